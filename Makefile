@@ -1,0 +1,21 @@
+# The two commands of README.md: `make demo` (main job) and `make test` (whole suite).
+# Both create .venv on first use and reuse it afterwards.
+.PHONY: venv demo test bench lint clean
+
+venv:
+	@scripts/setup_venv.sh
+
+demo: venv
+	scripts/ros_env.sh .venv/bin/python -m continuum_statics demo
+
+test: venv
+	scripts/ros_env.sh .venv/bin/python -m pytest -q test
+
+bench: venv
+	scripts/ros_env.sh .venv/bin/python -m continuum_statics bench
+
+lint: venv
+	.venv/bin/ruff check .
+
+clean:
+	rm -rf .venv build install log *.egg-info

@@ -1,0 +1,1 @@
+"""Real-time Cosserat-rod statics for cable/tendon-driven continuum robots."""
