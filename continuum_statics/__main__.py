@@ -1,0 +1,41 @@
+"""Command line: ``python -m continuum_statics {solve,bench,bringup,demo} ...``."""
+import sys
+
+
+USAGE = """usage: python -m continuum_statics COMMAND [options]
+
+commands:
+  solve     solve the boundary-value problem for a robot file and print the tip pose
+  bench     benchmark the numeric core (--nodes: the ROS nodes over DDS)
+  bringup   start the statics, tip_controller and cable_driver nodes in one process
+  demo      bringup with the simulated driver plus a client sending tip goals
+"""
+
+
+def main(argv=None):
+    """Dispatch to the sub-command's own ``main(argv)``; imports stay lazy (no rclpy for solve)."""
+    argv = list(sys.argv[1:] if argv is None else argv)
+    if not argv or argv[0] in ('-h', '--help'):
+        print(USAGE)
+        return 0 if argv else 2
+    command, rest = argv[0], argv[1:]
+    if command == 'solve':
+        from continuum_statics.cli import solve_main as run
+    elif command == 'bench':
+        if '--nodes' in rest:
+            rest.remove('--nodes')
+            from continuum_statics.node_bench import main as run
+        else:
+            from continuum_statics.bench import main as run
+    elif command == 'bringup':
+        from continuum_statics.bringup import main as run
+    elif command == 'demo':
+        from continuum_statics.demo import main as run
+    else:
+        print('unknown command %r\n\n%s' % (command, USAGE), file=sys.stderr)
+        return 2
+    return run(rest)
+
+
+if __name__ == '__main__':
+    sys.exit(main())
