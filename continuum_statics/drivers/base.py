@@ -1,0 +1,156 @@
+"""Cable actuator backend interface: what ``cable_driver`` needs from any actuator.
+
+The node owns everything ROS (topics, parameters, validation of messages, the command watchdog,
+diagnostics); a backend owns only the actuators. A backend receives target cable lengths that are
+already validated, finite and inside the robot's length limits, in ``cable_names`` order, and
+reports measured lengths (m), and where it knows them velocities (m/s) and tensions (N).
+
+A real actuator backend subclasses :class:`CableBackend`, and is selected with the node's
+``backend`` parameter either by a short name registered under the entry-point group
+``continuum_statics.cable_backends`` or by a ``'package.module:ClassName'`` spec, so it plugs
+in without touching the node.
+"""
+import abc
+from dataclasses import dataclass, field
+import importlib
+import importlib.metadata
+
+import numpy as np
+
+#: Entry-point group for third-party backends (``name = package.module:ClassName``).
+ENTRY_POINT_GROUP = 'continuum_statics.cable_backends'
+
+#: Diagnostic levels, same numbers as diagnostic_msgs/DiagnosticStatus (no ROS import here).
+OK, WARN, ERROR = 0, 1, 2
+
+
+@dataclass(frozen=True)
+class BackendOption:
+    """One backend option; the node declares it as the parameter ``<backend name>.<name>``.
+
+    :param name: option name
+    :param default: default value (its type is the parameter type)
+    :param description: what it does, with the unit
+    :param low: inclusive lower bound for numbers, or None
+    :param high: inclusive upper bound for numbers, or None
+    :param read_only: True if a change needs a restart (otherwise ``set_option`` applies it)
+    """
+
+    name: str
+    default: object
+    description: str
+    low: float = None
+    high: float = None
+    read_only: bool = False
+
+
+@dataclass(frozen=True)
+class CableReading:
+    """One measurement of every cable, in the backend's ``cable_names`` order.
+
+    :param lengths: measured cable lengths, m, shape (n_cables,)
+    :param velocities: cable speeds, m/s, shape (n_cables,), or None when unknown
+    :param tensions: cable tensions, N, shape (n_cables,), or None when unknown
+    """
+
+    lengths: np.ndarray
+    velocities: np.ndarray = None
+    tensions: np.ndarray = None
+
+
+@dataclass(frozen=True)
+class BackendStatus:
+    """Health of the actuators for diagnostics: a level (OK/WARN/ERROR), a message, key/values."""
+
+    level: int = OK
+    message: str = 'ok'
+    values: dict = field(default_factory=dict)
+
+
+class CableBackend(abc.ABC):
+    """Base class of every cable actuator backend.
+
+    :param cable_names: cable names, in the order of every array passed in or out
+    :param length_limits: (n_cables, 2) array of [min, max] cable lengths, m
+    :param initial_lengths: (n_cables,) lengths to assume before the first reading, m
+    :param options: backend-specific options (from the node's ``<backend>.*`` parameters)
+    """
+
+    #: Short name of the backend (the ``backend`` parameter value).
+    name = 'abstract'
+    #: The backend's options (:class:`BackendOption`), declared by the node as parameters.
+    options_spec = ()
+
+    def __init__(self, cable_names, length_limits, initial_lengths, **options):
+        self.cable_names = tuple(cable_names)
+        n_cables = len(self.cable_names)
+        self.length_limits = np.array(length_limits, dtype=float).reshape(n_cables, 2)
+        self.initial_lengths = np.array(initial_lengths, dtype=float).reshape(n_cables)
+        self.options = dict(options)
+
+    @abc.abstractmethod
+    def start(self, now):
+        """Connect to the actuators; ``now`` is a monotonic time in s."""
+
+    @abc.abstractmethod
+    def command(self, target_lengths, now):
+        """Move towards ``target_lengths`` (n_cables,) m; finite and inside the limits."""
+
+    @abc.abstractmethod
+    def hold(self, now):
+        """Stop where the cables are now (command watchdog, shutdown)."""
+
+    @abc.abstractmethod
+    def read(self, now):
+        """Return the current :class:`CableReading`; ``now`` is a monotonic time in s."""
+
+    def status(self):
+        """Return the actuators' :class:`BackendStatus` (override to report real health)."""
+        return BackendStatus()
+
+    def set_option(self, key, value):
+        """Change one option at run time; raise ValueError if it cannot change while running."""
+        raise ValueError('backend %r cannot change option %r while running' % (self.name, key))
+
+    def close(self):
+        """Release the actuators (called once, when the node is destroyed)."""
+
+
+def builtin_backends():
+    """Return the backends shipped with the package, by name."""
+    from continuum_statics.drivers.sim import SimulatedCableBackend
+    return {SimulatedCableBackend.name: SimulatedCableBackend}
+
+
+def backend_class(spec):
+    """Return the backend class for ``spec``: a built-in or entry-point name, or ``module:Class``.
+
+    :raises ValueError: when no backend of that name exists (the message lists the known names)
+    """
+    spec = str(spec).strip()
+    known = builtin_backends()
+    if spec in known:
+        return known[spec]
+    try:
+        entry_points = importlib.metadata.entry_points(group=ENTRY_POINT_GROUP)
+    except TypeError:  # Python < 3.10 API; kept for old robot computers
+        entry_points = importlib.metadata.entry_points().get(ENTRY_POINT_GROUP, [])
+    for entry_point in entry_points:
+        if entry_point.name == spec:
+            return _check_backend(entry_point.load(), spec)
+    if ':' in spec:
+        module_name, _, class_name = spec.partition(':')
+        try:
+            cls = getattr(importlib.import_module(module_name), class_name)
+        except (ImportError, AttributeError) as error:
+            raise ValueError('cannot load cable backend %r: %s' % (spec, error)) from None
+        return _check_backend(cls, spec)
+    names = sorted(set(known) | {entry_point.name for entry_point in entry_points})
+    raise ValueError('unknown cable backend %r; known: %s, or a "module:Class" spec'
+                     % (spec, ', '.join(names)))
+
+
+def _check_backend(cls, spec):
+    if not (isinstance(cls, type) and issubclass(cls, CableBackend)):
+        raise ValueError('cable backend %r is not a CableBackend subclass' % spec)
+    return cls

@@ -1,0 +1,147 @@
+"""Simulated cable actuators: a first-order lag with a speed limit, length limits and noise."""
+import math
+
+import numpy as np
+
+from continuum_statics.drivers.base import (
+    OK,
+    BackendOption,
+    BackendStatus,
+    CableBackend,
+    CableReading,
+)
+
+
+class SimulatedCableBackend(CableBackend):
+    """Each cable follows its target as a first-order lag whose speed is limited.
+
+    ``d length / dt = clip((target - length) / time_constant, -max_speed, max_speed)``, integrated
+    exactly between two calls, so the result does not depend on the call rate. Lengths stay inside
+    the limits; a reading adds zero-mean Gaussian noise of ``noise_std`` (m). The cables start at
+    ``initial_lengths`` (the straight-rod lengths in the node).
+
+    Options: ``time_constant`` (s, >= 0; 0 = no lag), ``max_speed`` (m/s, > 0),
+    ``noise_std`` (m, >= 0), ``seed`` (int; negative = not reproducible).
+    """
+
+    name = 'sim'
+    options_spec = (
+        BackendOption('time_constant', 0.02, 'time constant of the first-order lag, s (0: none)',
+                      0.0, 10.0),
+        BackendOption('max_speed', 0.05, 'maximum cable speed, m/s', 1e-6, 10.0),
+        BackendOption('noise_std', 0.0, 'standard deviation of the measurement noise, m',
+                      0.0, 0.01),
+        BackendOption('seed', -1, 'noise random seed (negative: not reproducible)',
+                      -1, 2 ** 31 - 1, read_only=True),
+    )
+    defaults = {option.name: option.default for option in options_spec}
+
+    def __init__(self, cable_names, length_limits, initial_lengths, **options):
+        unknown = set(options) - set(self.defaults)
+        if unknown:
+            raise ValueError('unknown option(s) for the sim backend: %s (known: %s)'
+                             % (', '.join(sorted(unknown)), ', '.join(sorted(self.defaults))))
+        merged = dict(self.defaults, **options)
+        super().__init__(cable_names, length_limits, initial_lengths, **merged)
+        for key in ('time_constant', 'max_speed', 'noise_std'):
+            self.set_option(key, merged[key])
+        seed = int(merged['seed'])
+        self._rng = np.random.default_rng(None if seed < 0 else seed)
+        self._lengths = np.clip(self.initial_lengths, self.length_limits[:, 0],
+                                self.length_limits[:, 1])
+        self._targets = self._lengths.copy()
+        self._velocities = np.zeros_like(self._lengths)
+        self._time = None
+
+    def set_option(self, key, value):
+        """Change ``time_constant``, ``max_speed`` or ``noise_std`` at run time."""
+        value = float(value)
+        if key == 'time_constant':
+            if not (math.isfinite(value) and value >= 0.0):
+                raise ValueError('time_constant must be finite and >= 0 s, got %r' % value)
+            self.time_constant = value
+        elif key == 'max_speed':
+            if not (value > 0.0):  # also rejects NaN; inf means no speed limit
+                raise ValueError('max_speed must be > 0 m/s, got %r' % value)
+            self.max_speed = value
+        elif key == 'noise_std':
+            if not (math.isfinite(value) and value >= 0.0):
+                raise ValueError('noise_std must be finite and >= 0 m, got %r' % value)
+            self.noise_std = value
+        else:
+            super().set_option(key, value)
+        self.options[key] = value
+
+    def start(self, now):
+        """Start the simulation clock at ``now`` (monotonic s)."""
+        self._time = float(now)
+
+    def command(self, target_lengths, now):
+        """Advance to ``now`` and follow the new targets from there."""
+        self._advance(now)
+        targets = np.asarray(target_lengths, dtype=float).reshape(self._lengths.shape)
+        self._targets = np.clip(targets, self.length_limits[:, 0], self.length_limits[:, 1])
+
+    def hold(self, now):
+        """Advance to ``now`` and stop there."""
+        self._advance(now)
+        self._targets = self._lengths.copy()
+
+    def read(self, now):
+        """Advance to ``now`` and return the (noisy) lengths, the speeds and no tensions."""
+        self._advance(now)
+        lengths = self._lengths
+        if self.noise_std > 0.0:
+            lengths = lengths + self._rng.normal(0.0, self.noise_std, lengths.shape)
+        return CableReading(lengths=lengths.copy(), velocities=self._velocities.copy())
+
+    def status(self):
+        """Report the largest distance between a cable and its target."""
+        tracking = float(np.max(np.abs(self._targets - self._lengths), initial=0.0))
+        return BackendStatus(OK, 'simulated cables', {
+            'max_tracking_error_m': '%.6f' % tracking,
+            'time_constant_s': '%g' % self.time_constant,
+            'max_speed_m_per_s': '%g' % self.max_speed,
+            'noise_std_m': '%g' % self.noise_std,
+        })
+
+    @property
+    def targets(self):
+        """Current targets, m (a copy)."""
+        return self._targets.copy()
+
+    def _advance(self, now):
+        now = float(now)
+        if self._time is None:
+            self._time = now
+        dt = now - self._time
+        if dt <= 0.0:
+            return
+        self._time = now
+        before = self._lengths
+        self._lengths = self.step(before, self._targets, dt, self.time_constant, self.max_speed)
+        self._lengths = np.clip(self._lengths, self.length_limits[:, 0], self.length_limits[:, 1])
+        self._velocities = (self._lengths - before) / dt
+
+    @staticmethod
+    def step(lengths, targets, dt, time_constant, max_speed):
+        """Exact solution of the speed-limited first-order lag over ``dt`` s.
+
+        While ``|target - length| > max_speed * time_constant`` the cable moves at ``max_speed``;
+        closer in, the gap decays as ``exp(-t / time_constant)``.
+        """
+        gap = targets - lengths
+        distance = np.abs(gap)
+        knee = max_speed * time_constant if time_constant > 0.0 else 0.0
+        # Time spent at full speed before the gap shrinks to the knee (0 if already inside it).
+        fast_time = np.where(distance > knee, (distance - knee) / max_speed, 0.0)
+        fast_time = np.nan_to_num(fast_time, nan=0.0)  # max_speed = inf
+        in_fast = dt <= fast_time
+        remaining = np.where(in_fast, 0.0, dt - fast_time)
+        start = np.minimum(distance, knee)
+        if time_constant > 0.0:
+            decayed = start * np.exp(-remaining / time_constant)
+        else:
+            decayed = np.zeros_like(start)
+        new_distance = np.where(in_fast, distance - max_speed * dt, decayed)
+        return targets - np.sign(gap) * new_distance

@@ -1,0 +1,155 @@
+"""Declare node parameters from a table, with descriptors, ranges and validation on set."""
+from dataclasses import dataclass
+import math
+import os
+from pathlib import Path
+
+from rcl_interfaces.msg import (
+    FloatingPointRange,
+    IntegerRange,
+    ParameterDescriptor,
+    SetParametersResult,
+)
+from rclpy.parameter import Parameter
+
+PACKAGE = 'continuum_statics'
+
+
+@dataclass(frozen=True)
+class ParamSpec:
+    """One node parameter.
+
+    :param name: parameter name (dots make YAML sub-keys: ``sim.max_speed``)
+    :param default: default value; its Python type sets the parameter type
+    :param description: shown by ``ros2 param describe``; state the unit
+    :param low: inclusive lower bound for numbers (None: unbounded)
+    :param high: inclusive upper bound for numbers (None: unbounded)
+    :param read_only: True where a change needs a restart
+    :param check: callable(value) -> None or a reason string, for rules a range cannot express
+    """
+
+    name: str
+    default: object
+    description: str
+    low: float = None
+    high: float = None
+    read_only: bool = False
+    check: object = None
+
+    def descriptor(self):
+        """Return the rcl_interfaces ParameterDescriptor."""
+        descriptor = ParameterDescriptor(name=self.name, description=self.description,
+                                         read_only=self.read_only)
+        if isinstance(self.default, float) and (self.low is not None or self.high is not None):
+            low = -math.inf if self.low is None else self.low
+            high = math.inf if self.high is None else self.high
+            descriptor.floating_point_range = [
+                FloatingPointRange(from_value=float(low), to_value=float(high), step=0.0)]
+            descriptor.additional_constraints = 'finite, in [%g, %g]' % (low, high)
+        elif isinstance(self.default, int) and not isinstance(self.default, bool) and (
+                self.low is not None or self.high is not None):
+            low = -2 ** 31 if self.low is None else int(self.low)
+            high = 2 ** 31 - 1 if self.high is None else int(self.high)
+            descriptor.integer_range = [IntegerRange(from_value=low, to_value=high, step=1)]
+            descriptor.additional_constraints = 'in [%d, %d]' % (low, high)
+        return descriptor
+
+    def reason(self, value):
+        """Return why ``value`` is not acceptable, or None."""
+        if isinstance(self.default, float):
+            if not isinstance(value, float) or not math.isfinite(value):
+                return '%s must be a finite number, got %r' % (self.name, value)
+        if isinstance(self.default, (int, float)) and not isinstance(self.default, bool):
+            if self.low is not None and value < self.low:
+                return '%s must be >= %g, got %r' % (self.name, self.low, value)
+            if self.high is not None and value > self.high:
+                return '%s must be <= %g, got %r' % (self.name, self.high, value)
+        if self.check is not None:
+            return self.check(value)
+        return None
+
+
+class ParameterTable:
+    """Declares a node's parameters and validates every later set against the table.
+
+    ``on_change(name, value)`` is called for each accepted change, after validation of the
+    whole set (so a set is applied entirely or not at all).
+    """
+
+    def __init__(self, node, specs, on_change=None):
+        self._specs = {spec.name: spec for spec in specs}
+        self._on_change = on_change
+        self.values = {}
+        for spec in specs:
+            value = node.declare_parameter(spec.name, spec.default, spec.descriptor()).value
+            reason = spec.reason(value)
+            if reason is not None:
+                raise ValueError('parameter %s: %s' % (spec.name, reason))
+            self.values[spec.name] = value
+        node.add_on_set_parameters_callback(self._on_set)
+
+    def __getitem__(self, name):
+        return self.values[name]
+
+    def _on_set(self, parameters):
+        for parameter in parameters:
+            spec = self._specs.get(parameter.name)
+            if spec is None:
+                continue
+            if spec.read_only:
+                return SetParametersResult(
+                    successful=False, reason='%s is read-only: restart the node to change it'
+                    % parameter.name)
+            if parameter.type_ == Parameter.Type.NOT_SET:
+                return SetParametersResult(successful=False,
+                                           reason='%s cannot be undeclared' % parameter.name)
+            reason = spec.reason(parameter.value)
+            if reason is not None:
+                return SetParametersResult(successful=False, reason=reason)
+        if self._on_change is not None:
+            for parameter in parameters:
+                if parameter.name in self._specs:
+                    try:
+                        self._on_change(parameter.name, parameter.value)
+                    except ValueError as error:
+                        return SetParametersResult(successful=False, reason=str(error))
+        for parameter in parameters:
+            if parameter.name in self._specs:
+                self.values[parameter.name] = parameter.value
+        return SetParametersResult(successful=True)
+
+
+def share_dir():
+    """Return the package's share directory (colcon install) or the source tree (pip -e)."""
+    try:
+        from ament_index_python.packages import get_package_share_directory
+        path = Path(get_package_share_directory(PACKAGE))
+        if (path / 'config').is_dir():
+            return path
+    except Exception:  # not in an ament index (pip route), or AMENT_PREFIX_PATH unset
+        pass
+    return Path(__file__).resolve().parents[1]
+
+
+def default_robot_file():
+    """Return the tendon robot file shipped in ``config/``."""
+    return str(share_dir() / 'config' / 'tendon_robot.yaml')
+
+
+def resolve_config_path(path):
+    """Return ``path`` if it exists, else the same relative path under the share directory."""
+    path = os.path.expanduser(str(path))
+    if os.path.isabs(path) or os.path.exists(path):
+        return path
+    candidate = share_dir() / path
+    return str(candidate) if candidate.exists() else path
+
+
+def check_robot_file(value):
+    """Reason why ``value`` is not a readable robot file, or None."""
+    if not value:
+        return 'robot_file must name a robot description YAML file'
+    path = resolve_config_path(value)
+    if not os.path.isfile(path):
+        return 'robot_file %r does not exist' % value
+    return None

@@ -1,0 +1,246 @@
+"""Stateless message <-> numpy helpers for the nodes (no physics here).
+
+Validation happens at this boundary: every reader raises ``ValueError`` with a message a user can
+act on (what was wrong, what was expected), so a node can log it, report it on diagnostics and drop
+that input. Writers never emit a NaN: they raise instead.
+"""
+import math
+
+from builtin_interfaces.msg import Time
+from geometry_msgs.msg import Point, PoseStamped
+import numpy as np
+from sensor_msgs.msg import JointState
+from std_msgs.msg import ColorRGBA, Header
+from visualization_msgs.msg import Marker
+
+#: Quaternion of the identity rotation, [x, y, z, w].
+IDENTITY_QUATERNION = (0.0, 0.0, 0.0, 1.0)
+
+
+def stamp_to_seconds(stamp):
+    """Return a builtin_interfaces/Time as float seconds."""
+    return stamp.sec + stamp.nanosec * 1e-9
+
+
+def seconds_to_stamp(seconds):
+    """Return float seconds as a builtin_interfaces/Time."""
+    nanoseconds = int(round(seconds * 1e9))
+    return Time(sec=nanoseconds // 1_000_000_000, nanosec=nanoseconds % 1_000_000_000)
+
+
+def is_zero_stamp(stamp):
+    """Return True for an unset (zero) stamp."""
+    return stamp.sec == 0 and stamp.nanosec == 0
+
+
+def cable_index(names, cable_names, require_all=True):
+    """Map message names onto the robot's cable order.
+
+    :param names: the ``name`` field of a JointState
+    :param cable_names: the robot's cable names
+    :param require_all: every cable must appear (a measurement); False allows a subset (a command)
+    :returns: int array ``index`` with ``values_in_robot_order[index] = message_values``
+    :raises ValueError: on unknown, repeated or (with ``require_all``) missing names
+    """
+    lookup = {name: i for i, name in enumerate(cable_names)}
+    index = []
+    for name in names:
+        if name not in lookup:
+            raise ValueError('unknown cable name %r (the robot has %s)'
+                             % (name, ', '.join(cable_names)))
+        index.append(lookup[name])
+    if len(set(index)) != len(index):
+        raise ValueError('repeated cable names in %s' % list(names))
+    if require_all and len(index) != len(cable_names):
+        missing = [name for name in cable_names if name not in set(names)]
+        raise ValueError('missing cable(s) %s: a measurement needs all of %s'
+                         % (', '.join(missing), ', '.join(cable_names)))
+    if not index:
+        raise ValueError('no cable names in the message')
+    return np.array(index, dtype=np.intp)
+
+
+def joint_positions(msg, n_names=None):
+    """Return ``msg.position`` as a finite float array whose size matches ``msg.name``.
+
+    :raises ValueError: on a size mismatch or a non-finite value
+    """
+    n_names = len(msg.name) if n_names is None else n_names
+    positions = np.asarray(msg.position, dtype=float)
+    if positions.shape != (n_names,):
+        raise ValueError('JointState has %d names but %d positions' % (n_names, positions.size))
+    if not np.all(np.isfinite(positions)):
+        bad = [str(msg.name[i]) for i in np.flatnonzero(~np.isfinite(positions))]
+        raise ValueError('non-finite cable length for %s' % ', '.join(bad))
+    return positions
+
+
+def joint_state(names, positions, stamp, velocities=None, efforts=None, msg=None):
+    """Fill (or create) a JointState; every array must be finite.
+
+    :param msg: a JointState to reuse (its fields are overwritten), or None for a new one
+    :raises ValueError: on a non-finite value
+    """
+    msg = JointState() if msg is None else msg
+    msg.header.stamp = stamp
+    msg.name = list(names)
+    msg.position = _finite_list(positions, 'position')
+    msg.velocity = [] if velocities is None else _finite_list(velocities, 'velocity')
+    msg.effort = [] if efforts is None else _finite_list(efforts, 'effort')
+    return msg
+
+
+def _finite_list(values, what):
+    values = np.asarray(values, dtype=float)
+    if not np.all(np.isfinite(values)):
+        raise ValueError('refusing to publish a non-finite %s: %s' % (what, values))
+    return values.tolist()
+
+
+def check_frame(frame_id, base_frame_id, what):
+    """Raise ValueError unless ``frame_id`` is the robot's base frame (empty is not accepted)."""
+    if frame_id != base_frame_id:
+        raise ValueError('%s is in frame %r; it must be in the robot base frame %r'
+                         % (what, frame_id, base_frame_id))
+
+
+def wrench_force(msg, base_frame_id):
+    """Return the force of a WrenchStamped in the base frame as a finite (3,) array, N.
+
+    :raises ValueError: on another frame or a non-finite component (force or torque)
+    """
+    check_frame(msg.header.frame_id, base_frame_id, 'tip_wrench')
+    force, torque = msg.wrench.force, msg.wrench.torque
+    values = (force.x, force.y, force.z, torque.x, torque.y, torque.z)
+    if not all(math.isfinite(v) for v in values):
+        raise ValueError('tip_wrench has a non-finite component: force (%g, %g, %g), '
+                         'torque (%g, %g, %g)' % values)
+    return np.array(values[:3])
+
+
+def goal_position(pose_stamped, base_frame_id):
+    """Return the position of a goal PoseStamped as a finite (3,) array in the base frame, m.
+
+    The orientation is not controlled (three tip-position goals for three bending unknowns), but it
+    must not be NaN either.
+
+    :raises ValueError: on another or an empty frame, or a non-finite number
+    """
+    check_frame(pose_stamped.header.frame_id, base_frame_id, 'the tip goal')
+    p, q = pose_stamped.pose.position, pose_stamped.pose.orientation
+    values = (p.x, p.y, p.z, q.x, q.y, q.z, q.w)
+    if not all(math.isfinite(v) for v in values):
+        raise ValueError('the tip goal has a non-finite number: position (%g, %g, %g), '
+                         'orientation (%g, %g, %g, %g)' % values)
+    return np.array(values[:3])
+
+
+def set_pose(pose, position, quaternion):
+    """Write a position (3,) and quaternion [x, y, z, w] (Python floats) into a Pose."""
+    p, q = pose.position, pose.orientation
+    p.x, p.y, p.z = position
+    q.x, q.y, q.z, q.w = quaternion
+
+
+def fill_path(path, header, positions, quaternions):
+    """Write poses base -> tip into ``path`` in place, reusing its PoseStamped objects.
+
+    Every pose shares ``header`` (one stamp, one frame), which is what a backbone sampled at one
+    instant is. Reusing the objects keeps the per-cycle cost to plain attribute writes.
+
+    :param positions: (n, 3) array, m
+    :param quaternions: (n, 4) array [x, y, z, w]
+    :raises ValueError: on a non-finite value (nothing is written then)
+    """
+    positions = np.asarray(positions, dtype=float)
+    quaternions = np.asarray(quaternions, dtype=float)
+    if not (np.all(np.isfinite(positions)) and np.all(np.isfinite(quaternions))):
+        raise ValueError('refusing to publish a backbone with non-finite poses')
+    n = positions.shape[0]
+    poses = path.poses
+    if len(poses) != n:
+        poses = [PoseStamped() for _ in range(n)]
+        path.poses = poses
+    path.header = header
+    for pose_stamped, position, quaternion in zip(poses, positions.tolist(),
+                                                  quaternions.tolist()):
+        pose_stamped.header = header
+        set_pose(pose_stamped.pose, position, quaternion)
+    return path
+
+
+def path_positions(path):
+    """Return the positions of a Path as an (n, 3) array."""
+    return np.array([(p.pose.position.x, p.pose.position.y, p.pose.position.z)
+                     for p in path.poses], dtype=float).reshape(-1, 3)
+
+
+def pose_position(pose):
+    """Return the position of a Pose as a (3,) array."""
+    return np.array((pose.position.x, pose.position.y, pose.position.z))
+
+
+def make_header(stamp, frame_id):
+    """Return a std_msgs/Header."""
+    return Header(stamp=stamp, frame_id=frame_id)
+
+
+def _color(rgba):
+    return ColorRGBA(r=float(rgba[0]), g=float(rgba[1]), b=float(rgba[2]), a=float(rgba[3]))
+
+
+def _points(array):
+    return [Point(x=x, y=y, z=z) for x, y, z in np.asarray(array, dtype=float).tolist()]
+
+
+def backbone_markers(header, positions, quaternions, guide_positions, guide_quaternions,
+                     cable_points, tube_diameter, disk_diameter, disk_thickness=0.002,
+                     namespace='continuum'):
+    """Return the RViz markers of one backbone: tube, guide disks, cables.
+
+    :param header: frame and stamp of every marker
+    :param positions: (n, 3) backbone points base -> tip, m
+    :param quaternions: (n, 4) backbone orientations [x, y, z, w] (for the tip marker)
+    :param guide_positions: (n_guides, 3) guide-disk centres, m
+    :param guide_quaternions: (n_guides, 4) guide-disk orientations (disk normal = local z)
+    :param cable_points: (n_cables, k, 3) points of each cable, base exit -> last guide, m
+    :param tube_diameter: drawn rod diameter, m; ``disk_diameter``, ``disk_thickness`` likewise
+    :returns: list of visualization_msgs/Marker (ids stable between calls, so RViz updates them)
+    :raises ValueError: on a non-finite input
+    """
+    arrays = (positions, quaternions, guide_positions, guide_quaternions, cable_points)
+    if not all(np.all(np.isfinite(np.asarray(a, dtype=float))) for a in arrays):
+        raise ValueError('refusing to publish markers with non-finite points')
+    markers = []
+    tube = Marker(header=header, ns=namespace + '/backbone', id=0, type=Marker.LINE_STRIP,
+                  action=Marker.ADD)
+    tube.pose.orientation.w = 1.0
+    tube.scale.x = float(tube_diameter)
+    tube.color = _color((0.85, 0.55, 0.15, 1.0))
+    tube.points = _points(positions)
+    markers.append(tube)
+    for i, (position, quaternion) in enumerate(zip(np.asarray(guide_positions).tolist(),
+                                                   np.asarray(guide_quaternions).tolist())):
+        disk = Marker(header=header, ns=namespace + '/guides', id=i, type=Marker.CYLINDER,
+                      action=Marker.ADD)
+        set_pose(disk.pose, position, quaternion)
+        disk.scale.x = disk.scale.y = float(disk_diameter)
+        disk.scale.z = float(disk_thickness)
+        disk.color = _color((0.6, 0.6, 0.65, 0.8))
+        markers.append(disk)
+    for i, points in enumerate(np.asarray(cable_points, dtype=float)):
+        cable = Marker(header=header, ns=namespace + '/cables', id=i, type=Marker.LINE_STRIP,
+                       action=Marker.ADD)
+        cable.pose.orientation.w = 1.0
+        cable.scale.x = float(tube_diameter) * 0.25
+        cable.color = _color((0.1, 0.4, 0.9, 1.0))
+        cable.points = _points(points)
+        markers.append(cable)
+    tip = Marker(header=header, ns=namespace + '/tip', id=0, type=Marker.ARROW, action=Marker.ADD)
+    set_pose(tip.pose, np.asarray(positions, dtype=float)[-1].tolist(),
+             np.asarray(quaternions, dtype=float)[-1].tolist())
+    # An arrow points along its local x; the tip frame's x is drawn (the rod extends along z).
+    tip.scale.x, tip.scale.y, tip.scale.z = 0.03, 0.003, 0.003
+    tip.color = _color((0.9, 0.1, 0.1, 1.0))
+    markers.append(tip)
+    return markers

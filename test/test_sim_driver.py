@@ -1,0 +1,130 @@
+"""Simulated cable backend and the backend registry: pure logic, no ROS."""
+import math
+
+import numpy as np
+import pytest
+
+from continuum_statics.drivers import CableBackend, backend_class
+from continuum_statics.drivers.sim import SimulatedCableBackend
+
+NAMES = ('cable_0', 'cable_1')
+LIMITS = [[0.30, 0.50], [0.30, 0.50]]
+START = [0.40, 0.40]
+
+
+def make(**options):
+    backend = SimulatedCableBackend(NAMES, LIMITS, START, **options)
+    backend.start(0.0)
+    return backend
+
+
+def test_starts_at_the_initial_lengths_inside_the_limits():
+    backend = SimulatedCableBackend(NAMES, LIMITS, [0.40, 0.60])
+    backend.start(0.0)
+    reading = backend.read(1.0)
+    np.testing.assert_allclose(reading.lengths, [0.40, 0.50])
+    np.testing.assert_allclose(reading.velocities, 0.0)
+    assert reading.tensions is None
+
+
+def test_first_order_lag_decays_by_one_e_per_time_constant():
+    backend = make(time_constant=0.1, max_speed=100.0)
+    backend.command([0.41, 0.39], 0.0)
+    lengths = backend.read(0.1).lengths
+    gap = np.array([0.41, 0.39]) - lengths
+    np.testing.assert_allclose(gap, [0.01 / math.e, -0.01 / math.e], rtol=1e-9)
+
+
+@pytest.mark.parametrize('time_constant, max_speed', [
+    (0.02, 0.05), (0.0, 0.05), (0.05, 1e9), (0.0, math.inf), (0.1, 0.01)])
+def test_result_does_not_depend_on_the_call_rate(time_constant, max_speed):
+    coarse, fine = make(time_constant=time_constant, max_speed=max_speed), make(
+        time_constant=time_constant, max_speed=max_speed)
+    for backend in (coarse, fine):
+        backend.command([0.45, 0.33], 0.0)
+    for t in np.linspace(0.001, 0.5, 500):
+        fine.read(t)
+    np.testing.assert_allclose(coarse.read(0.5).lengths, fine.read(0.5).lengths, atol=1e-12)
+
+
+def test_speed_limit_caps_large_steps():
+    backend = make(time_constant=0.02, max_speed=0.05)
+    backend.command([0.50, 0.30], 0.0)
+    reading = backend.read(0.5)
+    np.testing.assert_allclose(reading.lengths, [0.40 + 0.025, 0.40 - 0.025], atol=1e-12)
+    np.testing.assert_allclose(reading.velocities, [0.05, -0.05], atol=1e-9)
+
+
+def test_targets_outside_the_limits_are_clamped():
+    backend = make(time_constant=0.0, max_speed=math.inf)
+    backend.command([0.9, 0.1], 0.0)
+    np.testing.assert_allclose(backend.read(1.0).lengths, [0.50, 0.30])
+
+
+def test_hold_stops_where_the_cables_are():
+    backend = make(time_constant=0.02, max_speed=0.05)
+    backend.command([0.50, 0.40], 0.0)
+    backend.hold(0.1)
+    held = backend.read(0.1).lengths
+    np.testing.assert_allclose(backend.read(5.0).lengths, held)
+    np.testing.assert_allclose(held[0], 0.405, atol=1e-12)
+
+
+def test_noise_is_reproducible_with_a_seed_and_has_the_requested_spread():
+    first, second = make(noise_std=1e-4, seed=7), make(noise_std=1e-4, seed=7)
+    a = np.array([first.read(0.001 * i).lengths for i in range(1, 2001)])
+    b = np.array([second.read(0.001 * i).lengths for i in range(1, 2001)])
+    np.testing.assert_array_equal(a, b)
+    assert 0.9e-4 < np.std(a - 0.40) < 1.1e-4
+    np.testing.assert_array_equal(make().read(1.0).lengths, START)
+
+
+def test_time_going_backwards_changes_nothing():
+    backend = make()
+    backend.command([0.45, 0.35], 0.0)
+    before = backend.read(0.2).lengths
+    np.testing.assert_array_equal(backend.read(0.1).lengths, before)
+
+
+@pytest.mark.parametrize('options, message', [
+    ({'time_constant': -1.0}, 'time_constant'),
+    ({'time_constant': math.nan}, 'time_constant'),
+    ({'max_speed': 0.0}, 'max_speed'),
+    ({'max_speed': math.nan}, 'max_speed'),
+    ({'noise_std': -1e-3}, 'noise_std'),
+    ({'speed': 1.0}, 'unknown option'),
+])
+def test_bad_options_are_rejected_with_the_name(options, message):
+    with pytest.raises(ValueError, match=message):
+        SimulatedCableBackend(NAMES, LIMITS, START, **options)
+
+
+def test_seed_cannot_change_while_running():
+    with pytest.raises(ValueError, match='seed'):
+        make().set_option('seed', 3)
+
+
+def test_status_reports_tracking_error():
+    backend = make()
+    backend.command([0.45, 0.40], 0.0)
+    status = backend.status()
+    assert status.level == 0
+    assert float(status.values['max_tracking_error_m']) == pytest.approx(0.05)
+
+
+def test_registry_knows_sim_and_module_specs():
+    assert backend_class('sim') is SimulatedCableBackend
+    assert backend_class('continuum_statics.drivers.sim:SimulatedCableBackend') is \
+        SimulatedCableBackend
+    assert issubclass(backend_class(' sim '), CableBackend)
+
+
+@pytest.mark.parametrize('spec, message', [
+    ('dynamixel', 'unknown cable backend .*known: sim'),
+    ('continuum_statics.drivers.sim:Nope', 'cannot load'),
+    ('no_such_module_xyz:Backend', 'cannot load'),
+    ('continuum_statics.drivers.base:BackendStatus', 'not a CableBackend'),
+])
+def test_registry_rejects_unknown_backends(spec, message):
+    with pytest.raises(ValueError, match=message):
+        backend_class(spec)
