@@ -1,0 +1,98 @@
+"""Shape estimation: measured cable lengths and a tip force -> u(0) -> shape (paper sec. V.A).
+
+Unknown: the base bending u(0). Equations: the model's cable lengths (eq. 11) match the
+measurements in the least-squares sense, and the tip moment has no component the cables cannot
+apply (:attr:`Robot.free_moment_basis`): no twisting moment about the backbone, and no bending
+about an axis the cable holes do not span, so unobservable bending stays at the passive
+equilibrium instead of being fixed by an arbitrary regulariser.
+"""
+from dataclasses import dataclass
+
+import numpy as np
+
+from continuum_statics import bvp
+from continuum_statics.least_squares import constrained_gauss_newton
+from continuum_statics.shape import Shape
+
+
+@dataclass(frozen=True, eq=False)
+class ShapeEstimate:
+    """Result of :func:`estimate_shape`.
+
+    :ivar shape: estimated backbone
+    :ivar u0: estimated base bending (1/m)
+    :ivar converged: the solver reached a stationary point with the constraints satisfied
+    :ivar residual: RMS difference between model and measured cable lengths (m)
+    :ivar iterations: Gauss-Newton iterations used
+    :ivar observable_bending: number of bending directions the cables observe (0, 1 or 2)
+    :ivar message: what limited the estimate, empty when nothing did
+    """
+
+    shape: Shape
+    u0: np.ndarray
+    converged: bool
+    residual: float
+    iterations: int
+    observable_bending: int
+    message: str
+
+
+def moment_evaluator(robot, tip_force, residual_of, extra_constraints=None):
+    """Build the ``evaluate`` callback shared by estimation and tip-goal solving.
+
+    One batched kernel call per evaluation: the nominal u(0) and three perturbed ones give the
+    residual, the constraint (free tip-moment components, N m) and their forward differences.
+    """
+    h = robot.bending_step()
+    forces = np.tile(tip_force, (4, 1))
+    offsets = np.vstack([np.zeros(3), h * np.eye(3)])
+    basis = robot.free_moment_basis
+
+    def evaluate(x):
+        states = robot.integrate(forces, x + offsets)
+        values = residual_of(states)
+        constraint = (robot.c * states[:, -1, 15:18]) @ basis
+        if extra_constraints is not None:
+            constraint = np.hstack([constraint, extra_constraints(states)])
+        res, con = values[0], constraint[0]
+        jac = (values[1:] - res).T / h
+        con_jac = (constraint[1:] - con).T / h
+        return res, jac, con, con_jac, states[0]
+
+    return evaluate
+
+
+def estimate_shape(robot, cable_lengths, tip_force=(0.0, 0.0, 0.0), u0_guess=None):
+    """Estimate the shape from measured cable lengths (m, ``robot.cable_names`` order).
+
+    Damped Gauss-Newton from ``u0_guess`` (the previous estimate when tracking; default the
+    small-deflection passive solution).
+    """
+    from continuum_statics.robot import as_vector
+
+    n_cables = len(robot.cable_names)
+    measured = as_vector(cable_lengths, n_cables, 'cable_lengths')
+    tip_force = as_vector(tip_force, 3, 'tip_force')
+    if u0_guess is None:
+        u0_guess = bvp.linear_guess(robot, tip_force, np.zeros(3))
+    u0_guess = as_vector(u0_guess, 3, 'u0_guess')
+
+    def length_error(states):
+        return robot.batch_cable_lengths(states) - measured
+
+    evaluate = moment_evaluator(robot, tip_force, length_error)
+    result = constrained_gauss_newton(
+        evaluate, u0_guess, robot.solver.max_iterations, robot.solver.estimate_tolerance,
+        constraint_weight=robot.length ** 2 / robot.c[0])
+    observable = 3 - robot.free_moment_basis.shape[1]
+    message = ''
+    if observable < 2:
+        message = ('%d cable(s) observe %d of 2 bending directions; the rest is held at the '
+                   'passive equilibrium' % (n_cables, observable))
+    if not result.stationary:
+        message = ('not converged in %d iterations; ' % result.iterations + message).rstrip('; ')
+    residual = float(np.sqrt(np.mean(result.residual ** 2))) if n_cables else 0.0
+    shape = robot._shape(result.x, tip_force, result.evaluation)
+    return ShapeEstimate(shape=shape, u0=result.x, converged=result.stationary,
+                         residual=residual, iterations=result.iterations,
+                         observable_bending=observable, message=message)

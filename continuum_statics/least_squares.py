@@ -1,0 +1,83 @@
+"""Damped Gauss-Newton with exact equality constraints, for three unknowns (u(0)).
+
+Minimises |r(x)|^2 subject to c(x) = 0. Each step satisfies the linearised constraints exactly
+(minimum-norm particular step) and takes a Levenberg-Marquardt step for r in the null space of
+the constraint Jacobian, so a goal off the reachable set converges to its nearest reachable point
+instead of bending the physics to get closer.
+"""
+from dataclasses import dataclass
+
+import numpy as np
+
+
+@dataclass
+class LeastSquaresResult:
+    """Outcome of :func:`constrained_gauss_newton`; ``evaluation`` is the model at ``x``."""
+
+    x: np.ndarray
+    residual: np.ndarray
+    constraint: np.ndarray
+    iterations: int
+    stationary: bool
+    evaluation: object
+
+
+def _step(res, jac, con, con_jac, damping):
+    """Constrained damped Gauss-Newton step and its predicted change of the residual."""
+    n = jac.shape[1] if jac.size else con_jac.shape[1]
+    particular = np.zeros(n)
+    null = np.eye(n)
+    if con.size:
+        u, sing, vt = np.linalg.svd(con_jac)
+        rank = int(np.sum(sing > 1e-12 * max(sing[0], 1e-300)))
+        particular = -vt[:rank].T @ ((u[:, :rank].T @ con) / sing[:rank])
+        null = vt[rank:].T
+    if res.size and null.shape[1]:
+        a = jac @ null
+        g = res + jac @ particular
+        normal = a.T @ a
+        normal[np.diag_indices_from(normal)] += damping * (np.trace(normal) / len(normal) + 1e-300)
+        step = particular - null @ np.linalg.solve(normal, a.T @ g)
+    else:
+        step = particular
+    predicted = jac @ step if res.size else np.zeros(0)
+    return step, predicted
+
+
+def constrained_gauss_newton(evaluate, x0, max_iterations, step_tolerance, constraint_weight):
+    """Solve min |r(x)|^2 s.t. c(x) = 0 from ``x0``.
+
+    :param evaluate: x -> (r, dr/dx, c, dc/dx, evaluation), all numpy arrays except the last,
+        which is handed back with the result (e.g. the solved states)
+    :param step_tolerance: stop when the predicted change of r and the constraint correction
+        (weighted) are both below this (units of r)
+    :param constraint_weight: converts constraint units to residual units in the merit function
+    """
+    x = np.array(x0, dtype=float)
+    res, jac, con, con_jac, evaluation = evaluate(x)
+    damping = 1e-6
+
+    def merit(r, c):
+        return float(r @ r + constraint_weight ** 2 * (c @ c))
+
+    current = merit(res, con)
+    for iteration in range(1, max_iterations + 1):
+        step, predicted = _step(res, jac, con, con_jac, damping)
+        small = (np.linalg.norm(predicted) <= step_tolerance
+                 and constraint_weight * np.linalg.norm(con) <= step_tolerance)
+        if small or not np.all(np.isfinite(step)):
+            return LeastSquaresResult(x, res, con, iteration, bool(small), evaluation)
+        for _ in range(12):
+            trial = x + step
+            t_res, t_jac, t_con, t_con_jac, t_eval = evaluate(trial)
+            t_merit = merit(t_res, t_con)
+            if np.isfinite(t_merit) and t_merit < current:
+                damping = max(damping / 4.0, 1e-9)
+                break
+            damping *= 8.0
+            step, predicted = _step(res, jac, con, con_jac, damping)
+        else:
+            return LeastSquaresResult(x, res, con, iteration, False, evaluation)
+        x, res, jac, con, con_jac, evaluation = trial, t_res, t_jac, t_con, t_con_jac, t_eval
+        current = t_merit
+    return LeastSquaresResult(x, res, con, max_iterations, False, evaluation)

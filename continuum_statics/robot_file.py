@@ -1,0 +1,282 @@
+"""Robot description files (YAML): parsing and validation into plain, checked values.
+
+Every problem raises ``ValueError`` naming the offending field (``rod.length``,
+``cables[2].offset``, ...) and what was expected, so a user can fix the file without reading code.
+"""
+from dataclasses import dataclass
+import math
+
+import numpy as np
+import yaml
+
+
+@dataclass(frozen=True)
+class Rod:
+    """Backbone material and cross-section (SI units).
+
+    :ivar length: bending length L (m)
+    :ivar diameter: solid circular cross-section diameter (m)
+    :ivar youngs_modulus: E (Pa)
+    :ivar shear_modulus: G (Pa); G = E / (2 (1 + nu)) when given as Poisson's ratio (the paper's
+        text writes E / (1 + nu), an erratum: its number, 20.8 GPa, is E / (2 (1 + nu)))
+    :ivar density: rho (kg/m^3)
+    """
+
+    length: float
+    diameter: float
+    youngs_modulus: float
+    shear_modulus: float
+    density: float
+
+    @property
+    def area(self):
+        """Cross-section area A = pi d^2 / 4 (m^2)."""
+        return math.pi * self.diameter ** 2 / 4.0
+
+    @property
+    def second_moment(self):
+        """Second moment of area I = pi d^4 / 64 (m^4)."""
+        return math.pi * self.diameter ** 4 / 64.0
+
+    @property
+    def polar_moment(self):
+        """Polar moment of area J = pi d^4 / 32 (m^4)."""
+        return math.pi * self.diameter ** 4 / 32.0
+
+    @property
+    def bending_stiffness(self):
+        """Diagonal of C = diag(E I, E I, G J) (N m^2), eq. 7."""
+        ei = self.youngs_modulus * self.second_moment
+        return np.array([ei, ei, self.shear_modulus * self.polar_moment])
+
+    @property
+    def shear_stiffness(self):
+        """Diagonal of D = diag(G A, G A, E A) (N), eq. 6."""
+        ga = self.shear_modulus * self.area
+        return np.array([ga, ga, self.youngs_modulus * self.area])
+
+    @property
+    def mass_per_length(self):
+        """Rho A (kg/m)."""
+        return self.density * self.area
+
+
+@dataclass(frozen=True)
+class SolverSettings:
+    """Numerical settings of the robot file's ``solver`` section.
+
+    :ivar steps: RK4 steps over the rod length (the grid also has a node at every guide)
+    :ivar max_iterations: iteration limit of the shooting, estimation and tip-goal solvers
+    :ivar bvp_tolerance: tip-moment residual of the BVP, relative to E I / L
+    :ivar estimate_tolerance: step size (m of cable) below which the shape estimate has converged
+    :ivar goal_tolerance: default tip-goal position tolerance (m)
+    """
+
+    steps: int = 40
+    max_iterations: int = 50
+    bvp_tolerance: float = 1e-10
+    estimate_tolerance: float = 1e-9
+    goal_tolerance: float = 1e-4
+
+
+@dataclass(frozen=True)
+class RobotDescription:
+    """Validated content of a robot file (arrays are read-only)."""
+
+    name: str
+    rod: Rod
+    base_frame_id: str
+    base_position: np.ndarray
+    base_orientation: np.ndarray
+    gravity: np.ndarray
+    cable_names: tuple
+    cable_offsets: np.ndarray
+    cable_length_limits: np.ndarray
+    guides: np.ndarray
+    solver: SolverSettings
+
+
+_ROD_KEYS = {'length', 'diameter', 'youngs_modulus', 'poisson_ratio', 'shear_modulus', 'density'}
+_BASE_KEYS = {'frame_id', 'position', 'orientation'}
+_CABLE_KEYS = {'name', 'offset', 'length_limits'}
+_TOP_KEYS = {'name', 'description', 'rod', 'base', 'gravity', 'cables', 'guides', 'solver'}
+
+
+def _frozen(array):
+    array = np.array(array, dtype=float)
+    array.setflags(write=False)
+    return array
+
+
+def _number(value, field):
+    if isinstance(value, str):
+        # PyYAML (YAML 1.1) reads 54.0e9 as a string: it wants a signed exponent, 54.0e+9
+        try:
+            value = float(value)
+        except ValueError:
+            raise ValueError('%s must be a number, got %r' % (field, value)) from None
+    if isinstance(value, bool) or not isinstance(value, (int, float)):
+        raise ValueError('%s must be a number, got %r' % (field, value))
+    if not math.isfinite(value):
+        raise ValueError('%s must be finite, got %r' % (field, value))
+    return float(value)
+
+
+def _positive(value, field):
+    value = _number(value, field)
+    if value <= 0.0:
+        raise ValueError('%s must be > 0, got %g' % (field, value))
+    return value
+
+
+def _vector(value, size, field):
+    if not isinstance(value, (list, tuple)) or len(value) != size:
+        raise ValueError('%s must be a list of %d numbers, got %r' % (field, size, value))
+    return np.array([_number(x, '%s[%d]' % (field, i)) for i, x in enumerate(value)])
+
+
+def _section(data, key, field):
+    if key not in data:
+        raise ValueError('missing key %s' % field)
+    return data[key]
+
+
+def _mapping(value, field, allowed):
+    if not isinstance(value, dict):
+        raise ValueError('%s must be a mapping, got %r' % (field, value))
+    unknown = sorted(set(value) - allowed)
+    if unknown:
+        raise ValueError('%s has unknown keys %s (allowed: %s)'
+                         % (field, unknown, ', '.join(sorted(allowed))))
+    return value
+
+
+def _parse_rod(data):
+    rod = _mapping(_section(data, 'rod', 'rod'), 'rod', _ROD_KEYS)
+    length = _positive(_section(rod, 'length', 'rod.length'), 'rod.length')
+    diameter = _positive(_section(rod, 'diameter', 'rod.diameter'), 'rod.diameter')
+    youngs = _positive(_section(rod, 'youngs_modulus', 'rod.youngs_modulus'),
+                       'rod.youngs_modulus')
+    density = _number(_section(rod, 'density', 'rod.density'), 'rod.density')
+    if density < 0.0:
+        raise ValueError('rod.density must be >= 0, got %g' % density)
+    if 'shear_modulus' in rod and 'poisson_ratio' in rod:
+        raise ValueError('rod: give either poisson_ratio or shear_modulus, not both')
+    if 'shear_modulus' in rod:
+        shear = _positive(rod['shear_modulus'], 'rod.shear_modulus')
+    elif 'poisson_ratio' in rod:
+        nu = _number(rod['poisson_ratio'], 'rod.poisson_ratio')
+        if not -1.0 < nu <= 0.5:
+            raise ValueError('rod.poisson_ratio must be in (-1, 0.5], got %g' % nu)
+        shear = youngs / (2.0 * (1.0 + nu))
+    else:
+        raise ValueError('missing key rod.poisson_ratio (or rod.shear_modulus)')
+    return Rod(length, diameter, youngs, shear, density)
+
+
+def _parse_base(data):
+    base = _mapping(_section(data, 'base', 'base'), 'base', _BASE_KEYS)
+    frame_id = _section(base, 'frame_id', 'base.frame_id')
+    if not isinstance(frame_id, str) or not frame_id:
+        raise ValueError('base.frame_id must be a non-empty string, got %r' % (frame_id,))
+    position = _vector(base.get('position', [0.0, 0.0, 0.0]), 3, 'base.position')
+    orientation = _vector(_section(base, 'orientation', 'base.orientation'), 4,
+                          'base.orientation')
+    norm = np.linalg.norm(orientation)
+    if abs(norm - 1.0) > 1e-6:
+        raise ValueError('base.orientation must be a unit quaternion [x, y, z, w], its norm is %g'
+                         % norm)
+    return frame_id, position, orientation / norm
+
+
+def _parse_guides(data, length):
+    guides = data.get('guides') or []
+    if not isinstance(guides, (list, tuple)):
+        raise ValueError('guides must be a list of arc lengths in m, got %r' % (guides,))
+    guides = np.array([_number(g, 'guides[%d]' % i) for i, g in enumerate(guides)])
+    for i, g in enumerate(guides):
+        if not 0.0 <= g <= length:
+            raise ValueError('guides[%d] = %g is outside [0, rod.length = %g]' % (i, g, length))
+    if np.any(np.diff(guides) <= 0.0):
+        raise ValueError('guides must be strictly increasing, got %s' % guides.tolist())
+    return guides
+
+
+def _parse_cables(data, guides):
+    cables = data.get('cables') or []
+    if not isinstance(cables, (list, tuple)):
+        raise ValueError('cables must be a list of {name, offset}, got %r' % (cables,))
+    names, offsets, limits = [], [], []
+    for i, cable in enumerate(cables):
+        field = 'cables[%d]' % i
+        cable = _mapping(cable, field, _CABLE_KEYS)
+        name = _section(cable, 'name', field + '.name')
+        if not isinstance(name, str) or not name:
+            raise ValueError('%s.name must be a non-empty string, got %r' % (field, name))
+        if name in names:
+            raise ValueError('%s.name: duplicate cable name %r' % (field, name))
+        offset = _vector(_section(cable, 'offset', field + '.offset'), 3, field + '.offset')
+        if np.hypot(offset[0], offset[1]) <= 0.0:
+            raise ValueError('%s.offset must be off the backbone axis (x or y non-zero), got %s'
+                             % (field, offset.tolist()))
+        if 'length_limits' in cable:
+            lim = _vector(cable['length_limits'], 2, field + '.length_limits')
+        else:
+            lim = np.array([0.0, math.inf])
+        if not 0.0 <= lim[0] < lim[1]:
+            raise ValueError('%s.length_limits must satisfy 0 <= min < max, got %s'
+                             % (field, lim.tolist()))
+        names.append(name)
+        offsets.append(offset)
+        limits.append(lim)
+    if names and not np.any(guides > 0.0):
+        raise ValueError('cables need at least one guide at s > 0 (guides is empty)')
+    return tuple(names), np.reshape(offsets, (-1, 3)), np.reshape(limits, (-1, 2))
+
+
+def _parse_solver(data):
+    solver = data.get('solver') or {}
+    defaults = SolverSettings()
+    solver = _mapping(solver, 'solver', set(defaults.__dataclass_fields__))
+    steps = solver.get('steps', defaults.steps)
+    if isinstance(steps, bool) or not isinstance(steps, int) or not 1 <= steps <= 100000:
+        raise ValueError('solver.steps must be an integer in [1, 100000], got %r' % (steps,))
+    iterations = solver.get('max_iterations', defaults.max_iterations)
+    if isinstance(iterations, bool) or not isinstance(iterations, int) or iterations < 1:
+        raise ValueError('solver.max_iterations must be an integer >= 1, got %r' % (iterations,))
+    tolerances = {key: _positive(solver.get(key, getattr(defaults, key)), 'solver.' + key)
+                  for key in ('bvp_tolerance', 'estimate_tolerance', 'goal_tolerance')}
+    return SolverSettings(steps=steps, max_iterations=iterations, **tolerances)
+
+
+def parse_robot_description(data, source='robot file'):
+    """Validate the mapping of a robot file and return a :class:`RobotDescription`."""
+    if not isinstance(data, dict):
+        raise ValueError('%s must be a YAML mapping at the top level' % source)
+    unknown = sorted(set(data) - _TOP_KEYS)
+    if unknown:
+        raise ValueError('%s has unknown top-level keys %s (allowed: %s)'
+                         % (source, unknown, ', '.join(sorted(_TOP_KEYS))))
+    rod = _parse_rod(data)
+    frame_id, position, orientation = _parse_base(data)
+    gravity = _vector(_section(data, 'gravity', 'gravity'), 3, 'gravity')
+    guides = _parse_guides(data, rod.length)
+    names, offsets, limits = _parse_cables(data, guides)
+    return RobotDescription(
+        name=str(data.get('name', 'continuum_robot')), rod=rod, base_frame_id=frame_id,
+        base_position=_frozen(position), base_orientation=_frozen(orientation),
+        gravity=_frozen(gravity), cable_names=names, cable_offsets=_frozen(offsets),
+        cable_length_limits=_frozen(limits), guides=_frozen(guides),
+        solver=_parse_solver(data))
+
+
+def read_robot_description(path):
+    """Read and validate a robot file (YAML)."""
+    try:
+        with open(path, 'r', encoding='utf-8') as stream:
+            data = yaml.safe_load(stream)
+    except OSError as error:
+        raise ValueError('cannot read robot file %s: %s' % (path, error)) from error
+    except yaml.YAMLError as error:
+        raise ValueError('robot file %s is not valid YAML: %s' % (path, error)) from error
+    return parse_robot_description(data, source=str(path))

@@ -1,0 +1,109 @@
+"""The solved backbone: a small immutable record of arrays, base to tip."""
+import numpy as np
+
+from continuum_statics.rotations import rotation_to_quaternion
+
+
+class Shape:
+    """Backbone state at every integration node, base (index 0) to tip (index -1).
+
+    Built from the kernel's (N, 18) state array without copying; the array views below are
+    read-only.
+
+    :ivar s: (N,) unstretched arc length (m)
+    :ivar positions: (N, 3) backbone points r(s), global frame (m)
+    :ivar rotations: (N, 3, 3) orientations R(s), local -> global
+    :ivar v: (N, 3) local shear/stretch strain (1 = unstretched along local z)
+    :ivar u: (N, 3) local bending and twist (1/m)
+    :ivar u0: (3,) base bending u(0) the shape was integrated from (1/m)
+    :ivar tip_force: (3,) tip force F, global frame (N)
+    :ivar c: (3,) bending/torsional stiffness diagonal C (N m^2)
+    :ivar d: (3,) shear/axial stiffness diagonal D (N)
+    """
+
+    __slots__ = ('s', 'states', 'u0', 'tip_force', 'c', 'd')
+
+    def __init__(self, s, states, u0, tip_force, c, d):
+        states.setflags(write=False)
+        self.s, self.states, self.u0, self.tip_force, self.c, self.d = (
+            s, states, u0, tip_force, c, d)
+
+    @property
+    def positions(self):
+        """(N, 3) backbone points r(s), global frame (m)."""
+        return self.states[:, 0:3]
+
+    @property
+    def rotations(self):
+        """(N, 3, 3) orientations R(s), local -> global."""
+        return self.states[:, 3:12].reshape(-1, 3, 3)
+
+    @property
+    def v(self):
+        """(N, 3) local shear/stretch strain."""
+        return self.states[:, 12:15]
+
+    @property
+    def u(self):
+        """(N, 3) local bending and twist (1/m)."""
+        return self.states[:, 15:18]
+
+    @property
+    def tip_position(self):
+        """Tip position r(L), global frame (m)."""
+        return self.states[-1, 0:3]
+
+    @property
+    def tip_rotation(self):
+        """Tip orientation R(L)."""
+        return self.states[-1, 3:12].reshape(3, 3)
+
+    @property
+    def n(self):
+        """(N, 3) internal force n = R D (v - e3), global frame (N), eq. 6."""
+        local = self.d * (self.v - np.array([0.0, 0.0, 1.0]))
+        return np.einsum('nij,nj->ni', self.rotations, local)
+
+    @property
+    def m(self):
+        """(N, 3) internal moment m = R C u, global frame (N m), eq. 7."""
+        return np.einsum('nij,nj->ni', self.rotations, self.c * self.u)
+
+    @property
+    def tip_moment(self):
+        """Moment the tip load applies, m(L), global frame (N m)."""
+        return self.tip_rotation @ (self.c * self.states[-1, 15:18])
+
+    def sample(self, count):
+        """Evenly spaced poses along the backbone, base and tip included.
+
+        Positions are interpolated linearly between nodes and orientations taken from the
+        nearest node, which is exact at the ends and within the integration step elsewhere.
+
+        :param count: number of poses (>= 2)
+        :returns: s (count,) in m, positions (count, 3) in m, quaternions (count, 4) [x, y, z, w]
+        """
+        count = int(count)
+        if count < 2:
+            raise ValueError('sample count must be >= 2, got %d' % count)
+        s = np.linspace(self.s[0], self.s[-1], count)
+        positions = np.stack([np.interp(s, self.s, self.positions[:, i]) for i in range(3)], 1)
+        nearest = np.clip(np.searchsorted(self.s, s), 0, len(self.s) - 1)
+        lower = np.clip(nearest - 1, 0, None)
+        closer_lower = np.abs(self.s[lower] - s) < np.abs(self.s[nearest] - s)
+        nearest = np.where(closer_lower, lower, nearest)
+        return s, positions, rotation_to_quaternion(self.rotations[nearest])
+
+    def to_dict(self):
+        """Plain-Python form for JSON output (lists of floats, SI units)."""
+        return {
+            's': self.s.tolist(),
+            'positions': self.positions.tolist(),
+            'quaternions_xyzw': rotation_to_quaternion(self.rotations).tolist(),
+            'u': self.u.tolist(),
+            'v': self.v.tolist(),
+            'n': self.n.tolist(),
+            'm': self.m.tolist(),
+            'u0': self.u0.tolist(),
+            'tip_force': self.tip_force.tolist(),
+        }

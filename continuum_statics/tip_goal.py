@@ -1,0 +1,108 @@
+"""Tip-goal solving: goal position -> u(0) -> cable lengths (paper sec. V.B, end-point control).
+
+Damped least squares on the tip position with the same physical constraint as the estimator:
+the tip moment has no component the cables cannot apply (no twist about the backbone). A single
+section then has two bending degrees of freedom and its reachable tips form a surface; a goal off
+it converges to the nearest reachable tip and reports the remaining distance as ``error``. Cable
+length limits are honoured with an active set: a cable that would leave its range is held at the
+limit as one more equality constraint, and the solve continues with the freedom that is left.
+"""
+from dataclasses import dataclass
+
+import numpy as np
+
+from continuum_statics import bvp
+from continuum_statics.estimation import moment_evaluator
+from continuum_statics.least_squares import constrained_gauss_newton
+from continuum_statics.shape import Shape
+
+
+@dataclass(frozen=True, eq=False)
+class TipGoalSolution:
+    """Result of :func:`solve_tip_goal`.
+
+    :ivar shape: backbone at the solution
+    :ivar u0: base bending (1/m)
+    :ivar cable_lengths: cable lengths to command (m), ``robot.cable_names`` order
+    :ivar converged: the tip is within the tolerance of the goal
+    :ivar error: distance from the reached tip to the goal (m)
+    :ivar iterations: Gauss-Newton iterations used, over all active-set rounds
+    :ivar limited_cables: names of cables held at a length limit
+    :ivar message: why the goal was not reached, empty when it was
+    """
+
+    shape: Shape
+    u0: np.ndarray
+    cable_lengths: np.ndarray
+    converged: bool
+    error: float
+    iterations: int
+    limited_cables: tuple
+    message: str
+
+
+def solve_tip_goal(robot, goal_position, tip_force=(0.0, 0.0, 0.0), u0_guess=None,
+                   tolerance=None):
+    """Find u(0) and cable lengths that put the tip at ``goal_position`` (m, global frame).
+
+    :param u0_guess: start (1/m); default the passive equilibrium's small-deflection solution
+    :param tolerance: position tolerance (m); default ``robot.solver.goal_tolerance``
+    """
+    from continuum_statics.robot import as_vector
+
+    goal = as_vector(goal_position, 3, 'goal_position')
+    tip_force = as_vector(tip_force, 3, 'tip_force')
+    tolerance = robot.solver.goal_tolerance if tolerance is None else float(tolerance)
+    if not np.isfinite(tolerance) or tolerance <= 0.0:
+        raise ValueError('tolerance must be a finite number > 0 m, got %r' % tolerance)
+    if u0_guess is None:
+        u0_guess = bvp.linear_guess(robot, tip_force, np.zeros(3))
+    x = as_vector(u0_guess, 3, 'u0_guess')
+    limits = robot.cable_length_limits
+    active = {}  # cable index -> length it is held at
+    iterations = 0
+
+    def tip_error(states):
+        return states[:, -1, 0:3] - goal
+
+    while True:
+        held = sorted(active)
+
+        def at_limits(states, held=held):
+            if not held:
+                return np.zeros((states.shape[0], 0))
+            lengths = robot.batch_cable_lengths(states)[:, held]
+            # scaled to N m like the moment constraints: 1 mm of cable ~ E I / L * 1e-3 / r
+            return (lengths - [active[i] for i in held]) * robot.c[0] / robot.length ** 2
+
+        evaluate = moment_evaluator(robot, tip_force, tip_error, at_limits)
+        result = constrained_gauss_newton(
+            evaluate, x, robot.solver.max_iterations, 0.01 * tolerance,
+            constraint_weight=robot.length ** 2 / robot.c[0])
+        iterations += result.iterations
+        x = result.x
+        states = result.evaluation[None]
+        lengths = robot.batch_cable_lengths(states)[0] if len(robot.cable_names) else np.zeros(0)
+        violated = [i for i in range(len(lengths)) if i not in active and not (
+            limits[i, 0] - 1e-9 <= lengths[i] <= limits[i, 1] + 1e-9)]
+        if not violated:
+            break
+        for i in violated:
+            active[i] = float(np.clip(lengths[i], limits[i, 0], limits[i, 1]))
+
+    error = float(np.linalg.norm(result.residual))
+    converged = error <= tolerance
+    limited = tuple(robot.cable_names[i] for i in sorted(active))
+    message = ''
+    if not converged:
+        message = 'goal not reached: tip %.3g m from goal (tolerance %.3g m)' % (error, tolerance)
+        if limited:
+            message += '; cable(s) at length limit: ' + ', '.join(limited)
+        elif result.stationary:
+            message += '; nearest reachable tip (goal off the reachable surface)'
+        else:
+            message += '; not converged in %d iterations' % iterations
+    shape = robot._shape(x, tip_force, result.evaluation)
+    return TipGoalSolution(shape=shape, u0=x, cable_lengths=lengths, converged=converged,
+                           error=error, iterations=iterations, limited_cables=limited,
+                           message=message)
