@@ -1,7 +1,6 @@
 """Command line: ``python -m continuum_statics {solve,bench,bringup,demo} ...``."""
 import sys
 
-
 USAGE = """usage: python -m continuum_statics COMMAND [options]
 
 commands:

@@ -37,31 +37,6 @@ class ShapeEstimate:
     message: str
 
 
-def moment_evaluator(robot, tip_force, residual_of, extra_constraints=None):
-    """Build the ``evaluate`` callback shared by estimation and tip-goal solving.
-
-    One batched kernel call per evaluation: the nominal u(0) and three perturbed ones give the
-    residual, the constraint (free tip-moment components, N m) and their forward differences.
-    """
-    h = robot.bending_step()
-    forces = np.tile(tip_force, (4, 1))
-    offsets = np.vstack([np.zeros(3), h * np.eye(3)])
-    basis = robot.free_moment_basis
-
-    def evaluate(x):
-        states = robot.integrate(forces, x + offsets)
-        values = residual_of(states)
-        constraint = (robot.c * states[:, -1, 15:18]) @ basis
-        if extra_constraints is not None:
-            constraint = np.hstack([constraint, extra_constraints(states)])
-        res, con = values[0], constraint[0]
-        jac = (values[1:] - res).T / h
-        con_jac = (constraint[1:] - con).T / h
-        return res, jac, con, con_jac, states[0]
-
-    return evaluate
-
-
 def estimate_shape(robot, cable_lengths, tip_force=(0.0, 0.0, 0.0), u0_guess=None):
     """Estimate the shape from measured cable lengths (m, ``robot.cable_names`` order).
 
@@ -77,10 +52,13 @@ def estimate_shape(robot, cable_lengths, tip_force=(0.0, 0.0, 0.0), u0_guess=Non
         u0_guess = bvp.linear_guess(robot, tip_force, np.zeros(3))
     u0_guess = as_vector(u0_guess, 3, 'u0_guess')
 
-    def length_error(states):
-        return robot.batch_cable_lengths(states) - measured
+    cables = slice(3, 3 + n_cables)
+    free = slice(3 + n_cables, None)
 
-    evaluate = moment_evaluator(robot, tip_force, length_error)
+    def evaluate(x):
+        values, jac, states = robot.probe(x, tip_force)
+        return values[cables] - measured, jac[cables], values[free], jac[free], states
+
     result = constrained_gauss_newton(
         evaluate, u0_guess, robot.solver.max_iterations, robot.solver.estimate_tolerance,
         constraint_weight=robot.length ** 2 / robot.c[0])

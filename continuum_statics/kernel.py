@@ -193,3 +193,85 @@ def cable_lengths_batch(positions, rotations, guide_nodes, offsets):
                 if g > 0:
                     lengths[b, j] += np.sqrt(total)
     return lengths
+
+
+@numba.njit(cache=True)
+def probe(s_grid, params, tip_force, base_bending, step, guide_nodes, offsets, free_basis):
+    """Tip position, cable lengths and free tip-moment components, with forward differences.
+
+    One call integrates u(0) and u(0) + step * e_k (k = 0, 1, 2) and returns:
+    values (3 + n_cables + k,) = [tip position (m); cable lengths (m); free_basis^T C u(L) (N m)],
+    their Jacobian (same rows, 3 columns) with respect to u(0), and the nominal (N, 18) states.
+    This is everything one Gauss-Newton iteration of the estimator or the tip-goal solver needs.
+    """
+    forces = np.empty((4, 3))
+    bendings = np.empty((4, 3))
+    for b in range(4):
+        for i in range(3):
+            forces[b, i] = tip_force[i]
+            bendings[b, i] = base_bending[i]
+        if b > 0:
+            bendings[b, b - 1] += step
+    states = integrate_batch(s_grid, params, forces, bendings)
+    n_nodes = states.shape[1]
+    rotations = states[:, :, 3:12].copy().reshape(4, n_nodes, 3, 3)
+    lengths = cable_lengths_batch(states[:, :, 0:3], rotations, guide_nodes, offsets)
+    n_cables = offsets.shape[0]
+    n_free = free_basis.shape[1]
+    rows = 3 + n_cables + n_free
+    table = np.empty((4, rows))
+    for b in range(4):
+        for i in range(3):
+            table[b, i] = states[b, n_nodes - 1, i]
+        for j in range(n_cables):
+            table[b, 3 + j] = lengths[b, j]
+        for k in range(n_free):
+            moment = 0.0
+            for i in range(3):
+                moment += free_basis[i, k] * params[_C + i] * states[b, n_nodes - 1, 15 + i]
+            table[b, 3 + n_cables + k] = moment
+    values = table[0].copy()
+    jacobian = np.empty((rows, 3))
+    for r in range(rows):
+        for k in range(3):
+            jacobian[r, k] = (table[k + 1, r] - table[0, r]) / step
+    return values, jacobian, states[0].copy()
+
+
+@numba.njit(cache=True)
+def tip_jacobian(s_grid, params, tip_force, base_bending, force_step, bending_step):
+    """6x6 tip Jacobian by forward differences (paper sec. V.B) from one batch of 7 IVPs.
+
+    Rows: tip position (m) then tip rotation angle (rad), from vee(dR R^T), the paper's
+    omega-hat = R-dot R^T; columns: tip force F (N) then u(0) (1/m).
+    """
+    forces = np.empty((7, 3))
+    bendings = np.empty((7, 3))
+    for b in range(7):
+        for i in range(3):
+            forces[b, i] = tip_force[i]
+            bendings[b, i] = base_bending[i]
+    for k in range(3):
+        forces[1 + k, k] += force_step
+        bendings[4 + k, k] += bending_step
+    states = integrate_batch(s_grid, params, forces, bendings)
+    tip = states.shape[1] - 1
+    jac = np.empty((6, 6))
+    for col in range(6):
+        b = col + 1
+        h = force_step if col < 3 else bending_step
+        for i in range(3):
+            jac[i, col] = (states[b, tip, i] - states[0, tip, i]) / h
+        # dR R^T, with R row-major at state[3:12]
+        w = np.empty((3, 3))
+        for i in range(3):
+            for j in range(3):
+                acc = 0.0
+                for k in range(3):
+                    acc += ((states[b, tip, 3 + 3 * i + k] - states[0, tip, 3 + 3 * i + k])
+                            * states[0, tip, 3 + 3 * j + k])
+                w[i, j] = acc / h
+        jac[3, col] = 0.5 * (w[2, 1] - w[1, 2])
+        jac[4, col] = 0.5 * (w[0, 2] - w[2, 0])
+        jac[5, col] = 0.5 * (w[1, 0] - w[0, 1])
+    return jac

@@ -7,6 +7,7 @@ instead of bending the physics to get closer.
 """
 from dataclasses import dataclass
 
+import numba
 import numpy as np
 
 
@@ -22,26 +23,35 @@ class LeastSquaresResult:
     evaluation: object
 
 
+@numba.njit(cache=True)
 def _step(res, jac, con, con_jac, damping):
-    """Constrained damped Gauss-Newton step and its predicted change of the residual."""
-    n = jac.shape[1] if jac.size else con_jac.shape[1]
+    """Constrained damped Gauss-Newton step and its predicted change of the residual.
+
+    The particular step is the minimum-norm solution of the linearised constraints; the rest of
+    the step is a Levenberg-Marquardt step for the residual within their null space.
+    """
+    n = con_jac.shape[1]
     particular = np.zeros(n)
     null = np.eye(n)
-    if con.size:
+    if con.shape[0] > 0:
         u, sing, vt = np.linalg.svd(con_jac)
-        rank = int(np.sum(sing > 1e-12 * max(sing[0], 1e-300)))
-        particular = -vt[:rank].T @ ((u[:, :rank].T @ con) / sing[:rank])
-        null = vt[rank:].T
-    if res.size and null.shape[1]:
+        rank = 0
+        for value in sing:
+            if value > 1e-12 * max(sing[0], 1e-300):
+                rank += 1
+        coeff = (u[:, :rank].T @ con) / sing[:rank]
+        particular = -(vt[:rank].T @ coeff)
+        null = vt[rank:].T.copy()
+    step = particular
+    if res.shape[0] > 0 and null.shape[1] > 0:
         a = jac @ null
         g = res + jac @ particular
         normal = a.T @ a
-        normal[np.diag_indices_from(normal)] += damping * (np.trace(normal) / len(normal) + 1e-300)
+        scale = damping * (np.trace(normal) / normal.shape[0] + 1e-300)
+        for i in range(normal.shape[0]):
+            normal[i, i] += scale
         step = particular - null @ np.linalg.solve(normal, a.T @ g)
-    else:
-        step = particular
-    predicted = jac @ step if res.size else np.zeros(0)
-    return step, predicted
+    return step, jac @ step
 
 
 def constrained_gauss_newton(evaluate, x0, max_iterations, step_tolerance, constraint_weight):

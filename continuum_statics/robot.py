@@ -5,9 +5,15 @@ import math
 import numpy as np
 
 from continuum_statics import bvp, estimation, tip_goal
-from continuum_statics.kernel import cable_lengths_batch, integrate_batch, pack_params
+from continuum_statics.kernel import (
+    cable_lengths_batch,
+    integrate_batch,
+    pack_params,
+    probe,
+    tip_jacobian,
+)
 from continuum_statics.robot_file import read_robot_description
-from continuum_statics.rotations import quaternion_to_rotation, vee
+from continuum_statics.rotations import quaternion_to_rotation
 from continuum_statics.shape import Shape
 
 
@@ -152,31 +158,23 @@ class Robot:
         """6x6 tip Jacobian: rows [linear (m); angular (rad)], columns [F (N); u(0) (1/m)].
 
         Forward differences as in the paper (section V.B), all seven IVPs in one kernel call;
-        the angular rows are vee(dR R^T) (the paper's omega-hat = R-dot R^T).
+        the angular rows are vee(dR R^T) (the paper's omega-hat = R-dot R^T), global frame.
         """
-        u0 = as_vector(u0, 3, 'u0')
-        tip_force = as_vector(tip_force, 3, 'tip_force')
-        hf, hu = self.force_step(), self.bending_step()
-        forces = np.tile(tip_force, (7, 1))
-        bendings = np.tile(u0, (7, 1))
-        forces[1:4] += hf * np.eye(3)
-        bendings[4:7] += hu * np.eye(3)
-        tips = self.integrate(forces, bendings)[:, -1]
-        steps = np.array([hf] * 3 + [hu] * 3)
-        linear = (tips[1:, 0:3] - tips[0, 0:3]) / steps[:, None]
-        rot = tips[:, 3:12].reshape(7, 3, 3)
-        angular = vee((rot[1:] - rot[0]) @ rot[0].T) / steps[:, None]
-        return np.vstack([linear.T, angular.T])
+        return tip_jacobian(self.s_grid, self.params, as_vector(tip_force, 3, 'tip_force'),
+                            as_vector(u0, 3, 'u0'), self.force_step(), self.bending_step())
 
     def cable_jacobian(self, u0, tip_force=(0.0, 0.0, 0.0)):
         """d(cable lengths)/d u(0), (n_cables, 3) in m per 1/m; one batched kernel call."""
-        u0 = as_vector(u0, 3, 'u0')
-        tip_force = as_vector(tip_force, 3, 'tip_force')
-        hu = self.bending_step()
-        bendings = np.tile(u0, (4, 1))
-        bendings[1:] += hu * np.eye(3)
-        lengths = self.batch_cable_lengths(self.integrate(np.tile(tip_force, (4, 1)), bendings))
-        return ((lengths[1:] - lengths[0]) / hu).T
+        _, jac, _ = self.probe(as_vector(u0, 3, 'u0'), as_vector(tip_force, 3, 'tip_force'))
+        return jac[3:3 + len(self.cable_names)]
+
+    def probe(self, u0, tip_force):
+        """Tip, cable lengths and free tip moments with their u(0) Jacobian (kernel.probe).
+
+        Unchecked fast path for the solvers: ``u0`` and ``tip_force`` must be float (3,) arrays.
+        """
+        return probe(self.s_grid, self.params, tip_force, u0, self.bending_step(),
+                     self.guide_nodes, self.cable_offsets, self.free_moment_basis)
 
     # -- inverse problems ------------------------------------------------------------------
     def estimate_shape(self, cable_lengths, tip_force=(0.0, 0.0, 0.0), u0_guess=None):

@@ -12,7 +12,6 @@ from dataclasses import dataclass
 import numpy as np
 
 from continuum_statics import bvp
-from continuum_statics.estimation import moment_evaluator
 from continuum_statics.least_squares import constrained_gauss_newton
 from continuum_statics.shape import Shape
 
@@ -59,40 +58,40 @@ def solve_tip_goal(robot, goal_position, tip_force=(0.0, 0.0, 0.0), u0_guess=Non
         u0_guess = bvp.linear_guess(robot, tip_force, np.zeros(3))
     x = as_vector(u0_guess, 3, 'u0_guess')
     limits = robot.cable_length_limits
-    active = {}  # cable index -> length it is held at
+    n_cables = len(robot.cable_names)
+    cables = slice(3, 3 + n_cables)
+    free = slice(3 + n_cables, None)
+    # a cable held at a limit is one more constraint, scaled from m of cable to N m of tip
+    # moment (E I / L^2 per m) so that all constraint rows are of one size
+    held_scale = robot.c[0] / robot.length ** 2
+    held, held_at = [], []
     iterations = 0
 
-    def tip_error(states):
-        return states[:, -1, 0:3] - goal
+    def evaluate(x):
+        values, jac, states = robot.probe(x, tip_force)
+        rows = [3 + i for i in held]
+        con = np.concatenate([values[free], (values[rows] - held_at) * held_scale])
+        con_jac = np.vstack([jac[free], jac[rows] * held_scale])
+        return values[0:3] - goal, jac[0:3], con, con_jac, (states, values[cables])
 
     while True:
-        held = sorted(active)
-
-        def at_limits(states, held=held):
-            if not held:
-                return np.zeros((states.shape[0], 0))
-            lengths = robot.batch_cable_lengths(states)[:, held]
-            # scaled to N m like the moment constraints: 1 mm of cable ~ E I / L * 1e-3 / r
-            return (lengths - [active[i] for i in held]) * robot.c[0] / robot.length ** 2
-
-        evaluate = moment_evaluator(robot, tip_force, tip_error, at_limits)
         result = constrained_gauss_newton(
             evaluate, x, robot.solver.max_iterations, 0.01 * tolerance,
             constraint_weight=robot.length ** 2 / robot.c[0])
         iterations += result.iterations
         x = result.x
-        states = result.evaluation[None]
-        lengths = robot.batch_cable_lengths(states)[0] if len(robot.cable_names) else np.zeros(0)
-        violated = [i for i in range(len(lengths)) if i not in active and not (
+        states, lengths = result.evaluation
+        violated = [i for i in range(n_cables) if i not in held and not (
             limits[i, 0] - 1e-9 <= lengths[i] <= limits[i, 1] + 1e-9)]
         if not violated:
             break
         for i in violated:
-            active[i] = float(np.clip(lengths[i], limits[i, 0], limits[i, 1]))
+            held.append(i)
+            held_at.append(float(np.clip(lengths[i], limits[i, 0], limits[i, 1])))
 
     error = float(np.linalg.norm(result.residual))
     converged = error <= tolerance
-    limited = tuple(robot.cable_names[i] for i in sorted(active))
+    limited = tuple(robot.cable_names[i] for i in sorted(held))
     message = ''
     if not converged:
         message = 'goal not reached: tip %.3g m from goal (tolerance %.3g m)' % (error, tolerance)
@@ -102,7 +101,7 @@ def solve_tip_goal(robot, goal_position, tip_force=(0.0, 0.0, 0.0), u0_guess=Non
             message += '; nearest reachable tip (goal off the reachable surface)'
         else:
             message += '; not converged in %d iterations' % iterations
-    shape = robot._shape(x, tip_force, result.evaluation)
-    return TipGoalSolution(shape=shape, u0=x, cable_lengths=lengths, converged=converged,
+    shape = robot._shape(x, tip_force, states)
+    return TipGoalSolution(shape=shape, u0=x, cable_lengths=lengths.copy(), converged=converged,
                            error=error, iterations=iterations, limited_cables=limited,
                            message=message)
