@@ -3,9 +3,12 @@
 State along the arc length s (unstretched, m), all in SI units:
   r (3)    backbone position, global frame                 r' = R v          (eq. 1)
   R (3x3)  orientation, local -> global                    R' = R hat(u)     (eq. 2)
-  v (3)    local shear/stretch strain, v = e3 unstrained   v' from eq. 8
+  v - e3   local shear/stretch strain (3)                  v' from eq. 8
   u (3)    local bending/twist strain, 1/m                 u' from eq. 9
-with the initial stretch v(0) from the base force balance (eq. 10).
+with the initial stretch v(0) from the base force balance (eq. 10). The kernel stores v - e3
+rather than v: it is what n = D (v - e3) needs, and v itself would lose five of its sixteen
+digits to the 1 of the unstretched rod (axial strains are ~1e-5), which limited the BVP's
+attainable tip-moment residual.
 
 The scheme is the classical fourth-order Runge-Kutta method on the 18 state components,
 followed each step by one Newton step of the polar decomposition, R <- R (3 I - R^T R) / 2, which
@@ -17,7 +20,7 @@ loops; ``cache=True`` keeps the machine code on disk between processes.
 import numba
 import numpy as np
 
-STATE_SIZE = 18  # r (3), R row-major (9), v (3), u (3)
+STATE_SIZE = 18  # r (3), R row-major (9), v - e3 (3), u (3)
 
 
 # Layout of the ``params`` vector (see :func:`pack_params`).
@@ -48,7 +51,8 @@ def _derivative(y, p, out):
     r00, r01, r02 = y[3], y[4], y[5]
     r10, r11, r12 = y[6], y[7], y[8]
     r20, r21, r22 = y[9], y[10], y[11]
-    v0, v1, v2 = y[12], y[13], y[14]
+    w0, w1, w2 = y[12], y[13], y[14]  # v - e3
+    v0, v1, v2 = w0, w1, w2 + 1.0
     u0, u1, u2 = y[15], y[16], y[17]
     # eq. 1: r' = R v
     out[0] = r00 * v0 + r01 * v1 + r02 * v2
@@ -65,9 +69,9 @@ def _derivative(y, p, out):
     out[10] = -u2 * r20 + u0 * r22
     out[11] = u1 * r20 - u0 * r21
     # local internal force n^l = D (v - e3) (eq. 6) and moment m^l = C u (eq. 7)
-    n0 = d0 * v0
-    n1 = d1 * v1
-    n2 = d2 * (v2 - 1.0)
+    n0 = d0 * w0
+    n1 = d1 * w1
+    n2 = d2 * w2
     m0 = c0 * u0
     m1 = c1 * u1
     m2 = c2 * u2
@@ -119,7 +123,7 @@ def integrate_batch(s_grid, params, tip_forces, base_bendings):
     :param params: rod constants and base pose, from :func:`pack_params`
     :param tip_forces: (B, 3) tip force F per problem, global frame (N)
     :param base_bendings: (B, 3) u(0) per problem, local frame (1/m)
-    :returns: (B, N, 18) states: r (m), R row-major, v, u (1/m) at every node
+    :returns: (B, N, 18) states: r (m), R row-major, v - e3, u (1/m) at every node
     """
     n_batch = base_bendings.shape[0]
     n_nodes = s_grid.shape[0]
@@ -136,7 +140,7 @@ def integrate_batch(s_grid, params, tip_forces, base_bendings):
             y[i] = params[_R0 + i]
         for i in range(9):
             y[3 + i] = params[_ROT0 + i]
-        # eq. 10: n(0) = F + rho*A*g*L*e_g, so v(0) = D^-1 R(0)^T n(0) + e3
+        # eq. 10: n(0) = F + rho*A*g*L*e_g, so v(0) - e3 = D^-1 R(0)^T n(0)
         for i in range(3):
             n_base = 0.0
             for j in range(3):
@@ -144,7 +148,6 @@ def integrate_batch(s_grid, params, tip_forces, base_bendings):
                     tip_forces[b, j] + params[_F_BODY + j] * length)
             y[12 + i] = n_base * params[_D_INV + i]
             y[15 + i] = base_bendings[b, i]
-        y[14] += 1.0
         for node in range(1, n_nodes):
             h = s_grid[node] - s_grid[node - 1]
             y = states[b, node - 1]

@@ -210,5 +210,4 @@ def _straight_states(robot):
     axis = robot.base_rotation[:, 2]
     states[:, 0:3] = robot.base_position + s[:, None] * axis
     states[:, 3:12] = robot.base_rotation.ravel()
-    states[:, 14] = 1.0
     return states

@@ -40,8 +40,8 @@ class Shape:
 
     @property
     def v(self):
-        """(N, 3) local shear/stretch strain."""
-        return self.states[:, 12:15]
+        """(N, 3) local shear/stretch strain v (e3 when unstrained)."""
+        return self.states[:, 12:15] + np.array([0.0, 0.0, 1.0])
 
     @property
     def u(self):
@@ -61,7 +61,7 @@ class Shape:
     @property
     def n(self):
         """(N, 3) internal force n = R D (v - e3), global frame (N), eq. 6."""
-        local = self.d * (self.v - np.array([0.0, 0.0, 1.0]))
+        local = self.d * self.states[:, 12:15]  # the kernel keeps v - e3 at full precision
         return np.einsum('nij,nj->ni', self.rotations, local)
 
     @property
