@@ -2,6 +2,7 @@
 import copy
 
 from conftest import REPO
+
 from continuum_statics import load_robot
 from continuum_statics.robot import Robot
 from continuum_statics.robot_file import parse_robot_description

@@ -1,4 +1,4 @@
-"""The Cosserat IVP/BVP against independent truths: arcs, beam theory, the elastica, convergence."""
+"""The Cosserat IVP/BVP against independent truths: arcs, beam theory, elastica, convergence."""
 from core_fixtures import make_robot, paper_rod
 import numpy as np
 import pytest
