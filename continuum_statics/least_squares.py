@@ -67,8 +67,13 @@ def constrained_gauss_newton(evaluate, x0, max_iterations, step_tolerance, const
     res, jac, con, con_jac, evaluation = evaluate(x)
     damping = 1e-6
 
+    # constraints are physics, the residual is a wish: in the merit function a constraint
+    # violation costs a thousand times its residual-unit equivalent, so a step that restores
+    # a constraint is accepted even when it moves the tip away from the goal
+    penalty = (1e3 * constraint_weight) ** 2
+
     def merit(r, c):
-        return float(r @ r + constraint_weight ** 2 * (c @ c))
+        return float(r @ r + penalty * (c @ c))
 
     current = merit(res, con)
     for iteration in range(1, max_iterations + 1):
