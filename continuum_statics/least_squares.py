@@ -78,8 +78,8 @@ def constrained_gauss_newton(evaluate, x0, max_iterations, step_tolerance, const
     current = merit(res, con)
     for iteration in range(1, max_iterations + 1):
         step, predicted = _step(res, jac, con, con_jac, damping)
-        small = (np.linalg.norm(predicted) <= step_tolerance
-                 and constraint_weight * np.linalg.norm(con) <= step_tolerance)
+        small = (predicted @ predicted <= step_tolerance ** 2
+                 and constraint_weight ** 2 * (con @ con) <= step_tolerance ** 2)
         if small or not np.all(np.isfinite(step)):
             return LeastSquaresResult(x, res, con, iteration, bool(small), evaluation)
         for _ in range(12):
