@@ -39,8 +39,8 @@ def _step(res, jac, con, con_jac, damping):
         for value in sing:
             if value > 1e-12 * max(sing[0], 1e-300):
                 rank += 1
-        coeff = (u[:, :rank].T @ con) / sing[:rank]
-        particular = -(vt[:rank].T @ coeff)
+        coeff = (np.ascontiguousarray(u[:, :rank].T) @ con) / sing[:rank]
+        particular = -(np.ascontiguousarray(vt[:rank].T) @ coeff)
         null = vt[rank:].T.copy()
     step = particular
     if res.shape[0] > 0 and null.shape[1] > 0:
