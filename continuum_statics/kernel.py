@@ -199,6 +199,24 @@ def cable_lengths_batch(positions, rotations, guide_nodes, offsets):
 
 
 @numba.njit(cache=True)
+def _perturbed(tip_force, base_bending, force_step, bending_step):
+    """Batch of 7 loads for forward differences: nominal, F + h e_k, then u(0) + h e_k.
+
+    Rows 3..6 of the bendings pair with rows 0..3 of the forces for a u(0)-only batch.
+    """
+    forces = np.empty((7, 3))
+    bendings = np.empty((7, 3))
+    for b in range(7):
+        for i in range(3):
+            forces[b, i] = tip_force[i]
+            bendings[b, i] = base_bending[i]
+    for k in range(3):
+        forces[1 + k, k] += force_step
+        bendings[4 + k, k] += bending_step
+    return forces, bendings
+
+
+@numba.njit(cache=True)
 def probe(s_grid, params, tip_force, base_bending, step, guide_nodes, offsets, free_basis):
     """Tip position, cable lengths and free tip-moment components, with forward differences.
 
@@ -207,15 +225,8 @@ def probe(s_grid, params, tip_force, base_bending, step, guide_nodes, offsets, f
     their Jacobian (same rows, 3 columns) with respect to u(0), and the nominal (N, 18) states.
     This is everything one Gauss-Newton iteration of the estimator or the tip-goal solver needs.
     """
-    forces = np.empty((4, 3))
-    bendings = np.empty((4, 3))
-    for b in range(4):
-        for i in range(3):
-            forces[b, i] = tip_force[i]
-            bendings[b, i] = base_bending[i]
-        if b > 0:
-            bendings[b, b - 1] += step
-    states = integrate_batch(s_grid, params, forces, bendings)
+    forces, bendings = _perturbed(tip_force, base_bending, 0.0, step)
+    states = integrate_batch(s_grid, params, forces[0:4], bendings[3:7])
     n_nodes = states.shape[1]
     rotations = states[:, :, 3:12].copy().reshape(4, n_nodes, 3, 3)
     lengths = cable_lengths_batch(states[:, :, 0:3], rotations, guide_nodes, offsets)
@@ -248,15 +259,7 @@ def tip_jacobian(s_grid, params, tip_force, base_bending, force_step, bending_st
     Rows: tip position (m) then tip rotation angle (rad), from vee(dR R^T), the paper's
     omega-hat = R-dot R^T; columns: tip force F (N) then u(0) (1/m).
     """
-    forces = np.empty((7, 3))
-    bendings = np.empty((7, 3))
-    for b in range(7):
-        for i in range(3):
-            forces[b, i] = tip_force[i]
-            bendings[b, i] = base_bending[i]
-    for k in range(3):
-        forces[1 + k, k] += force_step
-        bendings[4 + k, k] += bending_step
+    forces, bendings = _perturbed(tip_force, base_bending, force_step, bending_step)
     states = integrate_batch(s_grid, params, forces, bendings)
     tip = states.shape[1] - 1
     jac = np.empty((6, 6))
