@@ -13,3 +13,20 @@ os.environ['ROS_AUTOMATIC_DISCOVERY_RANGE'] = 'LOCALHOST'
 os.environ.setdefault('ROS_DOMAIN_ID', str(random.randint(10, 99)))
 os.environ.setdefault(
     'FASTDDS_DEFAULT_PROFILES_FILE', str(REPO / 'config' / 'fastdds_fast_discovery.xml'))
+
+
+def pytest_sessionstart(session):
+    """Compile and cache the numba kernels once, before any test starts a node subprocess.
+
+    In a fresh clone the first solve compiles for ~20 s; doing it here keeps that out of the
+    deadlines of the cross-process tests, whose subprocesses then load the on-disk cache.
+    """
+    from continuum_statics import load_robot
+
+    robot = load_robot(REPO / 'config' / 'tendon_robot.yaml')
+    shape = robot.solve_ivp([1.0, 0.5, 0.0])
+    robot.cable_lengths(shape)
+    robot.estimate_shape(robot.cable_lengths(shape), u0_guess=shape.u0)
+    robot.solve_tip_goal(shape.tip_position)
+    robot.jacobian(shape.u0)
+    robot.solve_bvp(tip_force=(0.0, 0.0, -0.1))
