@@ -5,10 +5,9 @@ import time
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
 import numpy as np
 
-OK = DiagnosticStatus.OK
-WARN = DiagnosticStatus.WARN
-ERROR = DiagnosticStatus.ERROR
-STALE = DiagnosticStatus.STALE
+#: Levels as ints (the message constants are bytes in Python); ``max()`` picks the worst.
+OK, WARN, ERROR, STALE = (ord(DiagnosticStatus.OK), ord(DiagnosticStatus.WARN),
+                          ord(DiagnosticStatus.ERROR), ord(DiagnosticStatus.STALE))
 
 
 def diagnostic_array(stamp, name, hardware_id, level, message, values):

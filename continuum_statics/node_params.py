@@ -153,3 +153,9 @@ def check_robot_file(value):
     if not os.path.isfile(path):
         return 'robot_file %r does not exist' % value
     return None
+
+
+def load_robot_file(path):
+    """Load the robot description named by a ``robot_file`` parameter (ValueError when bad)."""
+    from continuum_statics import load_robot
+    return load_robot(resolve_config_path(path))

@@ -1,0 +1,85 @@
+"""bringup: the statics, tip_controller and cable_driver nodes in one process.
+
+``python -m continuum_statics bringup [--robot FILE] [--driver sim] [--namespace NS]
+[--ros-args ...]`` (also the ``bringup`` console script). Everything after ``--ros-args`` goes to
+rclpy (``--params-file``, remaps, ``-p`` parameters, log levels). ``--robot`` and ``--driver``
+override the ``robot_file`` and ``backend`` parameters of every node; without them the nodes use
+their parameters (default: the tendon robot in ``config/`` and the simulated driver). Ctrl-C
+(SIGINT) or SIGTERM stops everything and exits with code 0.
+
+On a robot computer with ROS installed, ``launch/continuum_robot.launch.py`` starts the same
+three nodes as separate processes.
+"""
+import argparse
+import os
+import sys
+
+from continuum_statics.node_params import share_dir
+
+USAGE_EPILOG = ('Arguments after --ros-args go to ROS, e.g. --ros-args --params-file '
+                'config/continuum_robot.params.yaml -r cable_states:=measured_lengths')
+
+
+def parse_args(argv):
+    """Split ``argv`` into bringup options and the ROS arguments (from ``--ros-args`` on)."""
+    argv = list(argv)
+    ros_args = []
+    if '--ros-args' in argv:
+        split = argv.index('--ros-args')
+        argv, ros_args = argv[:split], argv[split:]
+    parser = argparse.ArgumentParser(prog='python -m continuum_statics bringup',
+                                     description=__doc__.splitlines()[0], epilog=USAGE_EPILOG)
+    parser.add_argument('--robot', help='robot description YAML (default: the robot_file '
+                        'parameter, i.e. config/tendon_robot.yaml)')
+    parser.add_argument('--driver', help='cable backend (default: the backend parameter, sim)')
+    parser.add_argument('--namespace', default='continuum',
+                        help='namespace of the three nodes (default: %(default)s)')
+    return parser.parse_args(argv), ros_args
+
+
+def use_fast_discovery_profile():
+    """Point Fast DDS at the shipped quick-discovery profile unless the user chose one."""
+    if 'FASTDDS_DEFAULT_PROFILES_FILE' not in os.environ:
+        profile = share_dir() / 'config' / 'fastdds_fast_discovery.xml'
+        if profile.is_file():
+            os.environ['FASTDDS_DEFAULT_PROFILES_FILE'] = str(profile)
+
+
+def node_factories(robot=None, driver=None, namespace='continuum'):
+    """Return callables creating the three nodes with the bringup overrides applied."""
+    from functools import partial
+
+    from rclpy.parameter import Parameter
+
+    from continuum_statics.cable_driver_node import CableDriverNode
+    from continuum_statics.statics_node import StaticsNode
+    from continuum_statics.tip_controller_node import TipControllerNode
+
+    common = []
+    if robot is not None:
+        common.append(Parameter('robot_file', Parameter.Type.STRING, os.path.abspath(robot)))
+    driver_overrides = list(common)
+    if driver is not None:
+        driver_overrides.append(Parameter('backend', Parameter.Type.STRING, driver))
+    return [
+        partial(StaticsNode, namespace=namespace, parameter_overrides=common),
+        partial(TipControllerNode, namespace=namespace, parameter_overrides=common),
+        partial(CableDriverNode, namespace=namespace, parameter_overrides=driver_overrides),
+    ]
+
+
+def main(argv=None):
+    """Run bringup; returns the process exit code."""
+    argv = list(sys.argv[1:] if argv is None else argv)
+    options, ros_args = parse_args(argv)
+    if options.robot is not None and not os.path.isfile(options.robot):
+        print('bringup: robot file %r does not exist' % options.robot, file=sys.stderr)
+        return 2
+    use_fast_discovery_profile()
+    from continuum_statics.node_runner import run_nodes
+    factories = node_factories(options.robot, options.driver, options.namespace.strip() or '/')
+    return run_nodes(factories, args=['bringup'] + ros_args)
+
+
+if __name__ == '__main__':
+    sys.exit(main())

@@ -1,0 +1,154 @@
+"""``python -m continuum_statics demo`` (``make demo``): bringup plus a tip-goal client.
+
+Starts ``bringup`` (statics, tip_controller, simulated cable_driver) as a subprocess; this process
+is the client: it sends reachable tip goals (tips of shapes the robot can take) and one goal 2 m
+away through the ``tip_goal`` service (nav_msgs/srv/GetPlan), prints goal, reached tip, error and
+time for each, and a final line of figures. Exit code 0 when every reachable goal was reached
+within the tolerance, the unreachable one was answered with an empty plan, and bringup stopped
+cleanly on SIGINT.
+"""
+import argparse
+import math
+import os
+import subprocess
+import sys
+import time
+
+import numpy as np
+
+from continuum_statics.node_bench import ros_environment, stop
+from continuum_statics.node_params import default_robot_file
+
+#: Base bending u(0) (1/m) of the demo's goal shapes: reachable tips, all around the robot.
+GOAL_BENDINGS = [(2.0, 0.0), (0.0, 2.5), (-1.5, 1.5), (-2.0, -1.0), (1.0, -2.5), (0.5, 0.5),
+                 (-2.5, 0.0), (0.0, -1.5)]
+
+
+def tip_goals(robot, count):
+    """Return ``count`` reachable tip goals (m, base frame) and one 2 m away from the base."""
+    goals = []
+    for ux, uy in GOAL_BENDINGS[:count]:
+        goals.append((robot.solve_ivp([ux, uy, 0.0]).tip_position.copy(), True))
+    far = np.asarray(robot.solve_ivp([0.0, 0.0, 0.0]).tip_position) + np.array([2.0, 0.0, 0.0])
+    goals.append((far, False))
+    return goals
+
+
+def run_client(robot_file, namespace, goals=5, tolerance=1e-3, print_rows=True, process=None,
+               timeout=60.0):
+    """Send the goals through ``<namespace>/tip_goal``; return one dict per goal.
+
+    :param process: the bringup subprocess, to stop waiting early if it dies
+    :raises RuntimeError: when the service or the tip pose does not appear within ``timeout``
+    """
+    from geometry_msgs.msg import PoseStamped
+    from nav_msgs.srv import GetPlan
+    import rclpy
+
+    from continuum_statics import load_robot
+    from continuum_statics.ros_conversions import path_positions
+    from continuum_statics.statics_node import LATCHED_QOS
+
+    robot = load_robot(robot_file)
+    context = rclpy.Context()
+    rclpy.init(context=context)
+    node = rclpy.create_node('tip_goal_client', namespace=namespace, context=context)
+    executor = rclpy.executors.SingleThreadedExecutor(context=context)
+    executor.add_node(node)
+    tips = []
+    node.create_subscription(PoseStamped, 'tip_pose', tips.append, LATCHED_QOS)
+    client = node.create_client(GetPlan, 'tip_goal')
+    rows = []
+    try:
+        deadline = time.monotonic() + timeout
+        while not (client.service_is_ready() and tips):
+            if process is not None and process.poll() is not None:
+                raise RuntimeError('bringup exited with code %s' % process.returncode)
+            if time.monotonic() > deadline:
+                raise RuntimeError('no tip_goal service and tip_pose within %g s' % timeout)
+            executor.spin_once(timeout_sec=0.05)
+        if print_rows:
+            print('%-28s %-28s %9s %7s  %s' % ('goal x y z [mm]', 'reached tip x y z [mm]',
+                                             'error[mm]', 'time[s]', 'result'))
+        for position, reachable in tip_goals(robot, goals):
+            request = GetPlan.Request(tolerance=float(tolerance))
+            request.goal.header.frame_id = robot.base_frame_id
+            request.goal.pose.position.x, request.goal.pose.position.y, \
+                request.goal.pose.position.z = (float(v) for v in position)
+            request.goal.pose.orientation.w = 1.0
+            start = time.monotonic()
+            future = client.call_async(request)
+            executor.spin_until_future_complete(future, timeout_sec=timeout)
+            elapsed = time.monotonic() - start
+            if not future.done():
+                raise RuntimeError('tip_goal did not answer within %g s' % timeout)
+            plan = future.result().plan
+            tip = path_positions(plan)[-1] if plan.poses else None
+            error = math.nan if tip is None else float(np.linalg.norm(tip - position))
+            reached = tip is not None and error <= tolerance * (1.0 + 1e-6)
+            rows.append({'goal': position, 'tip': tip, 'error': error, 'time': elapsed,
+                         'reachable': reachable, 'reached': reached})
+            if print_rows:
+                print('%-28s %-28s %9s %7.2f  %s' % (
+                    _mm(position), '(empty plan)' if tip is None else _mm(tip),
+                    '-' if tip is None else '%.3f' % (error * 1e3), elapsed,
+                    ('reached' if reached else 'NOT REACHED') if reachable else
+                    ('rejected as unreachable' if tip is None else 'UNEXPECTEDLY REACHED')),
+                    flush=True)
+    finally:
+        executor.shutdown()
+        node.destroy_node()
+        rclpy.try_shutdown(context=context)
+    return rows
+
+
+def _mm(position):
+    return '%7.1f %7.1f %7.1f' % tuple(np.asarray(position) * 1e3)
+
+
+def main(argv=None):
+    """Run the demo; returns the exit code."""
+    parser = argparse.ArgumentParser(prog='python -m continuum_statics demo',
+                                     description=__doc__.splitlines()[0])
+    parser.add_argument('--robot', default=default_robot_file(), help='robot description YAML')
+    parser.add_argument('--namespace', default='continuum', help='bringup namespace')
+    parser.add_argument('--goals', type=int, default=5, help='reachable goals (max %d)'
+                        % len(GOAL_BENDINGS))
+    parser.add_argument('--tolerance', type=float, default=1e-3, help='tip tolerance, m')
+    options = parser.parse_args(list(sys.argv[1:] if argv is None else argv))
+    ros_environment()
+    robot_file = os.path.abspath(options.robot)
+    print('demo: bringup (simulated cables, robot %s, namespace /%s) + tip_goal client'
+          % (os.path.basename(robot_file), options.namespace), flush=True)
+    process = subprocess.Popen(
+        [sys.executable, '-m', 'continuum_statics', 'bringup', '--robot', robot_file,
+         '--driver', 'sim', '--namespace', options.namespace])
+    try:
+        rows = run_client(robot_file, options.namespace, options.goals, options.tolerance,
+                          process=process)
+    except RuntimeError as error:
+        print('demo: %s' % error, file=sys.stderr)
+        stop(process)
+        return 1
+    code = stop(process)
+    reachable = [row for row in rows if row['reachable']]
+    reached = [row for row in reachable if row['reached']]
+    unreachable = [row for row in rows if not row['reachable']]
+    errors = np.array([row['error'] for row in reached]) * 1e3
+    times = np.array([row['time'] for row in reached])
+    print('figures: %d/%d reachable goals reached (tolerance %.1f mm), error median %.3f mm '
+          'max %.3f mm, time median %.2f s max %.2f s; unreachable goal answered empty in '
+          '%.0f ms; bringup exit code %s' % (
+              len(reached), len(reachable), options.tolerance * 1e3,
+              np.median(errors) if errors.size else math.nan,
+              errors.max() if errors.size else math.nan,
+              np.median(times) if times.size else math.nan,
+              times.max() if times.size else math.nan,
+              unreachable[0]['time'] * 1e3 if unreachable else math.nan, code))
+    ok = (len(reached) == len(reachable) and all(row['tip'] is None for row in unreachable)
+          and code == 0)
+    return 0 if ok else 1
+
+
+if __name__ == '__main__':
+    sys.exit(main())

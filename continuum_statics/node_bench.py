@@ -1,0 +1,232 @@
+"""``python -m continuum_statics bench --nodes``: the ROS nodes measured over DDS.
+
+1. Starts the statics node as its own process, publishes ``cable_states`` from this process at
+   ``--rate`` (1 kHz) for ``--duration`` (10 s) and receives ``backbone`` as serialized bytes (the
+   stamp is read straight from the CDR header, so the receiver adds no deserialization time).
+   Reported: processed rate, dropped messages, stamp-to-``backbone`` latency (median, p99, max)
+   and the CPU used by the statics process.
+2. Starts the full bringup (simulated driver) and calls ``tip_goal`` for a few reachable goals and
+   one unreachable goal: reported round trip per goal.
+
+Figures go to stdout; the exit code is 0 when the runs completed (targets are reported, not
+asserted: performance belongs in benchmarks, not in pass/fail tests).
+"""
+import argparse
+import os
+import random
+import signal
+import struct
+import subprocess
+import sys
+import threading
+import time
+
+import numpy as np
+
+from continuum_statics.node_params import default_robot_file, share_dir
+
+
+def ros_environment():
+    """Loopback discovery, a domain of its own and the quick-discovery profile, unless set."""
+    os.environ.setdefault('ROS_AUTOMATIC_DISCOVERY_RANGE', 'LOCALHOST')
+    os.environ.setdefault('ROS_DOMAIN_ID', str(random.randint(100, 199)))
+    os.environ.setdefault('FASTDDS_DEFAULT_PROFILES_FILE',
+                          str(share_dir() / 'config' / 'fastdds_fast_discovery.xml'))
+
+
+def cpu_seconds(pid):
+    """User + system CPU time of a process, s (Linux /proc)."""
+    with open('/proc/%d/stat' % pid) as stat:
+        fields = stat.read().rsplit(')', 1)[1].split()
+    return (int(fields[11]) + int(fields[12])) / os.sysconf('SC_CLK_TCK')
+
+
+def stop(process, timeout=10.0):
+    """SIGINT, then kill if it does not exit; return the exit code."""
+    if process.poll() is None:
+        process.send_signal(signal.SIGINT)
+        try:
+            process.wait(timeout)
+        except subprocess.TimeoutExpired:
+            process.kill()
+            process.wait()
+    return process.returncode
+
+
+def measurement_lengths(robot, count, rate):
+    """Cable lengths of shapes circling at 0.5 Hz (|u(0)| = 2 1/m): realistic, always solvable."""
+    lengths = []
+    for i in range(count):
+        angle = 2.0 * np.pi * 0.5 * i / rate
+        shape = robot.solve_ivp([2.0 * np.cos(angle), 2.0 * np.sin(angle), 0.0])
+        lengths.append(robot.cable_lengths(shape).tolist())
+    return lengths
+
+
+def bench_statics(robot_file, rate, duration, warmup=1.0):
+    """Publish cable_states at ``rate`` to a statics process; return the figures as a dict."""
+    import rclpy
+    from rclpy.qos import QoSProfile, ReliabilityPolicy, qos_profile_sensor_data
+    from sensor_msgs.msg import JointState
+
+    from continuum_statics import load_robot
+    from continuum_statics.ros_conversions import seconds_to_stamp
+
+    robot = load_robot(robot_file)
+    period_count = int(round(rate * 2.0))  # two seconds of distinct lengths, then repeat
+    lengths = measurement_lengths(robot, period_count, rate)
+    namespace = '/bench_statics'
+    process = subprocess.Popen(
+        [sys.executable, '-m', 'continuum_statics.statics_node', '--ros-args',
+         '-r', '__ns:=' + namespace, '-p', 'robot_file:=' + robot_file,
+         '--log-level', 'warn'])
+    context = rclpy.Context()
+    rclpy.init(context=context)
+    node = rclpy.create_node('bench_statics_client', namespace=namespace, context=context)
+    executor = rclpy.executors.SingleThreadedExecutor(context=context)
+    executor.add_node(node)
+    received = []  # (stamp s, receive time s)
+    record = [False]
+
+    def on_backbone(data):
+        now = time.time()
+        if record[0]:
+            sec, nanosec = struct.unpack_from('<iI', data, 4)
+            received.append((sec + nanosec * 1e-9, now))
+
+    publisher = node.create_publisher(JointState, 'cable_states', qos_profile_sensor_data)
+    node.create_subscription(type_of('nav_msgs.msg', 'Path'), 'backbone', on_backbone,
+                             QoSProfile(depth=1000, reliability=ReliabilityPolicy.RELIABLE),
+                             raw=True)
+    figures = {}
+    try:
+        deadline = time.monotonic() + 60.0
+        while (publisher.get_subscription_count() < 1 or node.count_publishers(
+                namespace + '/backbone') < 1) and time.monotonic() < deadline:
+            if process.poll() is not None:
+                raise RuntimeError('the statics process exited with %s' % process.returncode)
+            executor.spin_once(timeout_sec=0.05)
+        if publisher.get_subscription_count() < 1:
+            raise RuntimeError('statics did not subscribe to cable_states within 60 s')
+        sent = [0]
+        window = {}
+
+        def publish_loop():
+            msg = JointState(name=list(robot.cable_names))
+            start = time.monotonic()
+            total = int(round((warmup + duration) * rate))
+            for i in range(total):
+                target = start + i / rate
+                delay = target - time.monotonic()
+                if delay > 0:
+                    time.sleep(delay)
+                if i == int(warmup * rate):
+                    window['start'] = time.time()
+                    window['cpu'] = cpu_seconds(process.pid)
+                    record[0] = True
+                    sent[0] = 0
+                msg.header.stamp = seconds_to_stamp(time.time())
+                msg.position = lengths[i % period_count]
+                publisher.publish(msg)
+                sent[0] += 1
+            window['end'] = time.time()
+            window['cpu_end'] = cpu_seconds(process.pid)
+
+        thread = threading.Thread(target=publish_loop, daemon=True)
+        thread.start()
+        while thread.is_alive():
+            executor.spin_once(timeout_sec=0.01)
+        end = time.monotonic() + 0.5  # let the last backbones arrive
+        while time.monotonic() < end:
+            executor.spin_once(timeout_sec=0.01)
+        record[0] = False
+        elapsed = window['end'] - window['start']
+        stamps = np.array([r[0] for r in received if r[0] >= window['start']])
+        latencies = np.array([r[1] - r[0] for r in received if r[0] >= window['start']])
+        figures.update(
+            sent=sent[0], processed=int(stamps.size), dropped=int(sent[0] - stamps.size),
+            input_rate_hz=sent[0] / elapsed, processed_rate_hz=stamps.size / elapsed,
+            latency_median_ms=float(np.median(latencies)) * 1e3 if latencies.size else np.nan,
+            latency_p99_ms=float(np.percentile(latencies, 99)) * 1e3 if latencies.size else np.nan,
+            latency_max_ms=float(latencies.max()) * 1e3 if latencies.size else np.nan,
+            statics_cpu_percent=100.0 * (window['cpu_end'] - window['cpu']) / elapsed)
+    finally:
+        executor.shutdown()
+        node.destroy_node()
+        rclpy.try_shutdown(context=context)
+        stop(process)
+    return figures
+
+
+def type_of(module, name):
+    """Import a message type by module and name."""
+    import importlib
+    return getattr(importlib.import_module(module), name)
+
+
+def bench_tip_goal(robot_file, goals=5):
+    """Start bringup, call tip_goal for reachable goals and one unreachable; return figures."""
+    from continuum_statics import demo
+
+    namespace = 'bench_goal'
+    process = subprocess.Popen(
+        [sys.executable, '-m', 'continuum_statics', 'bringup', '--robot', robot_file,
+         '--namespace', namespace, '--ros-args', '--log-level', 'warn'])
+    try:
+        rows = demo.run_client(robot_file, namespace, goals=goals, tolerance=1e-3,
+                               print_rows=False, process=process)
+    finally:
+        stop(process)
+    reached = [row for row in rows if row['reachable'] and row['reached']]
+    rejected = [row for row in rows if not row['reachable']]
+    return {
+        'goals': len([row for row in rows if row['reachable']]),
+        'reached': len(reached),
+        'round_trip_median_s': float(np.median([r['time'] for r in reached])) if reached
+        else np.nan,
+        'round_trip_max_s': max((r['time'] for r in reached), default=np.nan),
+        'unreachable_round_trip_ms': rejected[0]['time'] * 1e3 if rejected else np.nan,
+        'unreachable_rejected': bool(rejected) and not rejected[0]['reached'],
+    }
+
+
+def main(argv=None):
+    """Run the node benchmark; returns the exit code."""
+    parser = argparse.ArgumentParser(prog='python -m continuum_statics bench --nodes',
+                                     description=__doc__.splitlines()[0])
+    parser.add_argument('--robot', default=default_robot_file(), help='robot description YAML')
+    parser.add_argument('--rate', type=float, default=1000.0, help='cable_states rate, Hz')
+    parser.add_argument('--duration', type=float, default=10.0, help='measured time, s')
+    parser.add_argument('--goals', type=int, default=5, help='reachable tip goals to time')
+    parser.add_argument('--skip-goals', action='store_true', help='only the statics part')
+    options = parser.parse_args(list(sys.argv[1:] if argv is None else argv))
+    ros_environment()
+    robot_file = os.path.abspath(options.robot)
+    print('statics: cable_states at %g Hz for %g s (robot %s) ...'
+          % (options.rate, options.duration, os.path.basename(robot_file)), flush=True)
+    statics = bench_statics(robot_file, options.rate, options.duration)
+    print('  sent %(sent)d, processed %(processed)d, dropped %(dropped)d' % statics)
+    print('  input %(input_rate_hz).1f Hz, processed %(processed_rate_hz).1f Hz' % statics)
+    print('  stamp-to-backbone latency: median %(latency_median_ms).2f ms, p99 '
+          '%(latency_p99_ms).2f ms, max %(latency_max_ms).2f ms' % statics)
+    print('  statics process CPU: %(statics_cpu_percent).0f %% of one core' % statics,
+          flush=True)
+    line = ('figures: processed %.1f Hz (target >= 990), dropped %d, latency median %.2f ms '
+            '(<= 2), p99 %.2f ms (<= 10), statics CPU %.0f %%' % (
+                statics['processed_rate_hz'], statics['dropped'], statics['latency_median_ms'],
+                statics['latency_p99_ms'], statics['statics_cpu_percent']))
+    if not options.skip_goals:
+        print('tip_goal: %d reachable goals and one unreachable through bringup ...'
+              % options.goals, flush=True)
+        goal = bench_tip_goal(robot_file, options.goals)
+        print('  reached %(reached)d/%(goals)d, round trip median %(round_trip_median_s).2f s, '
+              'max %(round_trip_max_s).2f s; unreachable answered empty in '
+              '%(unreachable_round_trip_ms).0f ms' % goal)
+        line += ', tip_goal round trip median %.2f s (unreachable %.0f ms)' % (
+            goal['round_trip_median_s'], goal['unreachable_round_trip_ms'])
+    print(line)
+    return 0
+
+
+if __name__ == '__main__':
+    sys.exit(main())

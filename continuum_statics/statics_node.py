@@ -1,0 +1,296 @@
+"""statics: backbone shape and tip pose from measured cable lengths and a tip-load estimate.
+
+Subscribes ``cable_states`` (sensor_msgs/JointState: measured cable lengths in m by name; sensor-
+data QoS with depth 1, so at any input rate only the newest measurement waits) and ``tip_wrench``
+(geometry_msgs/WrenchStamped in the base frame; zero until received and after it is older than
+``tip_wrench_timeout``). Every measurement is solved with the numeric core, warm-started from the
+last estimate, and published as ``backbone`` (nav_msgs/Path, ``path_samples`` poses base -> tip)
+and ``tip_pose`` (geometry_msgs/PoseStamped), both latched, stamped with the measurement's stamp in
+the robot's base frame. ``backbone_markers`` (visualization_msgs/MarkerArray) follows at
+``marker_rate``; ``/diagnostics`` at 1 Hz.
+
+Backbone and tip pose are published as serialized bytes filled from a template
+(:class:`~continuum_statics.ros_conversions.PoseSequenceEncoder`): converting a Path object costs
+rclpy ~0.2 ms, which matters at 1 kHz.
+
+Bad input (unknown, repeated or missing names, size mismatch, NaN, a tip wrench in another frame)
+is dropped with a throttled warning and counted on diagnostics; the last good state stays
+published and nothing non-finite is ever published.
+"""
+import math
+import sys
+import time
+
+from geometry_msgs.msg import PoseStamped, WrenchStamped
+from nav_msgs.msg import Path
+import numpy as np
+from rclpy.node import Node
+from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
+from sensor_msgs.msg import JointState
+from std_msgs.msg import Header
+from visualization_msgs.msg import MarkerArray
+
+from continuum_statics import diagnostics_util as diag
+from continuum_statics.marker_geometry import guide_and_cable_points
+from continuum_statics.node_params import (
+    ParameterTable,
+    ParamSpec,
+    check_robot_file,
+    default_robot_file,
+    load_robot_file,
+)
+from continuum_statics.ros_conversions import (
+    PoseSequenceEncoder,
+    backbone_markers,
+    cable_index,
+    is_zero_stamp,
+    joint_positions,
+    wrench_force,
+)
+from continuum_statics.rotations import rotation_to_quaternion
+
+#: Newest measurement only: best effort, keep last 1 (a slow cycle never builds a backlog).
+LATEST_SENSOR_QOS = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=1,
+                               reliability=ReliabilityPolicy.BEST_EFFORT,
+                               durability=DurabilityPolicy.VOLATILE)
+#: Latched state (backbone, tip_pose, markers): reliable, depth 1, transient local.
+LATCHED_QOS = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=1,
+                         reliability=ReliabilityPolicy.RELIABLE,
+                         durability=DurabilityPolicy.TRANSIENT_LOCAL)
+THROTTLE_S = 2.0
+
+
+class StaticsNode(Node):
+    """Shape estimation at the measurement rate: a thin layer over ``Robot.estimate_shape``."""
+
+    EXECUTOR = 'single'
+
+    def __init__(self, node_name='statics', **kwargs):
+        super().__init__(node_name, **kwargs)
+        specs = [
+            ParamSpec('robot_file', default_robot_file(),
+                      'robot description YAML (rod, base frame, cables, guides)', read_only=True,
+                      check=check_robot_file),
+            ParamSpec('path_samples', 20, 'poses in each backbone Path, base to tip', 2, 500),
+            ParamSpec('marker_rate', 30.0, 'backbone_markers rate, Hz (0: off)', 0.0, 200.0),
+            ParamSpec('tip_wrench_timeout', 1.0, 'a tip_wrench estimate older than this is '
+                      'replaced by zero, s (0: never expires)', 0.0, 3600.0),
+            ParamSpec('max_residual', 1e-4, 'an estimate that did not converge is still published '
+                      'when its cable-length residual (RMS) is below this, m', 0.0, 1.0),
+            ParamSpec('tube_diameter', 0.006, 'diameter of the rod drawn in RViz, m', 1e-4, 0.2),
+        ]
+        self._params = ParameterTable(self, specs)
+        self.robot = load_robot_file(self._params['robot_file'])
+        self.cable_names = tuple(self.robot.cable_names)
+        self.base_frame_id = self.robot.base_frame_id
+        self._disk_diameter = 2.0 * float(np.max(np.linalg.norm(
+            np.asarray(self.robot.cable_offsets, dtype=float).reshape(-1, 3), axis=1),
+            initial=0.005)) + 0.006
+
+        # Hot-path state: the name order of the last good message and its index map.
+        self._names = None
+        self._index = None
+        self._lengths = np.empty(len(self.cable_names))
+        self._u0 = None
+        self._shape = None
+        self._shape_is_new = False
+        self._tip_force = np.zeros(3)
+        self._wrench_time = None
+        self._wrench_expired = False
+        self._stamp = None
+        self._tip_position = None
+        self._path_encoder = PoseSequenceEncoder(self.base_frame_id,
+                                                 self._params['path_samples'])
+        self._tip_encoder = PoseSequenceEncoder(self.base_frame_id)
+        self._last = {'residual': math.nan, 'iterations': 0, 'converged': False,
+                      'message': 'waiting for cable_states', 'time': None}
+        self._solve_times = diag.TimingWindow()
+        self._cycle_times = diag.TimingWindow()
+        self._input_rate = diag.RateMeter()
+        self._output_rate = diag.RateMeter()
+        self._problems = diag.Problems()
+        self._not_converged = 0
+
+        self._backbone_pub = self.create_publisher(Path, 'backbone', LATCHED_QOS)
+        self._tip_pub = self.create_publisher(PoseStamped, 'tip_pose', LATCHED_QOS)
+        self._marker_pub = self.create_publisher(MarkerArray, 'backbone_markers', LATCHED_QOS)
+        self._diagnostics = self.create_publisher(diag.DiagnosticArray, '/diagnostics', 10)
+        self.create_subscription(JointState, 'cable_states', self._on_cable_states,
+                                 LATEST_SENSOR_QOS)
+        self.create_subscription(WrenchStamped, 'tip_wrench', self._on_tip_wrench,
+                                 LATEST_SENSOR_QOS)
+        self._marker_timer = None
+        self._set_marker_timer(self._params['marker_rate'])
+        self.create_timer(1.0, self._publish_diagnostics)
+        self._params._on_change = self._on_parameter_change
+        self.get_logger().info('statics: robot %r, %d cables, frame %r, %d path samples' % (
+            self.robot.name, len(self.cable_names), self.base_frame_id,
+            self._params['path_samples']))
+
+    # -- parameters ------------------------------------------------------------------------
+    def _on_parameter_change(self, name, value):
+        if name == 'marker_rate':
+            self._set_marker_timer(value)
+
+    def _set_marker_timer(self, rate):
+        if self._marker_timer is not None:
+            self.destroy_timer(self._marker_timer)
+            self._marker_timer = None
+        if rate > 0.0:
+            self._marker_timer = self.create_timer(1.0 / rate, self._publish_markers)
+
+    # -- inputs ----------------------------------------------------------------------------
+    def _reject(self, kind, reason):
+        self._problems.add(kind, reason)
+        self.get_logger().warning('dropped %s: %s' % (kind, reason),
+                                  throttle_duration_sec=THROTTLE_S)
+
+    def _on_tip_wrench(self, msg):
+        try:
+            force = wrench_force(msg, self.base_frame_id)
+        except ValueError as error:
+            self._reject('tip_wrench', error)
+            return
+        self._tip_force = force
+        self._wrench_time = time.monotonic()
+        if self._wrench_expired:
+            self._wrench_expired = False
+            self.get_logger().info('tip_wrench received again')
+
+    def _current_tip_force(self, now):
+        timeout = self._params['tip_wrench_timeout']
+        if self._wrench_time is None or self._wrench_expired:
+            return self._tip_force
+        if timeout > 0.0 and now - self._wrench_time > timeout:
+            self._wrench_expired = True
+            self._tip_force = np.zeros(3)
+            self.get_logger().warning(
+                'tip_wrench estimate is older than %.3g s: using zero tip force' % timeout)
+        return self._tip_force
+
+    def _on_cable_states(self, msg):
+        start = time.perf_counter()
+        self._input_rate.tick()
+        names = msg.name
+        if names != self._names:
+            try:
+                index = cable_index(names, self.cable_names)
+            except ValueError as error:
+                self._reject('cable_states', error)
+                return
+            self._names, self._index = list(names), index
+        try:
+            positions = joint_positions(msg, len(self._index))
+        except ValueError as error:
+            self._reject('cable_states', error)
+            return
+        self._lengths[self._index] = positions
+        tip_force = self._current_tip_force(time.monotonic())
+        try:
+            estimate = self.robot.estimate_shape(self._lengths, tip_force, u0_guess=self._u0)
+        except ValueError as error:
+            self._reject('cable_states', error)
+            return
+        solved = time.perf_counter()
+        self._solve_times.add(solved - start)
+        self._last.update(residual=float(estimate.residual), iterations=estimate.iterations,
+                          converged=bool(estimate.converged), message=estimate.message,
+                          time=time.monotonic())
+        if not estimate.converged and not estimate.residual <= self._params['max_residual']:
+            self._not_converged += 1
+            self.get_logger().warning(
+                'shape estimate did not converge (%s, residual %.3g m): keeping the last good '
+                'shape' % (estimate.message, estimate.residual), throttle_duration_sec=THROTTLE_S)
+            return
+        shape = estimate.shape
+        samples = self._params['path_samples']
+        _, points, quaternions = shape.sample(samples)
+        stamp = self.get_clock().now().to_msg() if is_zero_stamp(
+            msg.header.stamp) else msg.header.stamp
+        if self._path_encoder.count != samples:
+            self._path_encoder = PoseSequenceEncoder(self.base_frame_id, samples)
+        try:
+            backbone = self._path_encoder.encode(stamp, points, quaternions)
+            tip = self._tip_encoder.encode(stamp, points[-1], quaternions[-1])
+        except ValueError as error:
+            self._reject('shape', error)
+            return
+        self._backbone_pub.publish(backbone)
+        self._tip_pub.publish(tip)
+        self._u0 = estimate.u0
+        self._stamp = stamp
+        self._tip_position = points[-1]
+        self._shape, self._shape_is_new = shape, True
+        self._output_rate.tick()
+        self._cycle_times.add(time.perf_counter() - start)
+
+    # -- outputs ---------------------------------------------------------------------------
+    def _publish_markers(self):
+        if not self._shape_is_new:
+            return
+        self._shape_is_new = False
+        shape = self._shape
+        try:
+            guide_points, guide_rotations, cable_points = guide_and_cable_points(
+                shape.s, shape.positions, shape.rotations, self.robot.guides,
+                self.robot.cable_offsets)
+            _, positions, quaternions = shape.sample(self._params['path_samples'])
+            header = Header(frame_id=self.base_frame_id, stamp=self._stamp)
+            markers = backbone_markers(
+                header, positions, quaternions, guide_points,
+                rotation_to_quaternion(guide_rotations), cable_points,
+                self._params['tube_diameter'], self._disk_diameter)
+        except ValueError as error:
+            self._reject('markers', error)
+            return
+        self._marker_pub.publish(MarkerArray(markers=markers))
+
+    def _publish_diagnostics(self):
+        now = time.monotonic()
+        last = self._last
+        input_rate = self._input_rate.report()
+        output_rate = self._output_rate.report()
+        solves, solve_median, solve_max = self._solve_times.report()
+        _, cycle_median, cycle_max = self._cycle_times.report()
+        level, message = diag.OK, 'estimating the shape'
+        if last['time'] is None or now - last['time'] > 1.0:
+            level, message = diag.WARN, 'no cable_states for over 1 s'
+        if self._problems.recent(2.0):
+            level, message = diag.WARN, 'rejected ' + self._problems.last_reason
+        if last['time'] is not None and not last['converged'] and not (
+                last['residual'] <= self._params['max_residual']):
+            level, message = diag.WARN, 'estimate did not converge: %s' % last['message']
+        wrench_age = math.inf if self._wrench_time is None else now - self._wrench_time
+        values = {
+            'status': message,
+            'input_rate_hz': input_rate,
+            'output_rate_hz': output_rate,
+            'solves': solves,
+            'solve_time_median_ms': solve_median,
+            'solve_time_max_ms': solve_max,
+            'cycle_time_median_ms': cycle_median,
+            'cycle_time_max_ms': cycle_max,
+            'residual_m': last['residual'],
+            'iterations': last['iterations'],
+            'converged': last['converged'],
+            'not_converged_total': self._not_converged,
+            'tip_force_n': ' '.join('%.4g' % f for f in self._tip_force),
+            'tip_wrench_age_s': wrench_age,
+            'tip_wrench_expired': self._wrench_expired,
+        }
+        if self._tip_position is not None:
+            values['tip_position_m'] = '%.5f %.5f %.5f' % tuple(self._tip_position)
+        values.update(self._problems.values())
+        self._diagnostics.publish(diag.diagnostic_array(
+            self.get_clock().now().to_msg(), self.get_fully_qualified_name().lstrip('/'),
+            self.robot.name, level, message, values))
+
+
+def main(args=None):
+    """Run the statics node (``ros2 run continuum_statics statics``)."""
+    from continuum_statics.node_runner import run_nodes
+    return run_nodes([StaticsNode], args)
+
+
+if __name__ == '__main__':
+    sys.exit(main())

@@ -1,0 +1,434 @@
+"""tip_controller: move the tip to a goal position, closed loop on the measured tip pose.
+
+Goals come from the ``tip_goal`` service (nav_msgs/srv/GetPlan: ``goal.pose.position`` in the base
+frame, ``tolerance`` in m; answered after arrival or failure) and from the ``tip_goal_pose`` topic
+(geometry_msgs/PoseStamped, streaming; ``default_tolerance``). For a goal the node
+
+1. solves the tip goal with the numeric core from the current estimate (warm start),
+2. ramps ``cable_commands`` (sensor_msgs/JointState) towards the solution's cable lengths with the
+   largest cable moving at ``max_cable_speed``,
+3. watches ``tip_pose`` and, once the cables have settled, corrects the goal by the remaining tip
+   error (integral correction: ``target += goal - measured_tip``, re-solved from the current u(0))
+   until the tip is within the tolerance or ``goal_timeout`` passes.
+
+The service answers with the ``backbone`` at the final state, or an empty plan when the goal was
+rejected (non-finite numbers, a frame other than the base frame, a non-positive tolerance, an
+unreachable position, no state yet), not reached in time, or pre-empted by a newer goal; the
+reason is logged and on diagnostics. The service runs in its own reentrant callback group, so a
+waiting call never blocks the topics it is waiting for (multi-threaded executor).
+"""
+from dataclasses import dataclass, field
+import math
+import sys
+import threading
+import time
+
+from geometry_msgs.msg import PoseStamped, WrenchStamped
+from nav_msgs.msg import Path
+from nav_msgs.srv import GetPlan
+import numpy as np
+from rclpy.callback_groups import MutuallyExclusiveCallbackGroup, ReentrantCallbackGroup
+from rclpy.node import Node
+from sensor_msgs.msg import JointState
+from std_msgs.msg import Header
+
+from continuum_statics import diagnostics_util as diag
+from continuum_statics.cable_driver_node import COMMAND_QOS
+from continuum_statics.node_params import (
+    ParameterTable,
+    ParamSpec,
+    check_robot_file,
+    default_robot_file,
+    load_robot_file,
+)
+from continuum_statics.ros_conversions import (
+    cable_index,
+    goal_position,
+    joint_positions,
+    joint_state,
+    pose_position,
+    stamp_to_seconds,
+    wrench_force,
+)
+from continuum_statics.statics_node import LATCHED_QOS, LATEST_SENSOR_QOS
+
+THROTTLE_S = 2.0
+
+
+@dataclass(eq=False)
+class Goal:
+    """One tip goal in progress; ``done`` is set when it ends, ``reason`` says how."""
+
+    position: np.ndarray
+    tolerance: float
+    source: str
+    started: float
+    deadline: float
+    done: threading.Event = field(default_factory=threading.Event)
+    reached: bool = False
+    reason: str = ''
+    tip_stamp: float = None
+    error: float = math.nan
+
+
+class TipControllerNode(Node):
+    """Tip-goal service and streaming goals, closed loop on ``tip_pose``."""
+
+    EXECUTOR = 'multi'
+
+    def __init__(self, node_name='tip_controller', **kwargs):
+        super().__init__(node_name, **kwargs)
+        specs = [
+            ParamSpec('robot_file', default_robot_file(),
+                      'robot description YAML (must be the one statics uses)', read_only=True,
+                      check=check_robot_file),
+            ParamSpec('max_cable_speed', 0.02, 'fastest cable speed of a ramp, m/s', 1e-5, 1.0),
+            ParamSpec('control_rate', 50.0, 'cable_commands rate while a goal runs, Hz', 1.0,
+                      1000.0),
+            ParamSpec('goal_timeout', 10.0, 'a goal not reached after this long fails, s', 0.1,
+                      3600.0),
+            ParamSpec('default_tolerance', 0.001, 'tip position tolerance of tip_goal_pose '
+                      'goals, m', 1e-6, 1.0),
+            ParamSpec('settle_time', 0.2, 'wait after a ramp before correcting the tip error, s',
+                      0.0, 10.0),
+            ParamSpec('max_corrections', 10, 'closed-loop corrections per goal before it fails',
+                      0, 1000),
+            ParamSpec('tip_wrench_timeout', 1.0, 'a tip_wrench estimate older than this is '
+                      'replaced by zero, s (0: never expires)', 0.0, 3600.0),
+        ]
+        self._params = ParameterTable(self, specs)
+        self.robot = load_robot_file(self._params['robot_file'])
+        self.cable_names = tuple(self.robot.cable_names)
+        self.base_frame_id = self.robot.base_frame_id
+        self._limits = np.asarray(self.robot.cable_length_limits, dtype=float)
+
+        self._lock = threading.Lock()
+        self._closing = False
+        self._goal = None
+        self._phase = 'idle'
+        self._commanded = None
+        self._target = None
+        self._corrected_goal = None
+        self._u0 = None
+        self._corrections = 0
+        self._settle_start = None
+        self._last_tick = None
+        self._measured = None
+        self._names = None
+        self._index = None
+        self._tip = None  # (position (3,), stamp s, monotonic receive time)
+        self._backbone = None
+        self._tip_force = np.zeros(3)
+        self._wrench_time = None
+        self._problems = diag.Problems()
+        self._counts = {'reached': 0, 'failed': 0, 'rejected': 0, 'preempted': 0}
+        self._last_outcome = 'no goal yet'
+        self._command_msg = JointState()
+
+        state_group = MutuallyExclusiveCallbackGroup()
+        self._control_group = MutuallyExclusiveCallbackGroup()
+        service_group = ReentrantCallbackGroup()
+        self._command_pub = self.create_publisher(JointState, 'cable_commands', COMMAND_QOS)
+        self._diagnostics = self.create_publisher(diag.DiagnosticArray, '/diagnostics', 10)
+        self.create_subscription(PoseStamped, 'tip_pose', self._on_tip_pose, LATCHED_QOS,
+                                 callback_group=state_group)
+        self.create_subscription(Path, 'backbone', self._on_backbone, LATCHED_QOS,
+                                 callback_group=state_group)
+        self.create_subscription(JointState, 'cable_states', self._on_cable_states,
+                                 LATEST_SENSOR_QOS, callback_group=state_group)
+        self.create_subscription(WrenchStamped, 'tip_wrench', self._on_tip_wrench,
+                                 LATEST_SENSOR_QOS, callback_group=state_group)
+        self.create_subscription(PoseStamped, 'tip_goal_pose', self._on_goal_pose, COMMAND_QOS,
+                                 callback_group=self._control_group)
+        self.create_service(GetPlan, 'tip_goal', self._on_tip_goal, callback_group=service_group)
+        self._timer = self.create_timer(1.0 / self._params['control_rate'], self._on_control,
+                                        callback_group=self._control_group)
+        self.create_timer(1.0, self._publish_diagnostics, callback_group=self._control_group)
+        self._params._on_change = self._on_parameter_change
+        self.get_logger().info('tip_controller: robot %r, frame %r, max cable speed %g m/s' % (
+            self.robot.name, self.base_frame_id, self._params['max_cable_speed']))
+
+    def _on_parameter_change(self, name, value):
+        if name == 'control_rate':
+            self.destroy_timer(self._timer)
+            self._timer = self.create_timer(1.0 / value, self._on_control,
+                                            callback_group=self._control_group)
+
+    # -- state inputs ----------------------------------------------------------------------
+    def _reject(self, kind, reason):
+        self._problems.add(kind, reason)
+        self.get_logger().warning('dropped %s: %s' % (kind, reason),
+                                  throttle_duration_sec=THROTTLE_S)
+
+    def _on_tip_pose(self, msg):
+        if msg.header.frame_id != self.base_frame_id:
+            self._reject('tip_pose', 'frame %r is not the base frame %r'
+                         % (msg.header.frame_id, self.base_frame_id))
+            return
+        position = pose_position(msg.pose)
+        if not np.all(np.isfinite(position)):
+            self._reject('tip_pose', 'non-finite position')
+            return
+        self._tip = (position, stamp_to_seconds(msg.header.stamp), time.monotonic())
+
+    def _on_backbone(self, msg):
+        self._backbone = msg
+
+    def _on_cable_states(self, msg):
+        try:
+            if msg.name != self._names:
+                self._index = cable_index(msg.name, self.cable_names)
+                self._names = list(msg.name)
+            positions = joint_positions(msg, len(self._index))
+        except ValueError as error:
+            self._names = None
+            self._reject('cable_states', error)
+            return
+        measured = np.empty(len(self.cable_names))
+        measured[self._index] = positions
+        self._measured = measured
+
+    def _on_tip_wrench(self, msg):
+        try:
+            self._tip_force = wrench_force(msg, self.base_frame_id)
+        except ValueError as error:
+            self._reject('tip_wrench', error)
+            return
+        self._wrench_time = time.monotonic()
+
+    def _current_tip_force(self):
+        timeout = self._params['tip_wrench_timeout']
+        if self._wrench_time is None:
+            return np.zeros(3)
+        if timeout > 0.0 and time.monotonic() - self._wrench_time > timeout:
+            return np.zeros(3)
+        return self._tip_force
+
+    # -- goals -----------------------------------------------------------------------------
+    def _on_tip_goal(self, request, response):
+        header = Header(frame_id=self.base_frame_id, stamp=self.get_clock().now().to_msg())
+        response.plan = Path(header=header)
+        tolerance = float(request.tolerance)
+        try:
+            if not (math.isfinite(tolerance) and tolerance > 0.0):
+                raise ValueError('tolerance must be a finite number > 0 m, got %r' % tolerance)
+            goal = self._start_goal(goal_position(request.goal, self.base_frame_id), tolerance,
+                                    'tip_goal service')
+        except ValueError as error:
+            self._goal_rejected(error)
+            return response
+        limit = time.monotonic() + self._params['goal_timeout'] + 5.0
+        while not goal.done.wait(0.05):
+            if self._closing or time.monotonic() > limit:
+                self._finish(goal, False, 'shutting down' if self._closing else 'timed out')
+                break
+        if goal.reached:
+            plan = self._plan_after(goal.tip_stamp)
+            if plan is not None:
+                response.plan = plan
+        return response
+
+    def _on_goal_pose(self, msg):
+        try:
+            self._start_goal(goal_position(msg, self.base_frame_id),
+                             self._params['default_tolerance'], 'tip_goal_pose')
+        except ValueError as error:
+            self._goal_rejected(error)
+
+    def _goal_rejected(self, error):
+        self._counts['rejected'] += 1
+        self._last_outcome = 'rejected: %s' % error
+        self._problems.add('tip_goal', error)
+        self.get_logger().warning('tip goal rejected: %s' % error)
+
+    def _start_goal(self, position, tolerance, source):
+        """Solve the goal and make it the active one; ValueError says why it is rejected."""
+        measured, tip = self._measured, self._tip
+        if measured is None or tip is None:
+            raise ValueError('no %s yet: are statics and cable_driver running?'
+                             % ('cable_states' if measured is None else 'tip_pose'))
+        tip_force = self._current_tip_force()
+        u0_guess = self._u0
+        estimate = self.robot.estimate_shape(measured, tip_force, u0_guess=u0_guess)
+        solution = self.robot.solve_tip_goal(position, tip_force, u0_guess=estimate.u0,
+                                             tolerance=tolerance)
+        if not solution.converged:
+            raise ValueError('unreachable goal (%.4f, %.4f, %.4f) m: %s' % (
+                *position, solution.message or 'closest tip %.1f mm away' % (
+                    solution.error * 1e3)))
+        lengths = np.asarray(solution.cable_lengths, dtype=float)
+        if not np.all(np.isfinite(lengths)):
+            raise ValueError('the solver returned non-finite cable lengths')
+        now = time.monotonic()
+        goal = Goal(position=position, tolerance=tolerance, source=source, started=now,
+                    deadline=now + self._params['goal_timeout'])
+        with self._lock:
+            previous = self._goal
+            if previous is not None:
+                self._finish_locked(previous, False, 'pre-empted by a new goal')
+            else:
+                self._commanded = measured.copy()
+            self._goal = goal
+            self._target = np.clip(lengths, self._limits[:, 0], self._limits[:, 1])
+            self._corrected_goal = position.copy()
+            self._u0 = solution.u0
+            self._corrections = 0
+            self._phase = 'ramp'
+            self._last_tick = now
+        self.get_logger().info('tip goal (%.4f, %.4f, %.4f) m, tolerance %.2g m from %s' % (
+            *position, tolerance, source))
+        return goal
+
+    def _finish(self, goal, reached, reason):
+        with self._lock:
+            self._finish_locked(goal, reached, reason)
+
+    def _finish_locked(self, goal, reached, reason):
+        if goal.done.is_set():
+            return
+        goal.reached, goal.reason = reached, reason
+        if self._goal is goal:
+            self._goal, self._phase = None, 'idle'
+        key = 'reached' if reached else ('preempted' if 'pre-empted' in reason else 'failed')
+        self._counts[key] += 1
+        self._last_outcome = '%s (%.4f, %.4f, %.4f): %s' % (key, *goal.position, reason)
+        goal.done.set()
+        if reached:
+            self.get_logger().info('tip goal reached: %s' % reason)
+        else:
+            self._problems.add('tip_goal', reason)
+            self.get_logger().warning('tip goal (%.4f, %.4f, %.4f) m not reached: %s'
+                                      % (*goal.position, reason))
+
+    def _plan_after(self, tip_stamp, wait=0.5):
+        """Return the newest backbone, waiting briefly for the one of the reached tip pose."""
+        limit = time.monotonic() + wait
+        while True:
+            backbone = self._backbone
+            if backbone is not None and backbone.poses and (
+                    tip_stamp is None or stamp_to_seconds(backbone.header.stamp) >= tip_stamp):
+                return backbone
+            if time.monotonic() > limit or self._closing:
+                return backbone if backbone is not None and backbone.poses else None
+            time.sleep(0.005)
+
+    # -- control loop ----------------------------------------------------------------------
+    def _on_control(self):
+        with self._lock:
+            goal = self._goal
+            if goal is None:
+                return
+            now = time.monotonic()
+            dt = min(max(now - self._last_tick, 0.0), 3.0 / self._params['control_rate'])
+            self._last_tick = now
+            tip = self._tip
+            error = math.inf if tip is None else float(
+                np.linalg.norm(goal.position - tip[0]))
+            goal.error = error
+            if now > goal.deadline:
+                self._finish_locked(goal, False, 'not reached within %.3g s (tip error %.2f mm)'
+                                    % (self._params['goal_timeout'], error * 1e3))
+                return
+            if self._phase == 'ramp':
+                self._commanded = self._ramp(self._commanded, self._target,
+                                             self._params['max_cable_speed'] * dt)
+                if np.array_equal(self._commanded, self._target):
+                    self._phase, self._settle_start = 'settle', now
+            elif tip is not None and tip[2] > self._settle_start:
+                if error <= goal.tolerance:
+                    goal.tip_stamp = tip[1]
+                    self._finish_locked(goal, True, 'tip %.2f mm from the goal after %.2f s, %d '
+                                        'correction(s)' % (error * 1e3, now - goal.started,
+                                                           self._corrections))
+                elif now - self._settle_start >= self._params['settle_time']:
+                    self._correct_locked(goal, tip[0])
+            commanded = self._commanded
+        self._publish_command(commanded)
+
+    @staticmethod
+    def _ramp(commanded, target, step):
+        """Move towards ``target`` along a straight line; the largest change moves ``step``."""
+        delta = target - commanded
+        largest = float(np.max(np.abs(delta)))
+        if largest <= step:
+            return target.copy()
+        return commanded + delta * (step / largest)
+
+    def _correct_locked(self, goal, measured_tip):
+        if self._corrections >= self._params['max_corrections']:
+            self._finish_locked(goal, False, 'still %.2f mm from the goal after %d corrections'
+                                % (goal.error * 1e3, self._corrections))
+            return
+        self._corrected_goal = self._corrected_goal + (goal.position - measured_tip)
+        try:
+            solution = self.robot.solve_tip_goal(
+                self._corrected_goal, self._current_tip_force(), u0_guess=self._u0,
+                tolerance=goal.tolerance)
+        except ValueError as error:
+            self._finish_locked(goal, False, 'correction failed: %s' % error)
+            return
+        lengths = np.asarray(solution.cable_lengths, dtype=float)
+        if not np.all(np.isfinite(lengths)):
+            self._finish_locked(goal, False, 'correction gave non-finite cable lengths')
+            return
+        self._corrections += 1
+        self._u0 = solution.u0
+        self._target = np.clip(lengths, self._limits[:, 0], self._limits[:, 1])
+        self._phase = 'ramp'
+
+    def _publish_command(self, lengths):
+        try:
+            msg = joint_state(self.cable_names, lengths, self.get_clock().now().to_msg(),
+                              msg=self._command_msg)
+        except ValueError as error:
+            self._reject('cable_commands', error)
+            return
+        self._command_pub.publish(msg)
+
+    # -- diagnostics and shutdown ----------------------------------------------------------
+    def _publish_diagnostics(self):
+        with self._lock:
+            goal, phase = self._goal, self._phase
+        level, message = diag.OK, 'idle' if goal is None else 'moving to a goal (%s)' % phase
+        if self._problems.recent(5.0):
+            level, message = diag.WARN, self._problems.last_reason
+        values = {
+            'phase': phase,
+            'goals_reached': self._counts['reached'],
+            'goals_failed': self._counts['failed'],
+            'goals_rejected': self._counts['rejected'],
+            'goals_preempted': self._counts['preempted'],
+            'last_outcome': self._last_outcome,
+            'have_tip_pose': self._tip is not None,
+            'have_cable_states': self._measured is not None,
+        }
+        if goal is not None:
+            values['goal_m'] = '%.5f %.5f %.5f' % tuple(goal.position)
+            values['tip_error_mm'] = goal.error * 1e3
+            values['corrections'] = self._corrections
+        values.update(self._problems.values())
+        self._diagnostics.publish(diag.diagnostic_array(
+            self.get_clock().now().to_msg(), self.get_fully_qualified_name().lstrip('/'),
+            self.robot.name, level, message, values))
+
+    def release_waiters(self):
+        """End the goal in progress so that a waiting service call returns (shutdown)."""
+        self._closing = True
+        with self._lock:
+            if self._goal is not None:
+                self._finish_locked(self._goal, False, 'shutting down')
+
+    def destroy_node(self):
+        """Release waiting service calls, then destroy the node."""
+        self.release_waiters()
+        return super().destroy_node()
+
+
+def main(args=None):
+    """Run the tip_controller node (``ros2 run continuum_statics tip_controller``)."""
+    from continuum_statics.node_runner import run_nodes
+    return run_nodes([TipControllerNode], args)
+
+
+if __name__ == '__main__':
+    sys.exit(main())
