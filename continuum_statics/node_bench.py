@@ -63,30 +63,35 @@ def measurement_lengths(robot, count, rate):
     return lengths
 
 
-def bench_statics(robot_file, rate, duration, warmup=1.0):
+def bench_statics(robot_file, rate, duration, warmup=1.0, parameters=()):
     """Publish cable_states at ``rate`` to a statics process; return the figures as a dict."""
+    from diagnostic_msgs.msg import DiagnosticArray
+    from nav_msgs.msg import Path
     import rclpy
     from rclpy.qos import QoSProfile, ReliabilityPolicy, qos_profile_sensor_data
     from sensor_msgs.msg import JointState
 
     from continuum_statics import load_robot
+    from continuum_statics.dedicated_intake import DedicatedIntake
     from continuum_statics.ros_conversions import seconds_to_stamp
 
     robot = load_robot(robot_file)
     period_count = int(round(rate * 2.0))  # two seconds of distinct lengths, then repeat
     lengths = measurement_lengths(robot, period_count, rate)
     namespace = '/bench_statics'
-    process = subprocess.Popen(
-        [sys.executable, '-m', 'continuum_statics.statics_node', '--ros-args',
-         '-r', '__ns:=' + namespace, '-p', 'robot_file:=' + robot_file,
-         '--log-level', 'warn'])
-    context = rclpy.Context()
-    rclpy.init(context=context)
-    node = rclpy.create_node('bench_statics_client', namespace=namespace, context=context)
-    executor = rclpy.executors.SingleThreadedExecutor(context=context)
-    executor.add_node(node)
     received = []  # (stamp s, receive time s)
     record = [False]
+    window = {}
+
+    totals = {}
+
+    def on_diagnostics(msg):
+        for status in msg.status:
+            if status.name.endswith('bench_statics/statics'):
+                values = {kv.key: kv.value for kv in status.values}
+                totals[time.time()] = tuple(int(values.get(key, -1)) for key in (
+                    'received_total', 'published_total', 'input_skipped_total',
+                    'input_lost_total'))
 
     def on_backbone(data):
         now = time.time()
@@ -94,74 +99,103 @@ def bench_statics(robot_file, rate, duration, warmup=1.0):
             sec, nanosec = struct.unpack_from('<iI', data, 4)
             received.append((sec + nanosec * 1e-9, now))
 
-    publisher = node.create_publisher(JointState, 'cable_states', qos_profile_sensor_data)
-    node.create_subscription(type_of('nav_msgs.msg', 'Path'), 'backbone', on_backbone,
-                             QoSProfile(depth=1000, reliability=ReliabilityPolicy.RELIABLE),
-                             raw=True)
-    figures = {}
+    process = subprocess.Popen(
+        [sys.executable, '-m', 'continuum_statics.statics_node', '--ros-args',
+         '-r', '__ns:=' + namespace, '-p', 'robot_file:=' + robot_file,
+         '--log-level', 'warn'] + [arg for p in parameters for arg in ('-p', p)])
+    context = rclpy.Context()
+    rclpy.init(context=context)
+    node = intake = executor = None
     try:
+        node = rclpy.create_node('bench_statics_client', namespace=namespace, context=context)
+        publisher = node.create_publisher(JointState, 'cable_states', qos_profile_sensor_data)
+        # Received as bytes in a thread of its own: the client must not be the bottleneck.
+        intake = DedicatedIntake(node, Path, 'backbone', on_backbone,
+                                 QoSProfile(depth=1000, reliability=ReliabilityPolicy.RELIABLE),
+                                 raw=True)
+        intake.start()
+        node.create_subscription(DiagnosticArray, '/diagnostics', on_diagnostics, 10)
+        executor = rclpy.executors.SingleThreadedExecutor(context=context)
+        executor.add_node(node)
+        spinner = threading.Thread(target=_spin_until_shutdown, args=(executor,), daemon=True)
+        spinner.start()
         deadline = time.monotonic() + 60.0
-        while (publisher.get_subscription_count() < 1 or node.count_publishers(
-                namespace + '/backbone') < 1) and time.monotonic() < deadline:
+        while publisher.get_subscription_count() < 1 or node.count_publishers(
+                namespace + '/backbone') < 1:
             if process.poll() is not None:
                 raise RuntimeError('the statics process exited with %s' % process.returncode)
-            executor.spin_once(timeout_sec=0.05)
-        if publisher.get_subscription_count() < 1:
-            raise RuntimeError('statics did not subscribe to cable_states within 60 s')
-        sent = [0]
-        window = {}
-
-        def publish_loop():
-            msg = JointState(name=list(robot.cable_names))
-            start = time.monotonic()
-            total = int(round((warmup + duration) * rate))
-            for i in range(total):
-                target = start + i / rate
-                delay = target - time.monotonic()
-                if delay > 0:
-                    time.sleep(delay)
-                if i == int(warmup * rate):
-                    window['start'] = time.time()
-                    window['cpu'] = cpu_seconds(process.pid)
-                    record[0] = True
-                    sent[0] = 0
-                msg.header.stamp = seconds_to_stamp(time.time())
-                msg.position = lengths[i % period_count]
-                publisher.publish(msg)
-                sent[0] += 1
-            window['end'] = time.time()
-            window['cpu_end'] = cpu_seconds(process.pid)
-
-        thread = threading.Thread(target=publish_loop, daemon=True)
-        thread.start()
-        while thread.is_alive():
-            executor.spin_once(timeout_sec=0.01)
-        end = time.monotonic() + 0.5  # let the last backbones arrive
-        while time.monotonic() < end:
-            executor.spin_once(timeout_sec=0.01)
+            if time.monotonic() > deadline:
+                raise RuntimeError('statics did not connect within 60 s')
+            time.sleep(0.05)
+        msg = JointState(name=list(robot.cable_names))
+        start = time.monotonic()
+        sent = 0
+        send_times = []
+        last = -1.0
+        for i in range(int(round((warmup + duration) * rate))):
+            # On schedule, but never closer than 0.75 periods after the previous message: a
+            # late wake-up must not turn into a burst (a real driver does not burst either).
+            delay = max(start + i / rate, last + 0.75 / rate) - time.monotonic()
+            if delay > 0:
+                time.sleep(delay)
+            last = time.monotonic()
+            if i == int(warmup * rate):
+                window.update(start=time.time(), cpu=cpu_seconds(process.pid),
+                              own_cpu=cpu_seconds(os.getpid()))
+                record[0], sent = True, 0
+            msg.header.stamp = seconds_to_stamp(time.time())
+            msg.position = lengths[i % period_count]
+            publisher.publish(msg)
+            sent += 1
+            send_times.append(last)
+        window.update(end=time.time(), cpu_end=cpu_seconds(process.pid),
+                      own_cpu_end=cpu_seconds(os.getpid()))
+        time.sleep(0.5)  # let the last backbones arrive
         record[0] = False
-        elapsed = window['end'] - window['start']
-        stamps = np.array([r[0] for r in received if r[0] >= window['start']])
-        latencies = np.array([r[1] - r[0] for r in received if r[0] >= window['start']])
-        figures.update(
-            sent=sent[0], processed=int(stamps.size), dropped=int(sent[0] - stamps.size),
-            input_rate_hz=sent[0] / elapsed, processed_rate_hz=stamps.size / elapsed,
-            latency_median_ms=float(np.median(latencies)) * 1e3 if latencies.size else np.nan,
-            latency_p99_ms=float(np.percentile(latencies, 99)) * 1e3 if latencies.size else np.nan,
-            latency_max_ms=float(latencies.max()) * 1e3 if latencies.size else np.nan,
-            statics_cpu_percent=100.0 * (window['cpu_end'] - window['cpu']) / elapsed)
+        deadline = time.monotonic() + 3.0  # statics reports its totals once a second
+        while time.monotonic() < deadline and not any(t > window['end'] + 0.5 for t in totals):
+            time.sleep(0.05)
     finally:
-        executor.shutdown()
-        node.destroy_node()
+        if intake is not None:
+            intake.stop()
+        if executor is not None:
+            executor.shutdown()
+        if node is not None:
+            node.destroy_node()
         rclpy.try_shutdown(context=context)
         stop(process)
-    return figures
+    elapsed = window['end'] - window['start']
+    stamps = np.array([r[0] for r in received if r[0] >= window['start']])
+    latencies = np.array([r[1] - r[0] for r in received if r[0] >= window['start']]) * 1e3
+    empty = latencies.size == 0
+    # Counters of the statics node itself (diagnostics, once a second): what reached it and what
+    # it published, so losses on the way in and on the way back can be told apart.
+    before = [v for t, v in sorted(totals.items()) if t <= window['start']]
+    after = [v for t, v in sorted(totals.items()) if t > window['end'] + 0.5]
+    statics_counts = [-1] * 4
+    if before and after:
+        statics_counts = [a - b for a, b in zip(after[0], before[-1])]
+    gaps = np.diff(send_times[-sent:]) * 1e3
+    print('  DEBUG send gaps ms: <0.25: %d, <0.5: %d, >1.5: %d, >3: %d, max %.2f' % (
+        np.sum(gaps < 0.25), np.sum(gaps < 0.5), np.sum(gaps > 1.5), np.sum(gaps > 3), gaps.max()))
+    return {
+        'sent': sent, 'processed': int(stamps.size), 'dropped': int(sent - stamps.size),
+        'input_rate_hz': sent / elapsed, 'processed_rate_hz': stamps.size / elapsed,
+        'latency_median_ms': np.nan if empty else float(np.median(latencies)),
+        'latency_p99_ms': np.nan if empty else float(np.percentile(latencies, 99)),
+        'latency_max_ms': np.nan if empty else float(latencies.max()),
+        'statics_cpu_percent': 100.0 * (window['cpu_end'] - window['cpu']) / elapsed,
+        'statics_received': statics_counts[0], 'statics_published': statics_counts[1],
+        'statics_skipped': statics_counts[2], 'statics_lost': statics_counts[3],
+        'client_cpu_percent': 100.0 * (window['own_cpu_end'] - window['own_cpu']) / elapsed,
+    }
 
 
-def type_of(module, name):
-    """Import a message type by module and name."""
-    import importlib
-    return getattr(importlib.import_module(module), name)
+def _spin_until_shutdown(executor):
+    try:
+        executor.spin()
+    except Exception:  # ExternalShutdownException and friends: the bench is ending
+        pass
 
 
 def bench_tip_goal(robot_file, goals=5):
@@ -199,18 +233,25 @@ def main(argv=None):
     parser.add_argument('--duration', type=float, default=10.0, help='measured time, s')
     parser.add_argument('--goals', type=int, default=5, help='reachable tip goals to time')
     parser.add_argument('--skip-goals', action='store_true', help='only the statics part')
+    parser.add_argument('--statics-param', action='append', default=[], metavar='NAME:=VALUE',
+                        help='parameter for the statics process (repeatable)')
     options = parser.parse_args(list(sys.argv[1:] if argv is None else argv))
     ros_environment()
     robot_file = os.path.abspath(options.robot)
     print('statics: cable_states at %g Hz for %g s (robot %s) ...'
           % (options.rate, options.duration, os.path.basename(robot_file)), flush=True)
-    statics = bench_statics(robot_file, options.rate, options.duration)
+    statics = bench_statics(robot_file, options.rate, options.duration,
+                            parameters=options.statics_param)
     print('  sent %(sent)d, processed %(processed)d, dropped %(dropped)d' % statics)
+    print('  statics counted (window +-1 s): %(statics_received)d solved, %(statics_published)d '
+          'published, %(statics_skipped)d skipped as stale, %(statics_lost)d lost before the '
+          'intake' % statics)
     print('  input %(input_rate_hz).1f Hz, processed %(processed_rate_hz).1f Hz' % statics)
     print('  stamp-to-backbone latency: median %(latency_median_ms).2f ms, p99 '
           '%(latency_p99_ms).2f ms, max %(latency_max_ms).2f ms' % statics)
-    print('  statics process CPU: %(statics_cpu_percent).0f %% of one core' % statics,
-          flush=True)
+    print('  CPU: statics process %(statics_cpu_percent).0f %%, this client process '
+          '%(client_cpu_percent).0f %% (of one core; %(cores)d cores)'
+          % dict(statics, cores=os.cpu_count()), flush=True)
     line = ('figures: processed %.1f Hz (target >= 990), dropped %d, latency median %.2f ms '
             '(<= 2), p99 %.2f ms (<= 10), statics CPU %.0f %%' % (
                 statics['processed_rate_hz'], statics['dropped'], statics['latency_median_ms'],
