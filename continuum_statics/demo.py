@@ -103,7 +103,8 @@ def run_client(robot_file, namespace, goals=5, tolerance=1e-3, print_rows=True, 
 
 
 def _mm(position):
-    return '%7.1f %7.1f %7.1f' % tuple(np.asarray(position) * 1e3)
+    millimetres = np.asarray(position, dtype=float) * 1e3
+    return '%7.1f %7.1f %7.1f' % tuple(np.where(np.abs(millimetres) < 0.05, 0.0, millimetres))
 
 
 def main(argv=None):

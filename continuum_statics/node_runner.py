@@ -7,9 +7,9 @@ each get their own executor and thread, so a busy node never delays another.
 rclpy's experimental ``EventsExecutor`` (Kilted) is not used: in rclpy 9.1 its ``spin()``
 busy-loops at 100 % CPU and does not return on SIGINT.
 """
+import signal
 import sys
 import threading
-import time
 
 import rclpy
 from rclpy.executors import (
@@ -17,6 +17,7 @@ from rclpy.executors import (
     MultiThreadedExecutor,
     SingleThreadedExecutor,
 )
+from rclpy.signals import SignalHandlerOptions
 
 #: Threads of a multi-threaded executor: waiting service calls each hold one.
 MULTI_THREADS = 8
@@ -30,17 +31,21 @@ def make_executor(kind, context=None):
 
 
 def run_nodes(factories, args=None, context=None):
-    """Create the nodes, spin them until shutdown (Ctrl-C, SIGTERM) and clean up.
+    """Create the nodes, spin them until SIGINT or SIGTERM and clean up; return the exit code.
 
-    Every executor spins in a thread of its own; the main thread only watches, so Ctrl-C is
-    handled the same way however many nodes run.
+    Every executor spins in a thread of its own; the main thread only waits for a signal. The
+    signals are handled here rather than by rclpy so that the executors are stopped while the
+    context is still valid: callbacks in flight finish normally instead of failing to publish.
 
     :param factories: callables returning a Node (usually the node classes)
     :param args: command-line arguments for ``rclpy.init`` (None: ``sys.argv``)
-    :returns: process exit code: 0 after a normal shutdown, 1 if a node failed
+    :returns: 0 after a normal shutdown, 1 if a node could not start or failed
     """
-    rclpy.init(args=args, context=context)
+    rclpy.init(args=args, context=context, signal_handler_options=SignalHandlerOptions.NO)
     context = context or rclpy.get_default_context()
+    stop = threading.Event()
+    previous = {signum: signal.signal(signum, lambda *_: stop.set())
+                for signum in (signal.SIGINT, signal.SIGTERM)}
     nodes, executors, threads, failures = [], [], [], []
     try:
         try:
@@ -57,10 +62,9 @@ def run_nodes(factories, args=None, context=None):
                                       name='spin_' + node.get_name(), daemon=True)
             thread.start()
             threads.append(thread)
-        while context.ok() and all(thread.is_alive() for thread in threads):
-            time.sleep(0.1)
-    except KeyboardInterrupt:
-        pass
+        while not stop.wait(0.1):
+            if not context.ok() or not all(thread.is_alive() for thread in threads):
+                break
     finally:
         for node in nodes:
             release = getattr(node, 'release_waiters', None)
@@ -73,6 +77,8 @@ def run_nodes(factories, args=None, context=None):
         for node in nodes:
             node.destroy_node()
         rclpy.try_shutdown(context=context)
+        for signum, handler in previous.items():
+            signal.signal(signum, handler)
     for error in failures:
         print('continuum_statics: a node stopped: %r' % error, file=sys.stderr)
     return 1 if failures else 0
@@ -84,7 +90,5 @@ def _spin(executor, context, failures):
     except (KeyboardInterrupt, ExternalShutdownException):
         pass
     except Exception as error:
-        # A callback that was running when Ctrl-C shut the context down may fail to publish;
-        # that is part of stopping. Anything else is a real failure.
         if context.ok():
             failures.append(error)

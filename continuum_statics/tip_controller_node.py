@@ -19,6 +19,7 @@ waiting call never blocks the topics it is waiting for (multi-threaded executor)
 """
 from dataclasses import dataclass, field
 import math
+import struct
 import sys
 import threading
 import time
@@ -29,6 +30,7 @@ from nav_msgs.srv import GetPlan
 import numpy as np
 from rclpy.callback_groups import MutuallyExclusiveCallbackGroup, ReentrantCallbackGroup
 from rclpy.node import Node
+from rclpy.serialization import deserialize_message
 from sensor_msgs.msg import JointState
 from std_msgs.msg import Header
 
@@ -47,7 +49,6 @@ from continuum_statics.ros_conversions import (
     joint_positions,
     joint_state,
     pose_position,
-    stamp_to_seconds,
     wrench_force,
 )
 from continuum_statics.statics_node import LATCHED_QOS, LATEST_SENSOR_QOS
@@ -67,7 +68,7 @@ class Goal:
     done: threading.Event = field(default_factory=threading.Event)
     reached: bool = False
     reason: str = ''
-    tip_stamp: float = None
+    tip_stamp: int = None  # ns
     error: float = math.nan
 
 
@@ -89,8 +90,11 @@ class TipControllerNode(Node):
                       3600.0),
             ParamSpec('default_tolerance', 0.001, 'tip position tolerance of tip_goal_pose '
                       'goals, m', 1e-6, 1.0),
-            ParamSpec('settle_time', 0.2, 'wait after a ramp before correcting the tip error, s',
-                      0.0, 10.0),
+            ParamSpec('settle_time', 0.2, 'longest wait for the cables to settle after a ramp '
+                      'before the tip error is judged, s', 0.0, 10.0),
+            ParamSpec('settled_cable_error', 1e-6, 'cables count as settled when every measured '
+                      'length is this close to its command, m (the tip moves ~L/r times as '
+                      'much)', 0.0, 0.01),
             ParamSpec('max_corrections', 10, 'closed-loop corrections per goal before it fails',
                       0, 1000),
             ParamSpec('tip_wrench_timeout', 1.0, 'a tip_wrench estimate older than this is '
@@ -112,6 +116,8 @@ class TipControllerNode(Node):
         self._u0 = None
         self._corrections = 0
         self._settle_start = None
+        self._settled_stamp = None
+        self._measured_at = None  # (stamp ns, monotonic receive time) of the last cable_states
         self._last_tick = None
         self._measured = None
         self._names = None
@@ -132,8 +138,9 @@ class TipControllerNode(Node):
         self._diagnostics = self.create_publisher(diag.DiagnosticArray, '/diagnostics', 10)
         self.create_subscription(PoseStamped, 'tip_pose', self._on_tip_pose, LATCHED_QOS,
                                  callback_group=state_group)
+        # Kept as bytes: only the backbone that answers a goal is ever decoded.
         self.create_subscription(Path, 'backbone', self._on_backbone, LATCHED_QOS,
-                                 callback_group=state_group)
+                                 callback_group=state_group, raw=True)
         self.create_subscription(JointState, 'cable_states', self._on_cable_states,
                                  LATEST_SENSOR_QOS, callback_group=state_group)
         self.create_subscription(WrenchStamped, 'tip_wrench', self._on_tip_wrench,
@@ -169,10 +176,12 @@ class TipControllerNode(Node):
         if not np.all(np.isfinite(position)):
             self._reject('tip_pose', 'non-finite position')
             return
-        self._tip = (position, stamp_to_seconds(msg.header.stamp), time.monotonic())
+        stamp = msg.header.stamp.sec * 1_000_000_000 + msg.header.stamp.nanosec
+        self._tip = (position, stamp, time.monotonic())
 
-    def _on_backbone(self, msg):
-        self._backbone = msg
+    def _on_backbone(self, data):
+        sec, nanosec = struct.unpack_from('<iI', data, 4)  # header stamp, first in the CDR
+        self._backbone = (sec * 1_000_000_000 + nanosec, data)
 
     def _on_cable_states(self, msg):
         try:
@@ -187,6 +196,8 @@ class TipControllerNode(Node):
         measured = np.empty(len(self.cable_names))
         measured[self._index] = positions
         self._measured = measured
+        self._measured_at = (msg.header.stamp.sec * 1_000_000_000 + msg.header.stamp.nanosec,
+                             time.monotonic())
 
     def _on_tip_wrench(self, msg):
         try:
@@ -251,11 +262,13 @@ class TipControllerNode(Node):
         u0_guess = self._u0
         estimate = self.robot.estimate_shape(measured, tip_force, u0_guess=u0_guess)
         solution = self.robot.solve_tip_goal(position, tip_force, u0_guess=estimate.u0,
-                                             tolerance=tolerance)
-        if not solution.converged:
-            raise ValueError('unreachable goal (%.4f, %.4f, %.4f) m: %s' % (
-                *position, solution.message or 'closest tip %.1f mm away' % (
-                    solution.error * 1e3)))
+                                             tolerance=self._model_tolerance(tolerance))
+        if not solution.error <= tolerance:
+            limited = ', '.join(solution.limited_cables)
+            raise ValueError('unreachable goal (%.4f, %.4f, %.4f) m: the nearest reachable tip '
+                             'is %.1f mm away (tolerance %.2f mm)%s' % (
+                                 *position, solution.error * 1e3, tolerance * 1e3,
+                                 '; cables at a length limit: ' + limited if limited else ''))
         lengths = np.asarray(solution.cable_lengths, dtype=float)
         if not np.all(np.isfinite(lengths)):
             raise ValueError('the solver returned non-finite cable lengths')
@@ -278,6 +291,10 @@ class TipControllerNode(Node):
         self.get_logger().info('tip goal (%.4f, %.4f, %.4f) m, tolerance %.2g m from %s' % (
             *position, tolerance, source))
         return goal
+
+    def _model_tolerance(self, tolerance):
+        """Solve the model well inside the goal's tolerance, so the tip lands near its centre."""
+        return min(0.01 * tolerance, self.robot.solver.goal_tolerance)
 
     def _finish(self, goal, reached, reason):
         with self._lock:
@@ -305,12 +322,15 @@ class TipControllerNode(Node):
         limit = time.monotonic() + wait
         while True:
             backbone = self._backbone
-            if backbone is not None and backbone.poses and (
-                    tip_stamp is None or stamp_to_seconds(backbone.header.stamp) >= tip_stamp):
-                return backbone
+            if backbone is not None and (tip_stamp is None or backbone[0] >= tip_stamp):
+                break
             if time.monotonic() > limit or self._closing:
-                return backbone if backbone is not None and backbone.poses else None
+                break
             time.sleep(0.005)
+        if backbone is None:
+            return None
+        plan = deserialize_message(backbone[1], Path)
+        return plan if plan.poses else None
 
     # -- control loop ----------------------------------------------------------------------
     def _on_control(self):
@@ -333,14 +353,24 @@ class TipControllerNode(Node):
                 self._commanded = self._ramp(self._commanded, self._target,
                                              self._params['max_cable_speed'] * dt)
                 if np.array_equal(self._commanded, self._target):
-                    self._phase, self._settle_start = 'settle', now
-            elif tip is not None and tip[2] > self._settle_start:
+                    self._phase, self._settle_start, self._settled_stamp = 'settle', now, None
+            elif self._settled_stamp is None:
+                # Settled: every cable measured at its command (or settle_time passed, e.g. with
+                # noise). The tip is judged only on measurements from then on, so a tip pose
+                # still on its way through statics never triggers a wrong correction.
+                measured, measured_at = self._measured, self._measured_at
+                if measured is not None and measured_at[1] > self._settle_start and (
+                        now - self._settle_start >= self._params['settle_time'] or float(
+                            np.max(np.abs(measured - self._commanded)))
+                        <= self._params['settled_cable_error']):
+                    self._settled_stamp = measured_at[0]
+            elif tip is not None and tip[1] >= self._settled_stamp:
                 if error <= goal.tolerance:
                     goal.tip_stamp = tip[1]
                     self._finish_locked(goal, True, 'tip %.2f mm from the goal after %.2f s, %d '
                                         'correction(s)' % (error * 1e3, now - goal.started,
                                                            self._corrections))
-                elif now - self._settle_start >= self._params['settle_time']:
+                else:
                     self._correct_locked(goal, tip[0])
             commanded = self._commanded
         self._publish_command(commanded)
@@ -363,7 +393,7 @@ class TipControllerNode(Node):
         try:
             solution = self.robot.solve_tip_goal(
                 self._corrected_goal, self._current_tip_force(), u0_guess=self._u0,
-                tolerance=goal.tolerance)
+                tolerance=self._model_tolerance(goal.tolerance))
         except ValueError as error:
             self._finish_locked(goal, False, 'correction failed: %s' % error)
             return
