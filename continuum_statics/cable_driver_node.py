@@ -10,6 +10,7 @@ warning and counted on diagnostics; lengths outside the robot's limits are clamp
 When no command arrives for ``command_timeout`` s the watchdog makes the backend hold position.
 """
 import sys
+import threading
 import time
 
 import numpy as np
@@ -18,12 +19,14 @@ from rclpy.qos import QoSProfile, ReliabilityPolicy, qos_profile_sensor_data
 from sensor_msgs.msg import JointState
 
 from continuum_statics import diagnostics_util as diag
+from continuum_statics.dedicated_intake import PeriodicThread
 from continuum_statics.drivers import backend_class
 from continuum_statics.node_params import (
     ParameterTable,
     ParamSpec,
     check_robot_file,
     default_robot_file,
+    diagnostics_rate_spec,
     load_robot_file,
 )
 from continuum_statics.ros_conversions import cable_index, joint_positions, joint_state
@@ -52,6 +55,7 @@ class CableDriverNode(Node):
             ParamSpec('robot_file', default_robot_file(),
                       'robot description YAML (cable names, length limits)', read_only=True,
                       check=check_robot_file),
+            diagnostics_rate_spec(),
             ParamSpec('backend', 'sim', 'cable actuator backend: sim, an entry point of group '
                       'continuum_statics.cable_backends, or module:Class', read_only=True,
                       check=_check_backend),
@@ -84,27 +88,31 @@ class CableDriverNode(Node):
         self._backend_error = ''
         self._rate = diag.RateMeter()
         self._state_msg = JointState()
+        self._lock = threading.Lock()  # backend calls come from the executor and the loop
 
         self._publisher = self.create_publisher(JointState, 'cable_states',
                                                 qos_profile_sensor_data)
         self._diagnostics = self.create_publisher(diag.DiagnosticArray, '/diagnostics', 10)
         self.create_subscription(JointState, 'cable_commands', self._on_command, COMMAND_QOS)
-        self._timer = self.create_timer(1.0 / self._params['publish_rate'], self._on_timer)
-        self.create_timer(1.0, self._publish_diagnostics)
+        # cable_states from a thread of its own: steadier and ~10x cheaper than a 200 Hz timer.
+        self._loop = PeriodicThread(self, self._params['publish_rate'], self._on_timer,
+                                    'cable_driver_publish')
+        self.create_timer(1.0 / self._params['diagnostics_rate'], self._publish_diagnostics)
         # Applied only after everything above exists.
         self._params._on_change = self._on_parameter_change
         self._options._on_change = self._on_option_change
+        self._loop.start()
         self.get_logger().info('cable_driver: backend %s, %d cables (%s), %g Hz' % (
             self._backend_cls.name, len(self.cable_names), ', '.join(self.cable_names),
             self._params['publish_rate']))
 
     def _on_parameter_change(self, name, value):
         if name == 'publish_rate':
-            self.destroy_timer(self._timer)
-            self._timer = self.create_timer(1.0 / value, self._on_timer)
+            self._loop.rate = value
 
     def _on_option_change(self, name, value):
-        self.backend.set_option(name.split('.', 1)[1], value)
+        with self._lock:
+            self.backend.set_option(name.split('.', 1)[1], value)
 
     def _reject(self, kind, reason):
         self._problems.add(kind, reason)
@@ -118,10 +126,6 @@ class CableDriverNode(Node):
         except ValueError as error:
             self._reject('cable_commands', error)
             return
-        now = time.monotonic()
-        if self._holding and self._last_reading is not None:
-            # After a hold, cables not named in this command stay where they are.
-            self._targets = self._last_reading.copy()
         low, high = self._limits[index, 0], self._limits[index, 1]
         clamped = np.clip(lengths, low, high)
         if np.any(clamped != lengths):
@@ -131,15 +135,21 @@ class CableDriverNode(Node):
                 'clamped cable command(s) to the length limits: %s' % ', '.join(
                     '%s %.4f m -> %.4f m' % (msg.name[i], lengths[i], clamped[i]) for i in bad),
                 throttle_duration_sec=THROTTLE_S)
-        self._targets[index] = clamped
-        try:
-            self.backend.command(self._targets, now)
-        except Exception as error:  # a real backend may fail; the node stays up
-            self._backend_failure('command', error)
-            return
-        self._commands += 1
-        self._last_command_time = now
-        if self._holding:
+        with self._lock:
+            now = time.monotonic()
+            targets = self._targets
+            if self._holding and self._last_reading is not None:
+                # After a hold, cables not named in this command stay where they are.
+                targets = self._last_reading.copy()
+            targets[index] = clamped
+            try:
+                self.backend.command(targets, now)
+            except Exception as error:  # a real backend may fail; the node stays up
+                self._backend_failure('command', error)
+                return
+            self._targets = targets
+            self._commands += 1
+            self._last_command_time = now
             self._holding = False
 
     def _backend_failure(self, what, error):
@@ -151,12 +161,14 @@ class CableDriverNode(Node):
         now = time.monotonic()
         timeout = self._params['command_timeout']
         try:
-            if (not self._holding and timeout > 0.0 and self._last_command_time is not None
-                    and now - self._last_command_time > timeout):
-                self.backend.hold(now)
-                self._holding = True
-                self.get_logger().info('no cable command for %.3g s: holding position' % timeout)
-            reading = self.backend.read(now)
+            with self._lock:
+                if (not self._holding and timeout > 0.0 and self._last_command_time is not None
+                        and now - self._last_command_time > timeout):
+                    self.backend.hold(now)
+                    self._holding = True
+                    self.get_logger().info('no cable command for %.3g s: holding position'
+                                           % timeout)
+                reading = self.backend.read(now)
             joint_state(self.cable_names, reading.lengths, self.get_clock().now().to_msg(),
                         reading.velocities, reading.tensions, msg=self._state_msg)
         except Exception as error:  # ValueError on NaN from a backend, or a hardware error
@@ -168,7 +180,8 @@ class CableDriverNode(Node):
         self._rate.tick()
 
     def _publish_diagnostics(self):
-        status = self.backend.status()
+        with self._lock:
+            status = self.backend.status()
         level, message = status.level, status.message
         if self._backend_error:
             level, message = diag.ERROR, self._backend_error
@@ -190,7 +203,8 @@ class CableDriverNode(Node):
             self.robot.name, level, message, values))
 
     def destroy_node(self):
-        """Hold and release the actuators, then destroy the node."""
+        """Stop publishing, hold and release the actuators, then destroy the node."""
+        self._loop.stop()
         try:
             self.backend.hold(time.monotonic())
             self.backend.close()

@@ -1,15 +1,17 @@
-"""Serve one high-rate subscription from a thread of its own, outside the rclpy executor.
+"""Serve high-rate subscriptions from a thread of their own, outside the rclpy executor.
 
 rclpy's Python executors rebuild their wait set and schedule a task for every message: ~0.4 ms of
-CPU per message on this class of machine, which alone would cap a 1 kHz input. A subscription in
-:class:`DedicatedIntake` is created normally (it is on the ROS graph, with its QoS) but in a
-callback group no executor will serve; a thread waits on it with a wait set of its own and calls
-the callback directly (~0.1 ms per message). Everything else on the node (parameters, timers,
-other topics) stays on the node's executor.
+CPU per message for the single-threaded executor and over 1 ms for the multi-threaded one on this
+class of machine, which alone would cap a 1 kHz input (and keeps an idle tip_controller, which
+hears three 200 Hz topics, at a full core). Subscriptions added to a :class:`DedicatedIntake` are
+created normally (they are on the ROS graph, with their QoS) but in a callback group no executor
+serves; one thread waits on all of them with a wait set of its own and calls the callbacks
+directly (~0.1 ms per message). Everything else on the node (parameters, services, timers) stays
+on the node's executor.
 
 This uses the same low-level rclpy calls as ``rclpy.wait_for_message`` (a ``WaitSet`` and
-``take_message`` on the subscription handle), available in Jazzy and Kilted; when they are not,
-:func:`create_intake` falls back to an ordinary executor-served subscription.
+``take_message`` on the subscription handle), available in Jazzy and Kilted; where they are not,
+:func:`make_intake` returns an :class:`ExecutorIntake` that creates ordinary subscriptions.
 """
 import threading
 import time
@@ -32,92 +34,26 @@ class NotExecutorServed(CallbackGroup):
         """Nothing to release."""
 
 
-class DedicatedIntake:
-    """One subscription served by a dedicated thread.
+class IntakeEntry:
+    """One subscription of an intake, with its counters (readable from any thread).
 
-    With ``max_lag`` set, a queue deeper than 1 absorbs short scheduling stalls without losing
-    measurements, yet never builds a backlog: when the message taken was received more than
-    ``max_lag`` seconds ago, the queue is drained and only the newest message is handed on.
-
-    :param node: the node owning the subscription
-    :param callback: called with each message, in the intake thread; exceptions are logged
-    :param max_lag: skip to the newest message when the oldest queued one is older than this, s
-        (None: hand on every message taken)
-    :param on_error: called with an exception the callback raised (default: log it)
-
-    Counters (read them from any thread): ``taken``, ``skipped`` (drained for being stale) and
-    ``lost`` (gaps in the publishers' sequence numbers: never reached this subscription, e.g.
-    overwritten in a full queue or lost in transport).
+    :ivar taken: messages taken from the subscription
+    :ivar skipped: messages drained unread because a newer one was waiting (``max_lag``)
+    :ivar lost: gaps in the publishers' sequence numbers: messages that never reached this
+        subscription (overwritten in a full queue, or lost in transport); -1 when not counted
     """
 
-    def __init__(self, node, msg_type, topic, callback, qos_profile, raw=False, max_lag=None,
-                 on_error=None):
-        from rclpy.impl.implementation_singleton import rclpy_implementation
-
-        self._node = node
-        self._callback = callback
-        self._on_error = on_error
-        self._max_lag_ns = None if max_lag is None else int(max_lag * 1e9)
+    def __init__(self, subscription, callback, max_lag=None, counted=True):
+        self.subscription = subscription
+        self.callback = callback
+        self.max_lag_ns = None if max_lag is None else int(max_lag * 1e9)
+        self.taken = 0
+        self.skipped = 0
+        self.lost = 0 if counted else -1
         self._sequences = {}
-        self.taken = self.skipped = self.lost = 0
-        self._wait_set = rclpy_implementation.WaitSet(1, 0, 0, 0, 0, 0, node.context.handle)
-        self.subscription = node.create_subscription(
-            msg_type, topic, callback, qos_profile, callback_group=NotExecutorServed(), raw=raw)
-        self._stop = threading.Event()
-        self._thread = threading.Thread(target=self._run, daemon=True,
-                                        name='intake_' + topic.replace('/', '_'))
 
-    def start(self):
-        """Start serving."""
-        self._thread.start()
-
-    def stop(self, timeout=2.0):
-        """Stop serving (before the node or the subscription is destroyed)."""
-        self._stop.set()
-        if self._thread.is_alive():
-            self._thread.join(timeout)
-
-    def _run(self):
-        subscription, wait_set = self.subscription, self._wait_set
-        handle, msg_type, raw = subscription.handle, subscription.msg_type, subscription.raw
-        context = self._node.context
-        while not self._stop.is_set() and context.ok():
-            try:
-                with handle:
-                    wait_set.clear_entities()
-                    wait_set.add_subscription(handle)
-                    wait_set.wait(50_000_000)  # ns: the stop flag is checked at least at 20 Hz
-                    if not wait_set.get_ready_entities('subscription'):
-                        continue
-                    taken = handle.take_message(msg_type, raw)
-                    if taken is None:
-                        continue
-                    self._count(taken[1])
-                    if self._max_lag_ns is not None and self._stale(taken[1]):
-                        while True:  # drain: only the newest measurement matters now
-                            newer = handle.take_message(msg_type, raw)
-                            if newer is None:
-                                break
-                            self._count(newer[1])
-                            self.skipped += 1
-                            taken = newer
-                self._callback(taken[0])
-            except Exception as error:  # a failing callback must not end the intake
-                if self._stop.is_set() or not context.ok():
-                    return
-                if self._on_error is not None:
-                    self._on_error(error)
-                else:
-                    self._node.get_logger().error('intake of %s failed: %r'
-                                                  % (subscription.topic_name, error),
-                                                  throttle_duration_sec=2.0)
-
-
-    def _stale(self, info):
-        received = info.get('received_timestamp') if isinstance(info, dict) else None
-        return bool(received) and time.time_ns() - received > self._max_lag_ns
-
-    def _count(self, info):
+    def count(self, info):
+        """Count one taken message and any gap in its publisher's sequence numbers."""
         self.taken += 1
         if not isinstance(info, dict):
             return
@@ -131,23 +67,181 @@ class DedicatedIntake:
             self.lost += sequence - last - 1
         self._sequences[key] = sequence
 
+    def stale(self, info):
+        """Return True if the message was received longer than ``max_lag`` ago."""
+        if self.max_lag_ns is None or not isinstance(info, dict):
+            return False
+        received = info.get('received_timestamp')
+        return bool(received) and time.time_ns() - received > self.max_lag_ns
 
-def create_intake(node, msg_type, topic, callback, qos_profile, dedicated=True, raw=False,
-                  max_lag=None, fallback_qos=None):
-    """Return a started :class:`DedicatedIntake`, or None after an ordinary subscription.
 
-    :param dedicated: False (or an rclpy without the low-level calls) gives an ordinary
-        subscription served by the node's executor, with ``fallback_qos`` (default the same)
+class DedicatedIntake:
+    """Subscriptions served by one dedicated thread; add them, then :meth:`start`.
+
+    With ``max_lag`` set on a subscription, a queue deeper than 1 absorbs short scheduling stalls
+    without losing messages, yet never builds a backlog: when the message taken was received more
+    than ``max_lag`` seconds ago, the queue is drained and only the newest is handed on.
+
+    :param node: the node owning the subscriptions
+    :param name: thread name (for debugging)
+    """
+
+    def __init__(self, node, name='intake'):
+        from rclpy.impl.implementation_singleton import rclpy_implementation
+
+        self._wait_set_class = rclpy_implementation.WaitSet  # AttributeError: not available
+        self._node = node
+        self._group = NotExecutorServed()
+        self._entries = []
+        self._wait_set = None
+        self._stop = threading.Event()
+        self._thread = threading.Thread(target=self._run, daemon=True, name=name)
+
+    def add(self, msg_type, topic, callback, qos_profile, raw=False, max_lag=None,
+            fallback_qos=None):
+        """Subscribe; ``callback`` runs in the intake thread. Returns the :class:`IntakeEntry`.
+
+        ``fallback_qos`` is used by :class:`ExecutorIntake` only.
+        """
+        if self._thread.is_alive():
+            raise RuntimeError('add subscriptions before start()')
+        subscription = self._node.create_subscription(
+            msg_type, topic, callback, qos_profile, callback_group=self._group, raw=raw)
+        entry = IntakeEntry(subscription, callback, max_lag)
+        self._entries.append(entry)
+        return entry
+
+    def start(self):
+        """Start serving."""
+        self._wait_set = self._wait_set_class(
+            len(self._entries), 0, 0, 0, 0, 0, self._node.context.handle)
+        self._thread.start()
+
+    def stop(self, timeout=2.0):
+        """Stop serving (before the node or its subscriptions are destroyed)."""
+        self._stop.set()
+        if self._thread.is_alive():
+            self._thread.join(timeout)
+
+    def _run(self):
+        wait_set, context = self._wait_set, self._node.context
+        entries = [(entry, entry.subscription.handle, entry.subscription.msg_type,
+                    entry.subscription.raw) for entry in self._entries]
+        while not self._stop.is_set() and context.ok():
+            try:
+                wait_set.clear_entities()
+                for _, handle, _, _ in entries:
+                    with handle:
+                        wait_set.add_subscription(handle)
+                wait_set.wait(50_000_000)  # ns: the stop flag is checked at least at 20 Hz
+                ready = wait_set.get_ready_entities('subscription')
+                if not ready:
+                    continue
+                for entry, handle, msg_type, raw in entries:
+                    if handle.pointer in ready:
+                        message = self._take(entry, handle, msg_type, raw)
+                        if message is not None:
+                            entry.callback(message)
+            except Exception as error:  # a failing callback must not end the intake
+                if self._stop.is_set() or not context.ok():
+                    return
+                self._node.get_logger().error('intake failed: %r' % (error,),
+                                              throttle_duration_sec=2.0)
+
+    @staticmethod
+    def _take(entry, handle, msg_type, raw):
+        with handle:
+            taken = handle.take_message(msg_type, raw)
+            if taken is None:
+                return None
+            entry.count(taken[1])
+            if entry.stale(taken[1]):
+                while True:  # drain: only the newest message matters now
+                    newer = handle.take_message(msg_type, raw)
+                    if newer is None:
+                        break
+                    entry.count(newer[1])
+                    entry.skipped += 1
+                    taken = newer
+        return taken[0]
+
+
+class ExecutorIntake:
+    """The same interface as :class:`DedicatedIntake`, with ordinary executor subscriptions."""
+
+    def __init__(self, node, name='intake'):
+        self._node = node
+
+    def add(self, msg_type, topic, callback, qos_profile, raw=False, max_lag=None,
+            fallback_qos=None):
+        """Subscribe with ``fallback_qos`` (default ``qos_profile``); counters stay at 0/-1."""
+        subscription = self._node.create_subscription(
+            msg_type, topic, callback, fallback_qos or qos_profile, raw=raw)
+        return IntakeEntry(subscription, callback, counted=False)
+
+    def start(self):
+        """Nothing to start: the node's executor serves the subscriptions."""
+
+    def stop(self, timeout=2.0):
+        """Nothing to stop."""
+
+
+def make_intake(node, dedicated=True, name='intake'):
+    """Return a :class:`DedicatedIntake`, or an :class:`ExecutorIntake` when not wanted/possible.
+
+    :param dedicated: False gives ordinary subscriptions served by the node's executor
     """
     if dedicated:
         try:
-            intake = DedicatedIntake(node, msg_type, topic, callback, qos_profile, raw=raw,
-                                     max_lag=max_lag)
-        except (AttributeError, ImportError, TypeError) as error:
-            node.get_logger().warning('no dedicated intake thread for %s (%r): using the '
-                                      'executor' % (topic, error))
-        else:
-            intake.start()
-            return intake
-    node.create_subscription(msg_type, topic, callback, fallback_qos or qos_profile, raw=raw)
-    return None
+            return DedicatedIntake(node, name)
+        except (AttributeError, ImportError) as error:
+            node.get_logger().warning('no dedicated intake thread (%r): subscriptions are '
+                                      'served by the executor' % (error,))
+    return ExecutorIntake(node, name)
+
+
+class PeriodicThread:
+    """Call ``callback()`` at ``rate`` Hz from a thread of its own (steady clock, no drift).
+
+    A 200 Hz rclpy timer costs ~1 ms of executor overhead per tick; this costs a sleep. A late
+    tick is not made up with a burst: the schedule restarts from now. Exceptions are logged.
+
+    :param node: the node whose logger reports failures and whose context ends the loop
+    :param rate: ticks per second; change it at any time with :attr:`rate`
+    """
+
+    def __init__(self, node, rate, callback, name='periodic'):
+        self._node = node
+        self.rate = float(rate)
+        self._callback = callback
+        self._stop = threading.Event()
+        self._thread = threading.Thread(target=self._run, daemon=True, name=name)
+
+    def start(self):
+        """Start ticking."""
+        self._thread.start()
+
+    def stop(self, timeout=2.0):
+        """Stop ticking and wait for the thread."""
+        self._stop.set()
+        if self._thread.is_alive():
+            self._thread.join(timeout)
+
+    def _run(self):
+        context = self._node.context
+        next_tick = time.monotonic()
+        while not self._stop.is_set() and context.ok():
+            period = 1.0 / self.rate
+            next_tick += period
+            delay = next_tick - time.monotonic()
+            if delay < -period:  # more than a tick late: restart the schedule, no burst
+                next_tick = time.monotonic()
+            elif delay > 0.0 and self._stop.wait(delay):
+                return
+            try:
+                self._callback()
+            except Exception as error:
+                if self._stop.is_set() or not context.ok():
+                    return
+                self._node.get_logger().error('periodic %s failed: %r' % (
+                    self._thread.name, error), throttle_duration_sec=2.0)

@@ -110,9 +110,9 @@ def bench_statics(robot_file, rate, duration, warmup=1.0, parameters=()):
         node = rclpy.create_node('bench_statics_client', namespace=namespace, context=context)
         publisher = node.create_publisher(JointState, 'cable_states', qos_profile_sensor_data)
         # Received as bytes in a thread of its own: the client must not be the bottleneck.
-        intake = DedicatedIntake(node, Path, 'backbone', on_backbone,
-                                 QoSProfile(depth=1000, reliability=ReliabilityPolicy.RELIABLE),
-                                 raw=True)
+        intake = DedicatedIntake(node, 'bench_intake')
+        intake.add(Path, 'backbone', on_backbone,
+                   QoSProfile(depth=1000, reliability=ReliabilityPolicy.RELIABLE), raw=True)
         intake.start()
         node.create_subscription(DiagnosticArray, '/diagnostics', on_diagnostics, 10)
         executor = rclpy.executors.SingleThreadedExecutor(context=context)

@@ -119,6 +119,12 @@ class ParameterTable:
         return SetParametersResult(successful=True)
 
 
+def diagnostics_rate_spec():
+    """Return the ``diagnostics_rate`` parameter every node declares (default 1 Hz)."""
+    return ParamSpec('diagnostics_rate', 1.0, '/diagnostics publish rate, Hz', 0.1, 50.0,
+                     read_only=True)
+
+
 def share_dir():
     """Return the package's share directory (colcon install) or the source tree (pip -e)."""
     try:

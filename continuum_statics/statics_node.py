@@ -40,13 +40,14 @@ from visualization_msgs.msg import MarkerArray
 
 from continuum_statics import diagnostics_util as diag
 from continuum_statics.backbone_sampling import BackboneSampler, rotations_to_quaternions
-from continuum_statics.dedicated_intake import create_intake
+from continuum_statics.dedicated_intake import make_intake
 from continuum_statics.marker_geometry import guide_and_cable_points
 from continuum_statics.node_params import (
     ParameterTable,
     ParamSpec,
     check_robot_file,
     default_robot_file,
+    diagnostics_rate_spec,
     load_robot_file,
 )
 from continuum_statics.ros_conversions import (
@@ -79,6 +80,7 @@ class StaticsNode(Node):
             ParamSpec('robot_file', default_robot_file(),
                       'robot description YAML (rod, base frame, cables, guides)', read_only=True,
                       check=check_robot_file),
+            diagnostics_rate_spec(),
             ParamSpec('path_samples', 20, 'poses in each backbone Path, base to tip', 2, 500),
             ParamSpec('marker_rate', 30.0, 'backbone_markers rate, Hz (0: off)', 0.0, 200.0),
             ParamSpec('tip_wrench_timeout', 1.0, 'a tip_wrench estimate older than this is '
@@ -141,15 +143,16 @@ class StaticsNode(Node):
                                depth=self._params['input_queue_depth'],
                                reliability=ReliabilityPolicy.BEST_EFFORT,
                                durability=DurabilityPolicy.VOLATILE)
-        self._intake = create_intake(self, JointState, 'cable_states', self._on_cable_states,
-                                     input_qos, dedicated=self._params['dedicated_intake_thread'],
-                                     raw=True, max_lag=self._params['max_input_lag'],
-                                     fallback_qos=LATEST_SENSOR_QOS)
+        self._intake = make_intake(self, self._params['dedicated_intake_thread'])
+        self._input = self._intake.add(JointState, 'cable_states', self._on_cable_states,
+                                       input_qos, raw=True, max_lag=self._params['max_input_lag'],
+                                       fallback_qos=LATEST_SENSOR_QOS)
+        self._intake.start()
         self.create_subscription(WrenchStamped, 'tip_wrench', self._on_tip_wrench,
                                  LATEST_SENSOR_QOS)
         self._marker_timer = None
         self._set_marker_timer(self._params['marker_rate'])
-        self.create_timer(1.0, self._publish_diagnostics)
+        self.create_timer(1.0 / self._params['diagnostics_rate'], self._publish_diagnostics)
         self._params._on_change = self._on_parameter_change
         self.get_logger().info('statics: robot %r, %d cables, frame %r, %d path samples' % (
             self.robot.name, len(self.cable_names), self.base_frame_id,
@@ -306,8 +309,8 @@ class StaticsNode(Node):
             'solves': solves,
             'received_total': self._input_rate.total,
             'published_total': self._output_rate.total,
-            'input_skipped_total': -1 if self._intake is None else self._intake.skipped,
-            'input_lost_total': -1 if self._intake is None else self._intake.lost,
+            'input_skipped_total': self._input.skipped,
+            'input_lost_total': self._input.lost,
             'solve_time_median_ms': solve_median,
             'solve_time_max_ms': solve_max,
             'cycle_time_median_ms': cycle_median,
@@ -330,8 +333,7 @@ class StaticsNode(Node):
 
     def destroy_node(self):
         """Stop the intake thread, then destroy the node."""
-        if self._intake is not None:
-            self._intake.stop()
+        self._intake.stop()
         return super().destroy_node()
 
 

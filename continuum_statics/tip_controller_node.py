@@ -36,18 +36,20 @@ from std_msgs.msg import Header
 
 from continuum_statics import diagnostics_util as diag
 from continuum_statics.cable_driver_node import COMMAND_QOS
+from continuum_statics.dedicated_intake import make_intake
 from continuum_statics.node_params import (
     ParameterTable,
     ParamSpec,
     check_robot_file,
     default_robot_file,
+    diagnostics_rate_spec,
     load_robot_file,
 )
 from continuum_statics.ros_conversions import (
     cable_index,
     goal_position,
-    joint_positions,
     joint_state,
+    parse_joint_state,
     pose_position,
     wrench_force,
 )
@@ -83,6 +85,7 @@ class TipControllerNode(Node):
             ParamSpec('robot_file', default_robot_file(),
                       'robot description YAML (must be the one statics uses)', read_only=True,
                       check=check_robot_file),
+            diagnostics_rate_spec(),
             ParamSpec('max_cable_speed', 0.02, 'fastest cable speed of a ramp, m/s', 1e-5, 1.0),
             ParamSpec('control_rate', 50.0, 'cable_commands rate while a goal runs, Hz', 1.0,
                       1000.0),
@@ -99,6 +102,9 @@ class TipControllerNode(Node):
                       0, 1000),
             ParamSpec('tip_wrench_timeout', 1.0, 'a tip_wrench estimate older than this is '
                       'replaced by zero, s (0: never expires)', 0.0, 3600.0),
+            ParamSpec('dedicated_intake_thread', True, 'serve tip_pose, backbone, cable_states '
+                      'and tip_wrench from a thread of their own instead of the executor',
+                      read_only=True),
         ]
         self._params = ParameterTable(self, specs)
         self.robot = load_robot_file(self._params['robot_file'])
@@ -117,10 +123,10 @@ class TipControllerNode(Node):
         self._corrections = 0
         self._settle_start = None
         self._settled_stamp = None
-        self._measured_at = None  # (stamp ns, monotonic receive time) of the last cable_states
+        # (lengths in robot order, stamp ns, monotonic receive time) of the last cable_states
+        self._measurement = None
         self._last_tick = None
-        self._measured = None
-        self._names = None
+        self._name_bytes = None
         self._index = None
         self._tip = None  # (position (3,), stamp s, monotonic receive time)
         self._backbone = None
@@ -131,26 +137,29 @@ class TipControllerNode(Node):
         self._last_outcome = 'no goal yet'
         self._command_msg = JointState()
 
-        state_group = MutuallyExclusiveCallbackGroup()
         self._control_group = MutuallyExclusiveCallbackGroup()
         service_group = ReentrantCallbackGroup()
         self._command_pub = self.create_publisher(JointState, 'cable_commands', COMMAND_QOS)
         self._diagnostics = self.create_publisher(diag.DiagnosticArray, '/diagnostics', 10)
-        self.create_subscription(PoseStamped, 'tip_pose', self._on_tip_pose, LATCHED_QOS,
-                                 callback_group=state_group)
+        # The state topics arrive at the measurement rate (hundreds of Hz): a thread of their own
+        # serves them, which costs a tenth of the multi-threaded executor's overhead.
+        self._intake = make_intake(self, self._params['dedicated_intake_thread'],
+                                   'tip_controller_intake')
+        self._intake.add(PoseStamped, 'tip_pose', self._on_tip_pose, LATCHED_QOS)
         # Kept as bytes: only the backbone that answers a goal is ever decoded.
-        self.create_subscription(Path, 'backbone', self._on_backbone, LATCHED_QOS,
-                                 callback_group=state_group, raw=True)
-        self.create_subscription(JointState, 'cable_states', self._on_cable_states,
-                                 LATEST_SENSOR_QOS, callback_group=state_group)
-        self.create_subscription(WrenchStamped, 'tip_wrench', self._on_tip_wrench,
-                                 LATEST_SENSOR_QOS, callback_group=state_group)
+        self._intake.add(Path, 'backbone', self._on_backbone, LATCHED_QOS, raw=True)
+        self._intake.add(JointState, 'cable_states', self._on_cable_states, LATEST_SENSOR_QOS,
+                         raw=True)
+        self._intake.add(WrenchStamped, 'tip_wrench', self._on_tip_wrench, LATEST_SENSOR_QOS)
+        self._intake.start()
         self.create_subscription(PoseStamped, 'tip_goal_pose', self._on_goal_pose, COMMAND_QOS,
                                  callback_group=self._control_group)
         self.create_service(GetPlan, 'tip_goal', self._on_tip_goal, callback_group=service_group)
         self._timer = self.create_timer(1.0 / self._params['control_rate'], self._on_control,
                                         callback_group=self._control_group)
-        self.create_timer(1.0, self._publish_diagnostics, callback_group=self._control_group)
+        self._timer.cancel()  # runs only while a goal does
+        self.create_timer(1.0 / self._params['diagnostics_rate'], self._publish_diagnostics,
+                          callback_group=self._control_group)
         self._params._on_change = self._on_parameter_change
         self.get_logger().info('tip_controller: robot %r, frame %r, max cable speed %g m/s' % (
             self.robot.name, self.base_frame_id, self._params['max_cable_speed']))
@@ -160,6 +169,8 @@ class TipControllerNode(Node):
             self.destroy_timer(self._timer)
             self._timer = self.create_timer(1.0 / value, self._on_control,
                                             callback_group=self._control_group)
+            if self._goal is None:
+                self._timer.cancel()
 
     # -- state inputs ----------------------------------------------------------------------
     def _reject(self, kind, reason):
@@ -183,21 +194,25 @@ class TipControllerNode(Node):
         sec, nanosec = struct.unpack_from('<iI', data, 4)  # header stamp, first in the CDR
         self._backbone = (sec * 1_000_000_000 + nanosec, data)
 
-    def _on_cable_states(self, msg):
+    def _on_cable_states(self, data):
         try:
-            if msg.name != self._names:
-                self._index = cable_index(msg.name, self.cable_names)
-                self._names = list(msg.name)
-            positions = joint_positions(msg, len(self._index))
+            view = parse_joint_state(data, self._name_bytes)
+            if view.name_bytes != self._name_bytes:
+                self._index = cable_index(view.names, self.cable_names)
+                self._name_bytes = view.name_bytes
+            if view.position.shape[0] != self._index.shape[0]:
+                raise ValueError('JointState has %d names but %d positions'
+                                 % (self._index.shape[0], view.position.shape[0]))
+            if not np.isfinite(view.position).all():
+                raise ValueError('non-finite cable length')
         except ValueError as error:
-            self._names = None
+            self._name_bytes = None
             self._reject('cable_states', error)
             return
         measured = np.empty(len(self.cable_names))
-        measured[self._index] = positions
-        self._measured = measured
-        self._measured_at = (msg.header.stamp.sec * 1_000_000_000 + msg.header.stamp.nanosec,
-                             time.monotonic())
+        measured[self._index] = view.position
+        # One tuple, one assignment: the control loop always sees a consistent measurement.
+        self._measurement = (measured, view.sec * 1_000_000_000 + view.nanosec, time.monotonic())
 
     def _on_tip_wrench(self, msg):
         try:
@@ -254,7 +269,8 @@ class TipControllerNode(Node):
 
     def _start_goal(self, position, tolerance, source):
         """Solve the goal and make it the active one; ValueError says why it is rejected."""
-        measured, tip = self._measured, self._tip
+        measurement, tip = self._measurement, self._tip
+        measured = None if measurement is None else measurement[0]
         if measured is None or tip is None:
             raise ValueError('no %s yet: are statics and cable_driver running?'
                              % ('cable_states' if measured is None else 'tip_pose'))
@@ -288,6 +304,7 @@ class TipControllerNode(Node):
             self._corrections = 0
             self._phase = 'ramp'
             self._last_tick = now
+            self._timer.reset()
         self.get_logger().info('tip goal (%.4f, %.4f, %.4f) m, tolerance %.2g m from %s' % (
             *position, tolerance, source))
         return goal
@@ -306,6 +323,7 @@ class TipControllerNode(Node):
         goal.reached, goal.reason = reached, reason
         if self._goal is goal:
             self._goal, self._phase = None, 'idle'
+            self._timer.cancel()
         key = 'reached' if reached else ('preempted' if 'pre-empted' in reason else 'failed')
         self._counts[key] += 1
         self._last_outcome = '%s (%.4f, %.4f, %.4f): %s' % (key, *goal.position, reason)
@@ -358,12 +376,12 @@ class TipControllerNode(Node):
                 # Settled: every cable measured at its command (or settle_time passed, e.g. with
                 # noise). The tip is judged only on measurements from then on, so a tip pose
                 # still on its way through statics never triggers a wrong correction.
-                measured, measured_at = self._measured, self._measured_at
-                if measured is not None and measured_at[1] > self._settle_start and (
+                measurement = self._measurement
+                if measurement is not None and measurement[2] > self._settle_start and (
                         now - self._settle_start >= self._params['settle_time'] or float(
-                            np.max(np.abs(measured - self._commanded)))
+                            np.max(np.abs(measurement[0] - self._commanded)))
                         <= self._params['settled_cable_error']):
-                    self._settled_stamp = measured_at[0]
+                    self._settled_stamp = measurement[1]
             elif tip is not None and tip[1] >= self._settled_stamp:
                 if error <= goal.tolerance:
                     goal.tip_stamp = tip[1]
@@ -430,7 +448,7 @@ class TipControllerNode(Node):
             'goals_preempted': self._counts['preempted'],
             'last_outcome': self._last_outcome,
             'have_tip_pose': self._tip is not None,
-            'have_cable_states': self._measured is not None,
+            'have_cable_states': self._measurement is not None,
         }
         if goal is not None:
             values['goal_m'] = '%.5f %.5f %.5f' % tuple(goal.position)
@@ -449,8 +467,9 @@ class TipControllerNode(Node):
                 self._finish_locked(self._goal, False, 'shutting down')
 
     def destroy_node(self):
-        """Release waiting service calls, then destroy the node."""
+        """Release waiting service calls, stop the intake thread, then destroy the node."""
         self.release_waiters()
+        self._intake.stop()
         return super().destroy_node()
 
 
