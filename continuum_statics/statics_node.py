@@ -288,6 +288,7 @@ class StaticsNode(Node):
 
     def _publish_diagnostics(self):
         now = time.monotonic()
+        self._current_tip_force(now)  # expire a stale tip load even while no measurement comes
         last = self._last
         input_rate = self._input_rate.report()
         output_rate = self._output_rate.report()

@@ -56,6 +56,8 @@ from continuum_statics.ros_conversions import (
 from continuum_statics.statics_node import LATCHED_QOS, LATEST_SENSOR_QOS
 
 THROTTLE_S = 2.0
+#: How long a goal that arrives before the first tip_pose / cable_states waits for them, s.
+STATE_WAIT_S = 2.0
 
 
 @dataclass(eq=False)
@@ -269,6 +271,11 @@ class TipControllerNode(Node):
 
     def _start_goal(self, position, tolerance, source):
         """Solve the goal and make it the active one; ValueError says why it is rejected."""
+        # Right after start-up the first state may still be on its way: wait a little for it.
+        limit = time.monotonic() + STATE_WAIT_S
+        while (self._measurement is None or self._tip is None) and not self._closing and \
+                time.monotonic() < limit:
+            time.sleep(0.01)
         measurement, tip = self._measurement, self._tip
         measured = None if measurement is None else measurement[0]
         if measured is None or tip is None:

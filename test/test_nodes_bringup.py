@@ -1,0 +1,125 @@
+"""Cross-process: the real bringup entry point as a subprocess and an independent client node."""
+import os
+import subprocess
+import sys
+import time
+import uuid
+
+from conftest import REPO
+from nodes_helpers import (
+    LATCHED,
+    Collector,
+    pose_xyz,
+    stop_process,
+    wait_until,
+)
+import numpy as np
+import pytest
+
+rclpy = pytest.importorskip('rclpy')
+from geometry_msgs.msg import PoseStamped  # noqa: E402
+from nav_msgs.msg import Path  # noqa: E402
+from nav_msgs.srv import GetPlan  # noqa: E402
+
+from continuum_statics import load_robot  # noqa: E402
+
+pytestmark = pytest.mark.ros
+ROBOT = load_robot(REPO / 'config' / 'tendon_robot.yaml')
+
+
+def start_bringup(*args):
+    return subprocess.Popen([sys.executable, '-m', 'continuum_statics', 'bringup', *args],
+                            cwd=REPO, env=os.environ.copy(), stdout=subprocess.PIPE,
+                            stderr=subprocess.STDOUT, text=True)
+
+
+def request(position, tolerance):
+    msg = GetPlan.Request(tolerance=float(tolerance))
+    msg.goal.header.frame_id = 'base_link'
+    p = msg.goal.pose.position
+    p.x, p.y, p.z = (float(v) for v in position)
+    msg.goal.pose.orientation.w = 1.0
+    return msg
+
+
+def test_bringup_serves_backbone_and_tip_goals_to_another_process():
+    namespace = 'cross_' + uuid.uuid4().hex[:8]
+    process = start_bringup('--namespace', namespace, '--ros-args', '--params-file',
+                            str(REPO / 'config' / 'continuum_robot.params.yaml'))
+    context = rclpy.Context()
+    rclpy.init(context=context)
+    executor = rclpy.executors.SingleThreadedExecutor(context=context)
+    node = None
+    try:
+        node = rclpy.create_node('cross_process_client', namespace=namespace, context=context)
+        executor.add_node(node)
+        backbone = Collector(node, Path, 'backbone', LATCHED)
+        tip = Collector(node, PoseStamped, 'tip_pose', LATCHED)
+        service = node.create_client(GetPlan, 'tip_goal')
+
+        def spin_until(predicate, timeout, what):
+            deadline = time.monotonic() + timeout
+            while not predicate():
+                assert process.poll() is None, 'bringup exited: %s' % process.stdout.read()
+                assert time.monotonic() < deadline, 'timed out after %g s: %s' % (timeout, what)
+                executor.spin_once(timeout_sec=0.02)
+
+        spin_until(lambda: len(backbone) > 0 and len(tip) > 0, 30.0, 'backbone and tip_pose')
+        # The newest backbone and tip pose of one measurement agree.
+        spin_until(lambda: backbone.last.header.stamp == tip.last.header.stamp, 10.0,
+                   'a backbone and a tip pose with the same stamp')
+        path, pose = backbone.last, tip.last
+        assert path.header.frame_id == pose.header.frame_id == 'base_link'
+        assert len(path.poses) == 20
+        assert path.poses[-1].pose == pose.pose
+        np.testing.assert_allclose(pose_xyz(path.poses[0].pose), [0.0, 0.0, 0.0], atol=1e-9)
+
+        spin_until(service.service_is_ready, 10.0, 'the tip_goal service')
+        goal = ROBOT.solve_ivp([-1.5, 2.0, 0.0]).tip_position
+        future = service.call_async(request(goal, 1e-3))
+        spin_until(future.done, 30.0, 'the answer to a reachable goal')
+        plan = future.result().plan
+        assert len(plan.poses) == 20
+        assert np.linalg.norm(pose_xyz(plan.poses[-1].pose) - goal) <= 1e-3
+
+        started = time.monotonic()
+        future = service.call_async(request((2.0, 0.0, 0.3), 1e-3))
+        spin_until(future.done, 10.0, 'the answer to an unreachable goal')
+        assert time.monotonic() - started < 5.0
+        assert len(future.result().plan.poses) == 0
+    finally:
+        executor.shutdown()
+        if node is not None:
+            node.destroy_node()
+        rclpy.try_shutdown(context=context)
+        code = stop_process(process)
+    output = process.stdout.read()
+    assert code == 0, output
+    assert 'Traceback' not in output, output
+
+
+def test_bringup_rejects_a_missing_robot_file_quickly():
+    process = start_bringup('--robot', '/nonexistent/robot.yaml')
+    try:
+        code = process.wait(30.0)
+    finally:
+        stop_process(process)
+    assert code != 0
+    assert 'does not exist' in process.stdout.read()
+
+
+def test_bringup_reports_a_bad_parameter_instead_of_a_traceback():
+    process = start_bringup('--namespace', 'bad_' + uuid.uuid4().hex[:8], '--ros-args', '-p',
+                            'path_samples:=1')
+    try:
+        code = process.wait(60.0)
+    finally:
+        stop_process(process)
+    output = process.stdout.read()
+    assert code == 1, output
+    assert 'path_samples' in output and 'Traceback' not in output, output
+
+
+def test_wait_until_fails_with_the_reason():
+    with pytest.raises(AssertionError, match='waiting for nothing'):
+        wait_until(lambda: False, 0.05, 'nothing')

@@ -1,0 +1,148 @@
+"""tip_controller with statics and the simulated driver, over DDS in one process."""
+import math
+import time
+
+from conftest import REPO
+from nodes_helpers import (
+    LATCHED,
+    RELIABLE,
+    Collector,
+    Harness,
+    call,
+    diagnostic_values,
+    pose_xyz,
+    publish_until,
+    wait_until,
+)
+import numpy as np
+import pytest
+
+rclpy = pytest.importorskip('rclpy')
+from diagnostic_msgs.msg import DiagnosticArray  # noqa: E402
+from geometry_msgs.msg import PoseStamped  # noqa: E402
+from nav_msgs.srv import GetPlan  # noqa: E402
+from rclpy.parameter import Parameter  # noqa: E402
+
+from continuum_statics import load_robot  # noqa: E402
+from continuum_statics.cable_driver_node import CableDriverNode  # noqa: E402
+from continuum_statics.statics_node import StaticsNode  # noqa: E402
+from continuum_statics.tip_controller_node import TipControllerNode  # noqa: E402
+
+pytestmark = pytest.mark.ros
+ROBOT = load_robot(REPO / 'config' / 'tendon_robot.yaml')
+
+
+def reachable(ux, uy):
+    return ROBOT.solve_ivp([ux, uy, 0.0]).tip_position.copy()
+
+
+class Stack:
+    """The three nodes plus a client with the tip_goal service and a tip_pose collector."""
+
+    def __init__(self, harness, **controller_overrides):
+        harness.add(StaticsNode, marker_rate=0.0)
+        harness.add(CableDriverNode)
+        self.controller = harness.add(TipControllerNode, **controller_overrides)
+        self.client = harness.client()
+        self.tip = Collector(self.client, PoseStamped, 'tip_pose', LATCHED)
+        self.diagnostics = Collector(self.client, DiagnosticArray, '/diagnostics', 10)
+        self.service = self.client.create_client(GetPlan, 'tip_goal')
+        assert self.service.wait_for_service(timeout_sec=10.0)
+        wait_until(lambda: self.tip.last is not None, 10.0, 'the first tip pose')
+        # The controller needs state before it accepts goals.
+        wait_until(lambda: (diagnostic_values(self.diagnostics, 'tip_controller') or ({},))[0]
+                   .get('have_tip_pose') == 'True', 10.0, 'the controller to hear tip_pose')
+
+    @staticmethod
+    def request(position, tolerance=1e-3, frame='base_link'):
+        request = GetPlan.Request(tolerance=float(tolerance))
+        request.goal.header.frame_id = frame
+        p = request.goal.pose.position
+        p.x, p.y, p.z = (float(v) for v in position)
+        request.goal.pose.orientation.w = 1.0
+        return request
+
+    def values(self):
+        found = diagnostic_values(self.diagnostics, 'tip_controller')
+        return found[0] if found else {}
+
+
+@pytest.fixture
+def harness():
+    harness = Harness()
+    try:
+        yield harness
+    finally:
+        harness.close()
+
+
+def test_reachable_goal_is_reached_and_answered_with_the_backbone(harness):
+    stack = Stack(harness)
+    goal = reachable(2.0, -1.0)
+    plan = call(stack.service, stack.request(goal, 1e-3), 30.0).plan
+    assert len(plan.poses) == 20
+    assert plan.header.frame_id == 'base_link'
+    tip = pose_xyz(plan.poses[-1].pose)
+    assert np.linalg.norm(tip - goal) <= 1e-3
+    # The measured tip stays there after the goal ended (the driver holds the cables).
+    time.sleep(0.3)
+    assert np.linalg.norm(pose_xyz(stack.tip.last.pose) - goal) <= 1e-3
+    wait_until(lambda: stack.values().get('goals_reached') == '1', 5.0, 'the count')
+
+
+BAD_GOALS = [
+    ((math.nan, 0.0, 0.25), 1e-3, 'base_link', 'non-finite'),
+    ((0.0, math.inf, 0.25), 1e-3, 'base_link', 'non-finite'),
+    (tuple(reachable(1.0, 0.0)), 1e-3, 'world', "frame 'world'"),
+    (tuple(reachable(1.0, 0.0)), 1e-3, '', "frame ''"),
+    (tuple(reachable(1.0, 0.0)), 0.0, 'base_link', 'tolerance'),
+    (tuple(reachable(1.0, 0.0)), -1e-3, 'base_link', 'tolerance'),
+    (tuple(reachable(1.0, 0.0)), math.nan, 'base_link', 'tolerance'),
+    ((2.0, 0.0, 0.3), 1e-3, 'base_link', 'unreachable'),
+]
+
+
+def test_bad_and_unreachable_goals_are_rejected_at_once(harness):
+    # A long goal timeout: an answer within seconds means "rejected at once", not "timed out".
+    stack = Stack(harness, goal_timeout=60.0)
+    start_tip = pose_xyz(stack.tip.last.pose)
+    for count, (position, tolerance, frame, reason) in enumerate(BAD_GOALS, 1):
+        started = time.monotonic()
+        response = call(stack.service, stack.request(position, tolerance, frame), 10.0)
+        assert time.monotonic() - started < 5.0, reason
+        assert len(response.plan.poses) == 0, reason
+        wait_until(lambda: stack.values().get('goals_rejected') == str(count), 5.0,
+                   'rejection %d on diagnostics' % count)
+        assert reason in stack.values()['last_outcome'], stack.values()['last_outcome']
+    # Nothing moved, and the controller still works.
+    np.testing.assert_allclose(pose_xyz(stack.tip.last.pose), start_tip, atol=1e-9)
+    goal = reachable(0.0, 1.5)
+    plan = call(stack.service, stack.request(goal, 1e-3), 30.0).plan
+    assert np.linalg.norm(pose_xyz(plan.poses[-1].pose) - goal) <= 1e-3
+
+
+def test_a_new_goal_preempts_the_one_in_progress(harness):
+    stack = Stack(harness, max_cable_speed=0.004)  # slow: the first goal is still moving
+    first = stack.service.call_async(stack.request(reachable(2.5, 0.0), 1e-3))
+    wait_until(lambda: stack.values().get('phase') == 'ramp', 10.0, 'the first goal to move')
+    harness.nodes[2].set_parameters([Parameter('max_cable_speed', value=0.05)])
+    second_goal = reachable(-1.0, 1.0)
+    second = call(stack.service, stack.request(second_goal, 1e-3), 30.0)
+    wait_until(first.done, 5.0, 'the pre-empted goal to answer')
+    assert len(first.result().plan.poses) == 0
+    assert np.linalg.norm(pose_xyz(second.plan.poses[-1].pose) - second_goal) <= 1e-3
+    assert stack.values()['goals_preempted'] == '1'
+
+
+def test_streaming_goals_on_tip_goal_pose(harness):
+    stack = Stack(harness, default_tolerance=5e-4)
+    goals = stack.client.create_publisher(PoseStamped, 'tip_goal_pose', RELIABLE)
+    goal = reachable(-1.5, -1.5)
+    msg = PoseStamped()
+    msg.header.frame_id = 'base_link'
+    msg.pose.position.x, msg.pose.position.y, msg.pose.position.z = (float(v) for v in goal)
+    msg.pose.orientation.w = 1.0
+    publish_until(goals, msg, lambda: stack.values().get('phase') in ('ramp', 'settle'), 10.0,
+                  'the streamed goal to start')
+    wait_until(lambda: np.linalg.norm(pose_xyz(stack.tip.last.pose) - goal) <= 5e-4
+               and stack.values().get('phase') == 'idle', 20.0, 'the tip at the streamed goal')
