@@ -139,9 +139,11 @@ class DedicatedIntake:
                     continue
                 for entry, handle, msg_type, raw in entries:
                     if handle.pointer in ready:
+                        # Take until the queue is empty: no wait-set round trip per message.
                         message = self._take(entry, handle, msg_type, raw)
-                        if message is not None:
+                        while message is not None:
                             entry.callback(message)
+                            message = self._take(entry, handle, msg_type, raw)
             except Exception as error:  # a failing callback must not end the intake
                 if self._stop.is_set() or not context.ok():
                     return

@@ -146,3 +146,17 @@ def test_streaming_goals_on_tip_goal_pose(harness):
                   'the streamed goal to start')
     wait_until(lambda: np.linalg.norm(pose_xyz(stack.tip.last.pose) - goal) <= 5e-4
                and stack.values().get('phase') == 'idle', 20.0, 'the tip at the streamed goal')
+
+
+def test_invalid_parameter_sets_are_rejected_with_a_reason(harness):
+    controller = harness.add(TipControllerNode)
+    for name, value, reason in [('max_cable_speed', 0.0, 'max_cable_speed'),
+                                ('goal_timeout', math.nan, 'goal_timeout'),
+                                ('default_tolerance', -1e-3, 'default_tolerance'),
+                                ('max_corrections', -1, 'max_corrections'),
+                                ('robot_file', '/tmp/x.yaml', 'read-only'),
+                                ('control_rate', 'fast', 'type')]:
+        result = controller.set_parameters([Parameter(name, value=value)])[0]
+        assert not result.successful, (name, value)
+        assert reason.lower() in result.reason.lower(), (name, result.reason)
+    assert controller.set_parameters([Parameter('control_rate', value=100.0)])[0].successful
