@@ -99,8 +99,8 @@ class CableDriverNode(Node):
                                     'cable_driver_publish')
         self.create_timer(1.0 / self._params['diagnostics_rate'], self._publish_diagnostics)
         # Applied only after everything above exists.
-        self._params._on_change = self._on_parameter_change
-        self._options._on_change = self._on_option_change
+        self._params.on_change = self._on_parameter_change
+        self._options.on_change = self._on_option_change
         self._loop.start()
         self.get_logger().info('cable_driver: backend %s, %d cables (%s), %g Hz' % (
             self._backend_cls.name, len(self.cable_names), ', '.join(self.cable_names),

@@ -78,7 +78,7 @@ class ParameterTable:
 
     def __init__(self, node, specs, on_change=None):
         self._specs = {spec.name: spec for spec in specs}
-        self._on_change = on_change
+        self.on_change = on_change
         self.values = {}
         for spec in specs:
             value = node.declare_parameter(spec.name, spec.default, spec.descriptor()).value
@@ -106,11 +106,11 @@ class ParameterTable:
             reason = spec.reason(parameter.value)
             if reason is not None:
                 return SetParametersResult(successful=False, reason=reason)
-        if self._on_change is not None:
+        if self.on_change is not None:
             for parameter in parameters:
                 if parameter.name in self._specs:
                     try:
-                        self._on_change(parameter.name, parameter.value)
+                        self.on_change(parameter.name, parameter.value)
                     except ValueError as error:
                         return SetParametersResult(successful=False, reason=str(error))
         for parameter in parameters:

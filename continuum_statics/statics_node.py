@@ -153,7 +153,7 @@ class StaticsNode(Node):
         self._marker_timer = None
         self._set_marker_timer(self._params['marker_rate'])
         self.create_timer(1.0 / self._params['diagnostics_rate'], self._publish_diagnostics)
-        self._params._on_change = self._on_parameter_change
+        self._params.on_change = self._on_parameter_change
         self.get_logger().info('statics: robot %r, %d cables, frame %r, %d path samples' % (
             self.robot.name, len(self.cable_names), self.base_frame_id,
             self._params['path_samples']))

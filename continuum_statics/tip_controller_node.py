@@ -162,7 +162,7 @@ class TipControllerNode(Node):
         self._timer.cancel()  # runs only while a goal does
         self.create_timer(1.0 / self._params['diagnostics_rate'], self._publish_diagnostics,
                           callback_group=self._control_group)
-        self._params._on_change = self._on_parameter_change
+        self._params.on_change = self._on_parameter_change
         self.get_logger().info('tip_controller: robot %r, frame %r, max cable speed %g m/s' % (
             self.robot.name, self.base_frame_id, self._params['max_cable_speed']))
 
