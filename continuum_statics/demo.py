@@ -123,7 +123,8 @@ def main(argv=None):
           % (os.path.basename(robot_file), options.namespace), flush=True)
     process = subprocess.Popen(
         [sys.executable, '-m', 'continuum_statics', 'bringup', '--robot', robot_file,
-         '--driver', 'sim', '--namespace', options.namespace])
+         '--driver', 'sim', '--namespace', options.namespace, '--ros-args', '--log-level',
+         'warn'])
     try:
         rows = run_client(robot_file, options.namespace, options.goals, options.tolerance,
                           process=process)
