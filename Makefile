@@ -1,6 +1,6 @@
 # The two commands of README.md: `make demo` (main job) and `make test` (whole suite).
 # Both create .venv on first use and reuse it afterwards.
-.PHONY: venv demo test bench lint clean
+.PHONY: venv demo test bench bench-nodes lint clean
 
 venv:
 	@scripts/setup_venv.sh
@@ -13,6 +13,9 @@ test: venv
 
 bench: venv
 	scripts/ros_env.sh .venv/bin/python -m continuum_statics bench
+
+bench-nodes: venv
+	scripts/ros_env.sh .venv/bin/python -m continuum_statics bench --nodes
 
 lint: venv
 	.venv/bin/ruff check .

@@ -37,26 +37,29 @@ class ShapeEstimate:
     message: str
 
 
-def estimate_shape(robot, cable_lengths, tip_force=(0.0, 0.0, 0.0), u0_guess=None):
+def estimate_shape(robot, cable_lengths, tip_force=(0.0, 0.0, 0.0), u0_guess=None,
+                   tip_moment=(0.0, 0.0, 0.0)):
     """Estimate the shape from measured cable lengths (m, ``robot.cable_names`` order).
 
-    Damped Gauss-Newton from ``u0_guess`` (the previous estimate when tracking; default the
-    small-deflection passive solution).
+    ``tip_force`` (N) and ``tip_moment`` (N m) are the external tip load in the base frame; the
+    cables add to the moment. Damped Gauss-Newton from ``u0_guess`` (the previous estimate when
+    tracking; default the small-deflection passive solution).
     """
     from continuum_statics.robot import as_vector
 
     n_cables = len(robot.cable_names)
     measured = as_vector(cable_lengths, n_cables, 'cable_lengths')
     tip_force = as_vector(tip_force, 3, 'tip_force')
+    tip_moment = as_vector(tip_moment, 3, 'tip_moment')
     if u0_guess is None:
-        u0_guess = bvp.linear_guess(robot, tip_force, np.zeros(3))
+        u0_guess = bvp.linear_guess(robot, tip_force, tip_moment)
     u0_guess = as_vector(u0_guess, 3, 'u0_guess')
 
     cables = slice(3, 3 + n_cables)
     free = slice(3 + n_cables, None)
 
     def evaluate(x):
-        values, jac, states = robot.probe(x, tip_force)
+        values, jac, states = robot.probe(x, tip_force, tip_moment)
         return values[cables] - measured, jac[cables], values[free], jac[free], states
 
     result = constrained_gauss_newton(

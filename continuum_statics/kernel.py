@@ -217,11 +217,14 @@ def _perturbed(tip_force, base_bending, force_step, bending_step):
 
 
 @numba.njit(cache=True)
-def probe(s_grid, params, tip_force, base_bending, step, guide_nodes, offsets, free_basis):
+def probe(s_grid, params, tip_force, tip_moment, base_bending, step, guide_nodes, offsets,
+          free_basis):
     """Tip position, cable lengths and free tip-moment components, with forward differences.
 
     One call integrates u(0) and u(0) + step * e_k (k = 0, 1, 2) and returns:
-    values (3 + n_cables + k,) = [tip position (m); cable lengths (m); free_basis^T C u(L) (N m)],
+    values (3 + n_cables + k,) = [tip position (m); cable lengths (m); the components along
+    ``free_basis`` of C u(L) - R(L)^T tau, the local tip moment the cables would have to supply
+    beyond the external tip moment tau (N m)],
     their Jacobian (same rows, 3 columns) with respect to u(0), and the nominal (N, 18) states.
     This is everything one Gauss-Newton iteration of the estimator or the tip-goal solver needs.
     """
@@ -239,10 +242,14 @@ def probe(s_grid, params, tip_force, base_bending, step, guide_nodes, offsets, f
             table[b, i] = states[b, n_nodes - 1, i]
         for j in range(n_cables):
             table[b, 3 + j] = lengths[b, j]
+        tip = states[b, n_nodes - 1]
         for k in range(n_free):
             moment = 0.0
             for i in range(3):
-                moment += free_basis[i, k] * params[_C + i] * states[b, n_nodes - 1, 15 + i]
+                # R(L)^T tau: column i of R (row-major at tip[3:12]) dotted with tau
+                external = (tip[3 + i] * tip_moment[0] + tip[6 + i] * tip_moment[1]
+                            + tip[9 + i] * tip_moment[2])
+                moment += free_basis[i, k] * (params[_C + i] * tip[15 + i] - external)
             table[b, 3 + n_cables + k] = moment
     values = table[0].copy()
     jacobian = np.empty((rows, 3))

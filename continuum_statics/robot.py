@@ -165,26 +165,29 @@ class Robot:
 
     def cable_jacobian(self, u0, tip_force=(0.0, 0.0, 0.0)):
         """d(cable lengths)/d u(0), (n_cables, 3) in m per 1/m; one batched kernel call."""
-        _, jac, _ = self.probe(as_vector(u0, 3, 'u0'), as_vector(tip_force, 3, 'tip_force'))
+        _, jac, _ = self.probe(as_vector(u0, 3, 'u0'), as_vector(tip_force, 3, 'tip_force'),
+                               np.zeros(3))
         return jac[3:3 + len(self.cable_names)]
 
-    def probe(self, u0, tip_force):
+    def probe(self, u0, tip_force, tip_moment):
         """Tip, cable lengths and free tip moments with their u(0) Jacobian (kernel.probe).
 
-        Unchecked fast path for the solvers: ``u0`` and ``tip_force`` must be float (3,) arrays.
+        Unchecked fast path for the solvers: arguments must be float (3,) arrays.
         """
-        return probe(self.s_grid, self.params, tip_force, u0, self.bending_step(),
+        return probe(self.s_grid, self.params, tip_force, tip_moment, u0, self.bending_step(),
                      self.guide_nodes, self.cable_offsets, self.free_moment_basis)
 
     # -- inverse problems ------------------------------------------------------------------
-    def estimate_shape(self, cable_lengths, tip_force=(0.0, 0.0, 0.0), u0_guess=None):
-        """Shape from measured cable lengths (m) and a tip force (N); see :mod:`estimation`."""
-        return estimation.estimate_shape(self, cable_lengths, tip_force, u0_guess)
+    def estimate_shape(self, cable_lengths, tip_force=(0.0, 0.0, 0.0), u0_guess=None,
+                       tip_moment=(0.0, 0.0, 0.0)):
+        """Shape from measured cable lengths (m) and a tip load (N, N m); see :mod:`estimation`."""
+        return estimation.estimate_shape(self, cable_lengths, tip_force, u0_guess, tip_moment)
 
     def solve_tip_goal(self, goal_position, tip_force=(0.0, 0.0, 0.0), u0_guess=None,
-                       tolerance=None):
+                       tolerance=None, tip_moment=(0.0, 0.0, 0.0)):
         """u(0) and cable lengths that put the tip at a goal (m); see :mod:`tip_goal`."""
-        return tip_goal.solve_tip_goal(self, goal_position, tip_force, u0_guess, tolerance)
+        return tip_goal.solve_tip_goal(self, goal_position, tip_force, u0_guess, tolerance,
+                                       tip_moment)
 
 
 def _free_moment_basis(offsets):

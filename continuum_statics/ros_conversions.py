@@ -105,8 +105,8 @@ def check_frame(frame_id, base_frame_id, what):
                          % (what, frame_id, base_frame_id))
 
 
-def wrench_force(msg, base_frame_id):
-    """Return the force of a WrenchStamped in the base frame as a finite (3,) array, N.
+def tip_load(msg, base_frame_id):
+    """Return a WrenchStamped in the base frame as a finite (6,) array: force (N), torque (N m).
 
     :raises ValueError: on another frame or a non-finite component (force or torque)
     """
@@ -116,7 +116,7 @@ def wrench_force(msg, base_frame_id):
     if not all(math.isfinite(v) for v in values):
         raise ValueError('tip_wrench has a non-finite component: force (%g, %g, %g), '
                          'torque (%g, %g, %g)' % values)
-    return np.array(values[:3])
+    return np.array(values)
 
 
 def goal_position(pose_stamped, base_frame_id):

@@ -1,4 +1,5 @@
 """Rotation helpers: quaternions ([x, y, z, w], ROS order), hat and vee maps."""
+import numba
 import numpy as np
 
 
@@ -12,35 +13,46 @@ def quaternion_to_rotation(q):
     ])
 
 
-def rotation_to_quaternion(rotations):
-    """Return unit quaternions ``[x, y, z, w]`` (w >= 0) of rotation matrices (..., 3, 3).
+@numba.njit(cache=True)
+def _quaternion(r, out):
+    """Write the unit quaternion [x, y, z, w], w >= 0, of rotation ``r`` into ``out``.
 
     Shepperd's method: branch on the largest diagonal term so no division loses precision.
     """
+    trace = r[0, 0] + r[1, 1] + r[2, 2]
+    if trace > max(r[0, 0], r[1, 1], r[2, 2]):
+        t = 2.0 * np.sqrt(1.0 + trace)
+        x, y, z, w = ((r[2, 1] - r[1, 2]) / t, (r[0, 2] - r[2, 0]) / t,
+                      (r[1, 0] - r[0, 1]) / t, 0.25 * t)
+    elif r[0, 0] >= r[1, 1] and r[0, 0] >= r[2, 2]:
+        t = 2.0 * np.sqrt(1.0 + r[0, 0] - r[1, 1] - r[2, 2])
+        x, y, z, w = (0.25 * t, (r[0, 1] + r[1, 0]) / t, (r[0, 2] + r[2, 0]) / t,
+                      (r[2, 1] - r[1, 2]) / t)
+    elif r[1, 1] >= r[2, 2]:
+        t = 2.0 * np.sqrt(1.0 - r[0, 0] + r[1, 1] - r[2, 2])
+        x, y, z, w = ((r[0, 1] + r[1, 0]) / t, 0.25 * t, (r[1, 2] + r[2, 1]) / t,
+                      (r[0, 2] - r[2, 0]) / t)
+    else:
+        t = 2.0 * np.sqrt(1.0 - r[0, 0] - r[1, 1] + r[2, 2])
+        x, y, z, w = ((r[0, 2] + r[2, 0]) / t, (r[1, 2] + r[2, 1]) / t, 0.25 * t,
+                      (r[1, 0] - r[0, 1]) / t)
+    scale = (-1.0 if w < 0.0 else 1.0) / np.sqrt(x * x + y * y + z * z + w * w)
+    out[0], out[1], out[2], out[3] = x * scale, y * scale, z * scale, w * scale
+
+
+@numba.njit(cache=True)
+def _quaternions(rotations, out):
+    for k in range(rotations.shape[0]):
+        _quaternion(rotations[k], out[k])
+
+
+def rotation_to_quaternion(rotations):
+    """Return unit quaternions ``[x, y, z, w]`` (w >= 0) of rotation matrices (..., 3, 3)."""
     m = np.asarray(rotations, dtype=float)
-    flat = m.reshape(-1, 3, 3)
-    q = np.empty((flat.shape[0], 4))
-    for k, r in enumerate(flat):
-        trace = r[0, 0] + r[1, 1] + r[2, 2]
-        if trace > max(r[0, 0], r[1, 1], r[2, 2]):
-            t = 2.0 * np.sqrt(1.0 + trace)
-            q[k] = [(r[2, 1] - r[1, 2]) / t, (r[0, 2] - r[2, 0]) / t,
-                    (r[1, 0] - r[0, 1]) / t, 0.25 * t]
-        elif r[0, 0] >= r[1, 1] and r[0, 0] >= r[2, 2]:
-            t = 2.0 * np.sqrt(1.0 + r[0, 0] - r[1, 1] - r[2, 2])
-            q[k] = [0.25 * t, (r[0, 1] + r[1, 0]) / t,
-                    (r[0, 2] + r[2, 0]) / t, (r[2, 1] - r[1, 2]) / t]
-        elif r[1, 1] >= r[2, 2]:
-            t = 2.0 * np.sqrt(1.0 - r[0, 0] + r[1, 1] - r[2, 2])
-            q[k] = [(r[0, 1] + r[1, 0]) / t, 0.25 * t,
-                    (r[1, 2] + r[2, 1]) / t, (r[0, 2] - r[2, 0]) / t]
-        else:
-            t = 2.0 * np.sqrt(1.0 - r[0, 0] - r[1, 1] + r[2, 2])
-            q[k] = [(r[0, 2] + r[2, 0]) / t, (r[1, 2] + r[2, 1]) / t,
-                    0.25 * t, (r[1, 0] - r[0, 1]) / t]
-    q *= np.where(q[:, 3:4] < 0.0, -1.0, 1.0)
-    q /= np.linalg.norm(q, axis=1, keepdims=True)
-    return q.reshape(m.shape[:-2] + (4,))
+    flat = np.ascontiguousarray(m).reshape(-1, 3, 3)
+    out = np.empty((flat.shape[0], 4))
+    _quaternions(flat, out)
+    return out.reshape(m.shape[:-2] + (4,))
 
 
 def hat(w):

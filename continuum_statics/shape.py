@@ -1,6 +1,7 @@
 """The solved backbone: a small immutable record of arrays, base to tip."""
 import numpy as np
 
+from continuum_statics.backbone_sampling import BackboneSampler
 from continuum_statics.rotations import rotation_to_quaternion
 
 
@@ -79,20 +80,14 @@ class Shape:
 
         Positions are interpolated linearly between nodes and orientations taken from the
         nearest node, which is exact at the ends and within the integration step elsewhere.
+        For many shapes on one grid, keep a :class:`BackboneSampler` instead.
 
         :param count: number of poses (>= 2)
         :returns: s (count,) in m, positions (count, 3) in m, quaternions (count, 4) [x, y, z, w]
         """
-        count = int(count)
-        if count < 2:
-            raise ValueError('sample count must be >= 2, got %d' % count)
-        s = np.linspace(self.s[0], self.s[-1], count)
-        positions = np.stack([np.interp(s, self.s, self.positions[:, i]) for i in range(3)], 1)
-        nearest = np.clip(np.searchsorted(self.s, s), 0, len(self.s) - 1)
-        lower = np.clip(nearest - 1, 0, None)
-        closer_lower = np.abs(self.s[lower] - s) < np.abs(self.s[nearest] - s)
-        nearest = np.where(closer_lower, lower, nearest)
-        return s, positions, rotation_to_quaternion(self.rotations[nearest])
+        sampler = BackboneSampler(self.s, count)
+        positions, quaternions = sampler.sample(self.positions, self.rotations)
+        return sampler.s, positions, quaternions
 
     def to_dict(self):
         """Plain-Python form for JSON output (lists of floats, SI units)."""

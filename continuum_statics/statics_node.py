@@ -39,7 +39,7 @@ from std_msgs.msg import Header
 from visualization_msgs.msg import MarkerArray
 
 from continuum_statics import diagnostics_util as diag
-from continuum_statics.backbone_sampling import BackboneSampler, rotations_to_quaternions
+from continuum_statics.backbone_sampling import BackboneSampler
 from continuum_statics.dedicated_intake import make_intake
 from continuum_statics.marker_geometry import guide_and_cable_points
 from continuum_statics.node_params import (
@@ -55,8 +55,9 @@ from continuum_statics.ros_conversions import (
     PoseSequenceEncoder,
     cable_index,
     parse_joint_state,
-    wrench_force,
+    tip_load,
 )
+from continuum_statics.rotations import rotation_to_quaternion
 
 #: Newest measurement only: best effort, keep last 1 (a slow cycle never builds a backlog).
 LATEST_SENSOR_QOS = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=1,
@@ -111,7 +112,7 @@ class StaticsNode(Node):
         self._u0 = None
         self._shape = None
         self._shape_is_new = False
-        self._tip_force = np.zeros(3)
+        self._tip_load = np.zeros(6)
         self._wrench_time = None
         self._wrench_expired = False
         self._stamp = None
@@ -123,7 +124,7 @@ class StaticsNode(Node):
         straight = self.robot.solve_ivp(np.zeros(3))
         self._sampler = BackboneSampler(straight.s, self._params['path_samples'])
         self._sampler.sample(straight.positions, straight.rotations)
-        rotations_to_quaternions(straight.rotations[:1])
+        rotation_to_quaternion(straight.rotations[:1])
         self._markers = BackboneMarkers(self.get_name(), self._params['tube_diameter'],
                                         self._disk_diameter)
         self._last = {'residual': math.nan, 'iterations': 0, 'converged': False,
@@ -178,26 +179,26 @@ class StaticsNode(Node):
 
     def _on_tip_wrench(self, msg):
         try:
-            force = wrench_force(msg, self.base_frame_id)
+            load = tip_load(msg, self.base_frame_id)
         except ValueError as error:
             self._reject('tip_wrench', error)
             return
-        self._tip_force = force
+        self._tip_load = load
         self._wrench_time = time.monotonic()
         if self._wrench_expired:
             self._wrench_expired = False
             self.get_logger().info('tip_wrench received again')
 
-    def _current_tip_force(self, now):
+    def _current_tip_load(self, now):
         timeout = self._params['tip_wrench_timeout']
         if self._wrench_time is None or self._wrench_expired:
-            return self._tip_force
+            return self._tip_load
         if timeout > 0.0 and now - self._wrench_time > timeout:
             self._wrench_expired = True
-            self._tip_force = np.zeros(3)
+            self._tip_load = np.zeros(6)
             self.get_logger().warning(
-                'tip_wrench estimate is older than %.3g s: using zero tip force' % timeout)
-        return self._tip_force
+                'tip_wrench estimate is older than %.3g s: using zero tip load' % timeout)
+        return self._tip_load
 
     def _on_cable_states(self, data):
         """Solve one serialized JointState (raw subscription: parsed without a message object)."""
@@ -220,9 +221,10 @@ class StaticsNode(Node):
             self._reject('cable_states', error)
             return
         self._lengths[self._index] = positions
-        tip_force = self._current_tip_force(time.monotonic())
+        load = self._current_tip_load(time.monotonic())
         try:
-            estimate = self.robot.estimate_shape(self._lengths, tip_force, u0_guess=self._u0)
+            estimate = self.robot.estimate_shape(self._lengths, load[:3], u0_guess=self._u0,
+                                                 tip_moment=load[3:])
         except ValueError as error:
             self._reject('cable_states', error)
             return
@@ -280,7 +282,7 @@ class StaticsNode(Node):
                 Header(frame_id=self.base_frame_id,
                        stamp=Time(sec=self._stamp[0], nanosec=self._stamp[1])),
                 positions, quaternions,
-                guide_points, rotations_to_quaternions(guide_rotations), cable_points)
+                guide_points, rotation_to_quaternion(guide_rotations), cable_points)
         except ValueError as error:
             self._reject('markers', error)
             return
@@ -288,7 +290,7 @@ class StaticsNode(Node):
 
     def _publish_diagnostics(self):
         now = time.monotonic()
-        self._current_tip_force(now)  # expire a stale tip load even while no measurement comes
+        self._current_tip_load(now)  # expire a stale tip load even while no measurement comes
         last = self._last
         input_rate = self._input_rate.report()
         output_rate = self._output_rate.report()
@@ -320,7 +322,8 @@ class StaticsNode(Node):
             'iterations': last['iterations'],
             'converged': last['converged'],
             'not_converged_total': self._not_converged,
-            'tip_force_n': ' '.join('%.4g' % f for f in self._tip_force),
+            'tip_force_n': ' '.join('%.4g' % f for f in self._tip_load[:3]),
+            'tip_moment_nm': ' '.join('%.4g' % f for f in self._tip_load[3:]),
             'tip_wrench_age_s': wrench_age,
             'tip_wrench_expired': self._wrench_expired,
         }

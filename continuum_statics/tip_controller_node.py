@@ -51,7 +51,7 @@ from continuum_statics.ros_conversions import (
     joint_state,
     parse_joint_state,
     pose_position,
-    wrench_force,
+    tip_load,
 )
 from continuum_statics.statics_node import LATCHED_QOS, LATEST_SENSOR_QOS
 
@@ -132,7 +132,7 @@ class TipControllerNode(Node):
         self._index = None
         self._tip = None  # (position (3,), stamp s, monotonic receive time)
         self._backbone = None
-        self._tip_force = np.zeros(3)
+        self._tip_load = np.zeros(6)
         self._wrench_time = None
         self._problems = diag.Problems()
         self._counts = {'reached': 0, 'failed': 0, 'rejected': 0, 'preempted': 0}
@@ -218,19 +218,19 @@ class TipControllerNode(Node):
 
     def _on_tip_wrench(self, msg):
         try:
-            self._tip_force = wrench_force(msg, self.base_frame_id)
+            self._tip_load = tip_load(msg, self.base_frame_id)
         except ValueError as error:
             self._reject('tip_wrench', error)
             return
         self._wrench_time = time.monotonic()
 
-    def _current_tip_force(self):
+    def _current_tip_load(self):
         timeout = self._params['tip_wrench_timeout']
         if self._wrench_time is None:
-            return np.zeros(3)
+            return np.zeros(6)
         if timeout > 0.0 and time.monotonic() - self._wrench_time > timeout:
-            return np.zeros(3)
-        return self._tip_force
+            return np.zeros(6)
+        return self._tip_load
 
     # -- goals -----------------------------------------------------------------------------
     def _on_tip_goal(self, request, response):
@@ -281,11 +281,12 @@ class TipControllerNode(Node):
         if measured is None or tip is None:
             raise ValueError('no %s yet: are statics and cable_driver running?'
                              % ('cable_states' if measured is None else 'tip_pose'))
-        tip_force = self._current_tip_force()
-        u0_guess = self._u0
-        estimate = self.robot.estimate_shape(measured, tip_force, u0_guess=u0_guess)
-        solution = self.robot.solve_tip_goal(position, tip_force, u0_guess=estimate.u0,
-                                             tolerance=self._model_tolerance(tolerance))
+        load = self._current_tip_load()
+        estimate = self.robot.estimate_shape(measured, load[:3], u0_guess=self._u0,
+                                             tip_moment=load[3:])
+        solution = self.robot.solve_tip_goal(position, load[:3], u0_guess=estimate.u0,
+                                             tolerance=self._model_tolerance(tolerance),
+                                             tip_moment=load[3:])
         if not solution.error <= tolerance:
             limited = ', '.join(solution.limited_cables)
             raise ValueError('unreachable goal (%.4f, %.4f, %.4f) m: the nearest reachable tip '
@@ -416,9 +417,10 @@ class TipControllerNode(Node):
             return
         self._corrected_goal = self._corrected_goal + (goal.position - measured_tip)
         try:
+            load = self._current_tip_load()
             solution = self.robot.solve_tip_goal(
-                self._corrected_goal, self._current_tip_force(), u0_guess=self._u0,
-                tolerance=self._model_tolerance(goal.tolerance))
+                self._corrected_goal, load[:3], u0_guess=self._u0,
+                tolerance=self._model_tolerance(goal.tolerance), tip_moment=load[3:])
         except ValueError as error:
             self._finish_locked(goal, False, 'correction failed: %s' % error)
             return

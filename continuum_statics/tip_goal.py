@@ -41,8 +41,10 @@ class TipGoalSolution:
 
 
 def solve_tip_goal(robot, goal_position, tip_force=(0.0, 0.0, 0.0), u0_guess=None,
-                   tolerance=None):
+                   tolerance=None, tip_moment=(0.0, 0.0, 0.0)):
     """Find u(0) and cable lengths that put the tip at ``goal_position`` (m, global frame).
+
+    ``tip_force`` (N) and ``tip_moment`` (N m) are the external tip load, base frame.
 
     :param u0_guess: start (1/m); default the passive equilibrium's small-deflection solution
     :param tolerance: position tolerance (m); default ``robot.solver.goal_tolerance``
@@ -51,11 +53,12 @@ def solve_tip_goal(robot, goal_position, tip_force=(0.0, 0.0, 0.0), u0_guess=Non
 
     goal = as_vector(goal_position, 3, 'goal_position')
     tip_force = as_vector(tip_force, 3, 'tip_force')
+    tip_moment = as_vector(tip_moment, 3, 'tip_moment')
     tolerance = robot.solver.goal_tolerance if tolerance is None else float(tolerance)
     if not np.isfinite(tolerance) or tolerance <= 0.0:
         raise ValueError('tolerance must be a finite number > 0 m, got %r' % tolerance)
     if u0_guess is None:
-        u0_guess = bvp.linear_guess(robot, tip_force, np.zeros(3))
+        u0_guess = bvp.linear_guess(robot, tip_force, tip_moment)
     x = as_vector(u0_guess, 3, 'u0_guess')
     limits = robot.cable_length_limits
     n_cables = len(robot.cable_names)
@@ -68,7 +71,7 @@ def solve_tip_goal(robot, goal_position, tip_force=(0.0, 0.0, 0.0), u0_guess=Non
     iterations = 0
 
     def evaluate(x):
-        values, jac, states = robot.probe(x, tip_force)
+        values, jac, states = robot.probe(x, tip_force, tip_moment)
         rows = [3 + i for i in held]
         con = np.concatenate([values[free], (values[rows] - held_at) * held_scale])
         con_jac = np.vstack([jac[free], jac[rows] * held_scale])

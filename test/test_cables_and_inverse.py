@@ -182,3 +182,27 @@ def test_tip_goal_respects_cable_length_limits():
 def test_bad_numeric_input_raises_value_error(call):
     with pytest.raises(ValueError):
         call(tendon_robot())
+
+
+def test_external_tip_moment_enters_the_passive_directions():
+    # an opposing pair along local x cannot bend the rod about local x; an external tip moment
+    # about that axis must then be carried by the rod, and the estimate must show it
+    robot = cable_robot(cables=[FOUR_CABLES[0], FOUR_CABLES[2]])
+    force = np.array([0.0, 0.0, -0.1])
+    external = np.array([0.004, 0.0, 0.0])
+    # truth: the cables add 0.006 N m about the tip's local y (the only axis they can); the
+    # tip frame depends on the shape, so iterate the BVP to the fixed point
+    truth = robot.solve_bvp(tip_force=force, tip_moment=external)
+    for _ in range(30):
+        cable_moment = truth.tip_rotation @ [0.0, 0.006, 0.0]
+        truth = robot.solve_bvp(tip_force=force, tip_moment=external + cable_moment,
+                                u0_guess=truth.u0)
+    assert np.allclose(truth.tip_moment, external + truth.tip_rotation @ [0.0, 0.006, 0.0],
+                       atol=1e-12)
+    lengths = robot.cable_lengths(truth)
+    est = robot.estimate_shape(lengths, force, tip_moment=external)
+    assert np.linalg.norm(est.shape.tip_position - truth.tip_position) < 1e-6
+    ignored = robot.estimate_shape(lengths, force)
+    assert np.linalg.norm(ignored.shape.tip_position - truth.tip_position) > 1e-3
+    goal = robot.solve_tip_goal(truth.tip_position, force, tip_moment=external, tolerance=1e-6)
+    assert goal.converged

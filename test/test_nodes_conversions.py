@@ -16,10 +16,7 @@ from sensor_msgs.msg import JointState  # noqa: E402
 from std_msgs.msg import Header  # noqa: E402
 
 from continuum_statics import load_robot  # noqa: E402
-from continuum_statics.backbone_sampling import (  # noqa: E402
-    BackboneSampler,
-    rotations_to_quaternions,
-)
+from continuum_statics.backbone_sampling import BackboneSampler  # noqa: E402
 from continuum_statics.bringup import parse_args  # noqa: E402
 from continuum_statics.dedicated_intake import IntakeEntry  # noqa: E402
 from continuum_statics.marker_geometry import guide_and_cable_points  # noqa: E402
@@ -32,9 +29,12 @@ from continuum_statics.ros_conversions import (  # noqa: E402
     goal_position,
     parse_joint_state,
     set_pose,
-    wrench_force,
+    tip_load,
 )
-from continuum_statics.rotations import rotation_to_quaternion  # noqa: E402
+from continuum_statics.rotations import (  # noqa: E402
+    quaternion_to_rotation,
+    rotation_to_quaternion,
+)
 
 ROBOT = load_robot(REPO / 'config' / 'tendon_robot.yaml')
 NAMES = ('cable_0', 'cable_1', 'cable_2', 'cable_3')
@@ -139,37 +139,47 @@ def test_wrench_validation():
     msg = WrenchStamped()
     msg.header.frame_id = 'base_link'
     msg.wrench.force.z = -0.5
-    np.testing.assert_array_equal(wrench_force(msg, 'base_link'), [0.0, 0.0, -0.5])
+    msg.wrench.torque.x = 0.01
+    np.testing.assert_array_equal(tip_load(msg, 'base_link'), [0.0, 0.0, -0.5, 0.01, 0.0, 0.0])
     msg.wrench.torque.y = math.nan
     with pytest.raises(ValueError, match='non-finite'):
-        wrench_force(msg, 'base_link')
+        tip_load(msg, 'base_link')
     msg.wrench.torque.y = 0.0
     msg.header.frame_id = 'tool0'
     with pytest.raises(ValueError, match='tool0'):
-        wrench_force(msg, 'base_link')
+        tip_load(msg, 'base_link')
 
 
-@pytest.mark.parametrize('u0', [(0.0, 0.0, 0.0), (2.0, 1.0, 0.0), (-3.0, 0.5, 0.2)])
 @pytest.mark.parametrize('count', [2, 3, 20, 50])
-def test_sampler_equals_shape_sample(u0, count):
-    shape = ROBOT.solve_ivp(u0)
-    _, positions, quaternions = shape.sample(count)
+def test_sampler_interpolates_the_backbone(count):
+    robot = ROBOT
+    shape = robot.solve_bvp(tip_moment=(0.0, 0.1, 0.0))
     sampler = BackboneSampler(shape.s, count)
     points, quats = sampler.sample(shape.positions, shape.rotations)
-    np.testing.assert_allclose(points, positions, atol=1e-13)
-    np.testing.assert_allclose(quats, quaternions, atol=1e-12)
+    s = np.linspace(0.0, robot.length, count)
+    assert np.allclose(sampler.s, s)
+    np.testing.assert_allclose(points[0], shape.positions[0], atol=1e-15)
+    np.testing.assert_allclose(points[-1], shape.tip_position, atol=1e-15)
+    np.testing.assert_allclose(quats[-1], rotation_to_quaternion(shape.tip_rotation), atol=1e-12)
+    # every sample lies on the polyline through the nodes, at its arc length
+    for axis in range(3):
+        expected = np.interp(s, shape.s, shape.positions[:, axis])
+        np.testing.assert_allclose(points[:, axis], expected, atol=1e-12)
     assert sampler.matches(shape.s, count) and not sampler.matches(shape.s, count + 1)
 
 
-def test_quaternions_match_the_core_on_every_branch():
+def test_quaternions_round_trip_on_every_branch():
     rng = np.random.default_rng(3)
     random = np.linalg.qr(rng.normal(size=(500, 3, 3)))[0]
     random *= np.sign(np.linalg.det(random))[:, None, None]  # proper rotations
     half_turns = np.array([np.diag(d) for d in ([1, -1, -1], [-1, 1, -1], [-1, -1, 1])],
                           dtype=float)
     rotations = np.concatenate([random, half_turns, np.eye(3)[None]])
-    np.testing.assert_allclose(rotations_to_quaternions(rotations),
-                               rotation_to_quaternion(rotations), atol=1e-12)
+    quaternions = rotation_to_quaternion(rotations)
+    assert np.all(quaternions[:, 3] >= 0.0)
+    np.testing.assert_allclose(np.linalg.norm(quaternions, axis=1), 1.0, atol=1e-14)
+    back = np.array([quaternion_to_rotation(q) for q in quaternions])
+    np.testing.assert_allclose(back, rotations, atol=1e-12)
 
 
 def test_marker_geometry_of_the_straight_rod():
@@ -191,7 +201,7 @@ def test_markers_are_reused_and_refuse_nan():
     _, positions, quaternions = shape.sample(20)
     markers = BackboneMarkers('robot')
     args = (Header(frame_id='base_link'), positions, quaternions, guides,
-            rotations_to_quaternions(rotations), cables)
+            rotation_to_quaternion(rotations), cables)
     first = list(markers.update(*args).markers)
     second = list(markers.update(*args).markers)
     assert [id(m) for m in first] == [id(m) for m in second]
