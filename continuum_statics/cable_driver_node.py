@@ -24,10 +24,9 @@ from continuum_statics.drivers import backend_class
 from continuum_statics.node_params import (
     ParameterTable,
     ParamSpec,
-    check_robot_file,
-    default_robot_file,
     diagnostics_rate_spec,
     load_robot_file,
+    robot_file_spec,
 )
 from continuum_statics.ros_conversions import cable_index, joint_positions, joint_state
 
@@ -52,9 +51,7 @@ class CableDriverNode(Node):
     def __init__(self, node_name='cable_driver', **kwargs):
         super().__init__(node_name, **kwargs)
         specs = [
-            ParamSpec('robot_file', default_robot_file(),
-                      'robot description YAML (cable names, length limits)', read_only=True,
-                      check=check_robot_file),
+            robot_file_spec('cable names, length limits'),
             diagnostics_rate_spec(),
             ParamSpec('backend', 'sim', 'cable actuator backend: sim, an entry point of group '
                       'continuum_statics.cable_backends, or module:Class', read_only=True,

@@ -119,6 +119,12 @@ class ParameterTable:
         return SetParametersResult(successful=True)
 
 
+def robot_file_spec(purpose):
+    """Return the read-only ``robot_file`` parameter; ``purpose`` says what the node reads."""
+    return ParamSpec('robot_file', default_robot_file(), 'robot description YAML (%s)' % purpose,
+                     read_only=True, check=check_robot_file)
+
+
 def diagnostics_rate_spec():
     """Return the ``diagnostics_rate`` parameter every node declares (default 1 Hz)."""
     return ParamSpec('diagnostics_rate', 1.0, '/diagnostics publish rate, Hz', 0.1, 50.0,

@@ -45,10 +45,9 @@ from continuum_statics.marker_geometry import guide_and_cable_points
 from continuum_statics.node_params import (
     ParameterTable,
     ParamSpec,
-    check_robot_file,
-    default_robot_file,
     diagnostics_rate_spec,
     load_robot_file,
+    robot_file_spec,
 )
 from continuum_statics.ros_conversions import (
     BackboneMarkers,
@@ -78,9 +77,7 @@ class StaticsNode(Node):
     def __init__(self, node_name='statics', **kwargs):
         super().__init__(node_name, **kwargs)
         specs = [
-            ParamSpec('robot_file', default_robot_file(),
-                      'robot description YAML (rod, base frame, cables, guides)', read_only=True,
-                      check=check_robot_file),
+            robot_file_spec('rod, base frame, cables, guides'),
             diagnostics_rate_spec(),
             ParamSpec('path_samples', 20, 'poses in each backbone Path, base to tip', 2, 500),
             ParamSpec('marker_rate', 30.0, 'backbone_markers rate, Hz (0: off)', 0.0, 200.0),

@@ -40,10 +40,9 @@ from continuum_statics.dedicated_intake import make_intake
 from continuum_statics.node_params import (
     ParameterTable,
     ParamSpec,
-    check_robot_file,
-    default_robot_file,
     diagnostics_rate_spec,
     load_robot_file,
+    robot_file_spec,
 )
 from continuum_statics.ros_conversions import (
     cable_index,
@@ -84,9 +83,7 @@ class TipControllerNode(Node):
     def __init__(self, node_name='tip_controller', **kwargs):
         super().__init__(node_name, **kwargs)
         specs = [
-            ParamSpec('robot_file', default_robot_file(),
-                      'robot description YAML (must be the one statics uses)', read_only=True,
-                      check=check_robot_file),
+            robot_file_spec('must be the one statics uses'),
             diagnostics_rate_spec(),
             ParamSpec('max_cable_speed', 0.02, 'fastest cable speed of a ramp, m/s', 1e-5, 1.0),
             ParamSpec('control_rate', 50.0, 'cable_commands rate while a goal runs, Hz', 1.0,
