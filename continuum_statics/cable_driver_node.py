@@ -134,7 +134,7 @@ class CableDriverNode(Node):
                 throttle_duration_sec=THROTTLE_S)
         with self._lock:
             now = time.monotonic()
-            targets = self._targets
+            targets = self._targets.copy()  # stored only once the backend took it
             if self._holding and self._last_reading is not None:
                 # After a hold, cables not named in this command stay where they are.
                 targets = self._last_reading.copy()

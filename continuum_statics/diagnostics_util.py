@@ -1,5 +1,6 @@
 """Small helpers for the nodes' diagnostics: statuses, rates and timing windows."""
 from collections import deque
+import math
 import time
 
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
@@ -25,7 +26,8 @@ def diagnostic_array(stamp, name, hardware_id, level, message, values):
 
 def _text(value):
     if isinstance(value, float):
-        return '%.6g' % value
+        # 'n/a' rather than 'nan'/'inf': no NaN leaves a node, not even as text
+        return '%.6g' % value if math.isfinite(value) else 'n/a'
     return str(value)
 
 
@@ -82,7 +84,9 @@ class Problems:
     def add(self, kind, reason):
         """Record one rejected input of ``kind`` (e.g. 'cable_states') with its reason."""
         self.counts[kind] = self.counts.get(kind, 0) + 1
-        self.last_reason = '%s: %s' % (kind, reason)
+        reason = '%s: %s' % (kind, reason)
+        # one huge bad message must not bloat every later diagnostics message
+        self.last_reason = reason if len(reason) <= 300 else reason[:297] + '...'
         self.last_time = time.monotonic()
 
     def recent(self, window):

@@ -51,7 +51,8 @@ def cable_index(names, cable_names, require_all=True):
                              % (name, ', '.join(cable_names)))
         index.append(lookup[name])
     if len(set(index)) != len(index):
-        raise ValueError('repeated cable names in %s' % list(names))
+        repeated = sorted({name for name in names if list(names).count(name) > 1})
+        raise ValueError('repeated cable names %s' % ', '.join(repeated))
     if require_all and len(index) != len(cable_names):
         missing = [name for name in cable_names if name not in set(names)]
         raise ValueError('missing cable(s) %s: a measurement needs all of %s'
@@ -73,6 +74,13 @@ def joint_positions(msg, n_names=None):
     if not np.all(np.isfinite(positions)):
         bad = [str(msg.name[i]) for i in np.flatnonzero(~np.isfinite(positions))]
         raise ValueError('non-finite cable length for %s' % ', '.join(bad))
+    for field in ('velocity', 'effort'):  # optional, but when given they must fit too
+        values = np.asarray(getattr(msg, field), dtype=float)
+        if values.size and values.shape != (n_names,):
+            raise ValueError('JointState has %d names but %d %s values'
+                             % (n_names, values.size, field))
+        if not np.all(np.isfinite(values)):
+            raise ValueError('non-finite %s in JointState' % field)
     return positions
 
 
@@ -418,7 +426,10 @@ def parse_joint_state(data, previous_name_bytes=None):
     """
     if data[:2] != b'\x00\x01':  # not little-endian plain CDR: let rclpy read it
         from rclpy.serialization import deserialize_message
-        msg = deserialize_message(data, JointState)
+        try:
+            msg = deserialize_message(data, JointState)
+        except Exception as error:  # rclpy raises RMWError (a RuntimeError) on bad bytes
+            raise ValueError('malformed JointState (%s)' % error) from None
         names = list(msg.name)
         return JointStateView(msg.header.stamp.sec, msg.header.stamp.nanosec,
                               '\x00'.join(names).encode('utf-8') + b'\x01',

@@ -83,8 +83,8 @@ class StaticsNode(Node):
             ParamSpec('marker_rate', 30.0, 'backbone_markers rate, Hz (0: off)', 0.0, 200.0),
             ParamSpec('tip_wrench_timeout', 1.0, 'a tip_wrench estimate older than this is '
                       'replaced by zero, s (0: never expires)', 0.0, 3600.0),
-            ParamSpec('max_residual', 1e-4, 'an estimate that did not converge is still published '
-                      'when its cable-length residual (RMS) is below this, m', 0.0, 1.0),
+            ParamSpec('max_residual', 1e-4, 'an estimate whose cable-length residual (RMS) is '
+                      'above this is rejected and the last good shape kept, m', 0.0, 1.0),
             ParamSpec('tube_diameter', 0.006, 'diameter of the rod drawn in RViz, m', 1e-4, 0.2),
             ParamSpec('dedicated_intake_thread', True, 'serve cable_states from a thread of its '
                       'own instead of the executor (~0.3 ms less per message)', read_only=True),
@@ -210,10 +210,10 @@ class StaticsNode(Node):
             if positions.shape[0] != self._index.shape[0]:
                 raise ValueError('JointState has %d names but %d positions'
                                  % (self._index.shape[0], positions.shape[0]))
-            if not np.isfinite(positions).all():
-                raise ValueError('non-finite cable length for %s' % ', '.join(
+            if not (positions > 0.0).all():  # also false for NaN
+                raise ValueError('cable length not a positive finite number for %s' % ', '.join(
                     self.cable_names[self._index[i]]
-                    for i in np.flatnonzero(~np.isfinite(positions))))
+                    for i in np.flatnonzero(~(positions > 0.0))))
         except ValueError as error:
             self._reject('cable_states', error)
             return
@@ -230,11 +230,15 @@ class StaticsNode(Node):
         self._last.update(residual=float(estimate.residual), iterations=estimate.iterations,
                           converged=bool(estimate.converged), message=estimate.message,
                           time=time.monotonic())
-        if not estimate.converged and not estimate.residual <= self._params['max_residual']:
+        if not estimate.converged:
             self._not_converged += 1
-            self.get_logger().warning(
-                'shape estimate did not converge (%s, residual %.3g m): keeping the last good '
-                'shape' % (estimate.message, estimate.residual), throttle_duration_sec=THROTTLE_S)
+        if not estimate.residual <= self._params['max_residual']:
+            # lengths no shape of this robot explains (slack cable, wrong robot file, bad
+            # encoder): keep the last good shape rather than publish a best fit of nonsense
+            self._reject('cable_states', 'cable lengths fit no shape: RMS residual %.3g m > '
+                         'max_residual %.3g m%s' % (
+                             estimate.residual, self._params['max_residual'],
+                             '' if estimate.converged else ' (%s)' % estimate.message))
             return
         shape = estimate.shape
         samples = self._params['path_samples']

@@ -57,6 +57,8 @@ from continuum_statics.statics_node import LATCHED_QOS, LATEST_SENSOR_QOS
 THROTTLE_S = 2.0
 #: How long a goal that arrives before the first tip_pose / cable_states waits for them, s.
 STATE_WAIT_S = 2.0
+#: Smallest tip_goal tolerance, m: below a micrometre the model's own accuracy decides.
+MIN_TOLERANCE = 1e-6
 
 
 @dataclass(eq=False)
@@ -101,6 +103,8 @@ class TipControllerNode(Node):
                       0, 1000),
             ParamSpec('tip_wrench_timeout', 1.0, 'a tip_wrench estimate older than this is '
                       'replaced by zero, s (0: never expires)', 0.0, 3600.0),
+            ParamSpec('max_state_age', 0.5, 'cable_states and tip_pose older than this mean a '
+                      'dead driver or statics: goals are rejected or fail, s', 0.01, 60.0),
             ParamSpec('dedicated_intake_thread', True, 'serve tip_pose, backbone, cable_states '
                       'and tip_wrench from a thread of their own instead of the executor',
                       read_only=True),
@@ -190,7 +194,14 @@ class TipControllerNode(Node):
         self._tip = (position, stamp, time.monotonic())
 
     def _on_backbone(self, data):
-        sec, nanosec = struct.unpack_from('<iI', data, 4)  # header stamp, first in the CDR
+        # Only the stamp is read here (decoding every Path costs ~0.2 ms); the whole message
+        # is decoded and checked when a goal answers with it (_plan_after).
+        try:
+            byte_order = '<' if data[1:2] == b'\x01' else '>'  # CDR encapsulation header
+            sec, nanosec = struct.unpack_from(byte_order + 'iI', data, 4)
+        except struct.error:
+            self._reject('backbone', 'malformed Path (%d bytes)' % len(data))
+            return
         self._backbone = (sec * 1_000_000_000 + nanosec, data)
 
     def _on_cable_states(self, data):
@@ -233,10 +244,20 @@ class TipControllerNode(Node):
     def _on_tip_goal(self, request, response):
         header = Header(frame_id=self.base_frame_id, stamp=self.get_clock().now().to_msg())
         response.plan = Path(header=header)
+        try:
+            return self._serve_tip_goal(request, response)
+        except Exception as error:  # never let one request take the executor down
+            self.get_logger().error('tip_goal failed: %r' % (error,))
+            self._goal_rejected('internal error: %r' % (error,))
+            response.plan = Path(header=header)
+            return response
+
+    def _serve_tip_goal(self, request, response):
         tolerance = float(request.tolerance)
         try:
-            if not (math.isfinite(tolerance) and tolerance > 0.0):
-                raise ValueError('tolerance must be a finite number > 0 m, got %r' % tolerance)
+            if not (math.isfinite(tolerance) and MIN_TOLERANCE <= tolerance <= self.robot.length):
+                raise ValueError('tolerance must be between %g m and the rod length %g m, got %r'
+                                 % (MIN_TOLERANCE, self.robot.length, tolerance))
             goal = self._start_goal(goal_position(request.goal, self.base_frame_id), tolerance,
                                     'tip_goal service')
         except ValueError as error:
@@ -259,6 +280,9 @@ class TipControllerNode(Node):
                              self._params['default_tolerance'], 'tip_goal_pose')
         except ValueError as error:
             self._goal_rejected(error)
+        except Exception as error:  # never let one message take the node down
+            self.get_logger().error('tip_goal_pose failed: %r' % (error,))
+            self._goal_rejected('internal error: %r' % (error,))
 
     def _goal_rejected(self, error):
         self._counts['rejected'] += 1
@@ -278,6 +302,9 @@ class TipControllerNode(Node):
         if measured is None or tip is None:
             raise ValueError('no %s yet: are statics and cable_driver running?'
                              % ('cable_states' if measured is None else 'tip_pose'))
+        stale = self._stale_state(time.monotonic())
+        if stale:
+            raise ValueError(stale)
         load = self._current_tip_load()
         estimate = self.robot.estimate_shape(measured, load[:3], u0_guess=self._u0,
                                              tip_moment=load[3:])
@@ -340,6 +367,16 @@ class TipControllerNode(Node):
             self.get_logger().warning('tip goal (%.4f, %.4f, %.4f) m not reached: %s'
                                       % (*goal.position, reason))
 
+    def _stale_state(self, now):
+        """Return why the measured state is too old to control with, or '' when it is fresh."""
+        limit = self._params['max_state_age']
+        for what, state, source in (('cable_states', self._measurement, 'cable_driver'),
+                                    ('tip_pose', self._tip, 'statics')):
+            if state is not None and now - state[2] > limit:
+                return ('no %s for %.2f s (max_state_age %.3g s): is %s running?'
+                        % (what, now - state[2], limit, source))
+        return ''
+
     def _plan_after(self, tip_stamp, wait=0.5):
         """Return the newest backbone, waiting briefly for the one of the reached tip pose."""
         limit = time.monotonic() + wait
@@ -352,8 +389,20 @@ class TipControllerNode(Node):
             time.sleep(0.005)
         if backbone is None:
             return None
-        plan = deserialize_message(backbone[1], Path)
-        return plan if plan.poses else None
+        try:
+            plan = deserialize_message(backbone[1], Path)
+        except Exception as error:  # rclpy raises RMWError on bad bytes
+            self._reject('backbone', 'malformed Path: %s' % error)
+            return None
+        points = [(p.pose.position.x, p.pose.position.y, p.pose.position.z,
+                   p.pose.orientation.x, p.pose.orientation.y, p.pose.orientation.z,
+                   p.pose.orientation.w) for p in plan.poses]
+        if (not points or plan.header.frame_id != self.base_frame_id
+                or not np.all(np.isfinite(points))):
+            self._reject('backbone', 'unusable Path: %d poses, frame %r'
+                         % (len(points), plan.header.frame_id))
+            return None
+        return plan
 
     # -- control loop ----------------------------------------------------------------------
     def _on_control(self):
@@ -371,6 +420,10 @@ class TipControllerNode(Node):
             if now > goal.deadline:
                 self._finish_locked(goal, False, 'not reached within %.3g s (tip error %.2f mm)'
                                     % (self._params['goal_timeout'], error * 1e3))
+                return
+            stale = self._stale_state(now)
+            if stale:
+                self._finish_locked(goal, False, stale)
                 return
             if self._phase == 'ramp':
                 self._commanded = self._ramp(self._commanded, self._target,

@@ -77,6 +77,9 @@ BAD_COMMANDS = [
     (JointState(name=['cable_9'], position=[0.3]), 'unknown cable name'),
     (JointState(name=['cable_0', 'cable_1'], position=[0.3]), '2 names but 1 positions'),
     (JointState(name=['cable_0', 'cable_0'], position=[0.3, 0.3]), 'repeated'),
+    (JointState(name=['cable_0', 'cable_1'], position=[0.3, 0.3], velocity=[1.0]),
+     '2 names but 1 velocity'),
+    (JointState(name=['cable_0'], position=[0.3], effort=[math.nan]), 'non-finite effort'),
 ]
 
 

@@ -93,14 +93,16 @@ def test_joint_state_view_matches_rclpy(names, positions, frame):
 
 def test_joint_state_view_rejects_malformed_data():
     data = serialize_message(JointState(name=list(NAMES), position=[0.3] * 4))
-    for bad in (data[:10], data[:40], b'\x00\x01\x00\x00' + b'\xff' * 40):
+    # truncated, garbage little-endian, and garbage in another encapsulation (rclpy's path)
+    for bad in (data[:10], data[:40], b'\x00\x01\x00\x00' + b'\xff' * 40,
+                b'\x00\x00\x00\x00' + b'\xff' * 8):
         with pytest.raises(ValueError, match='malformed'):
             parse_joint_state(bad)
 
 
 @pytest.mark.parametrize('names, require_all, message', [
     (['cable_0', 'cable_x'], False, "unknown cable name 'cable_x'"),
-    (['cable_1', 'cable_1'], False, 'repeated'),
+    (['cable_1', 'cable_1'], False, 'repeated cable names cable_1$'),
     (['cable_0', 'cable_1', 'cable_2'], True, 'missing cable.*cable_3'),
     ([], False, 'no cable names'),
 ])

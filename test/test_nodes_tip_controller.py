@@ -22,6 +22,8 @@ from diagnostic_msgs.msg import DiagnosticArray  # noqa: E402
 from geometry_msgs.msg import PoseStamped  # noqa: E402
 from nav_msgs.srv import GetPlan  # noqa: E402
 from rclpy.parameter import Parameter  # noqa: E402
+from rclpy.qos import qos_profile_sensor_data  # noqa: E402
+from sensor_msgs.msg import JointState  # noqa: E402
 
 from continuum_statics import load_robot  # noqa: E402
 from continuum_statics.cable_driver_node import CableDriverNode  # noqa: E402
@@ -101,6 +103,8 @@ BAD_GOALS = [
     (tuple(reachable(1.0, 0.0)), 0.0, 'base_link', 'tolerance'),
     (tuple(reachable(1.0, 0.0)), -1e-3, 'base_link', 'tolerance'),
     (tuple(reachable(1.0, 0.0)), math.nan, 'base_link', 'tolerance'),
+    (tuple(reachable(1.0, 0.0)), 1e-45, 'base_link', 'tolerance'),
+    (tuple(reachable(1.0, 0.0)), 1e9, 'base_link', 'tolerance'),
     ((2.0, 0.0, 0.3), 1e-3, 'base_link', 'unreachable'),
 ]
 
@@ -122,6 +126,40 @@ def test_bad_and_unreachable_goals_are_rejected_at_once(harness):
     goal = reachable(0.0, 1.5)
     plan = call(stack.service, stack.request(goal, 1e-3), 30.0).plan
     assert np.linalg.norm(pose_xyz(plan.poses[-1].pose) - goal) <= 1e-3
+
+
+def test_a_dead_driver_fails_goals_with_the_reason(harness):
+    # Only the controller: the test publishes one measurement and one tip pose, then nothing,
+    # as when the actuator link or statics died.
+    harness.add(TipControllerNode, max_state_age=0.05, goal_timeout=60.0)
+    client = harness.client()
+    diagnostics = Collector(client, DiagnosticArray, '/diagnostics', 10)
+    states = client.create_publisher(JointState, 'cable_states', qos_profile_sensor_data)
+    tips = client.create_publisher(PoseStamped, 'tip_pose', LATCHED)
+    straight = ROBOT.solve_ivp([0.0, 0.0, 0.0])
+    tip = PoseStamped()
+    tip.header.frame_id = 'base_link'
+    tip.pose.position.x, tip.pose.position.y, tip.pose.position.z = (
+        float(v) for v in straight.tip_position)
+    tips.publish(tip)
+    state = JointState(name=list(ROBOT.cable_names),
+                       position=[float(v) for v in ROBOT.cable_lengths(straight)])
+
+    def values():
+        found = diagnostic_values(diagnostics, 'tip_controller')
+        return found[0] if found else {}
+
+    publish_until(states, state, lambda: values().get('have_cable_states') == 'True'
+                  and values().get('have_tip_pose') == 'True', 10.0, 'the controller to hear both')
+    service = client.create_client(GetPlan, 'tip_goal')
+    assert service.wait_for_service(timeout_sec=10.0)
+    started = time.monotonic()
+    response = call(service, Stack.request(reachable(1.0, 0.0), 1e-3), 20.0)
+    assert time.monotonic() - started < 5.0, 'a dead link must not wait for the goal timeout'
+    assert len(response.plan.poses) == 0
+    wait_until(lambda: 'running?' in values().get('last_outcome', ''), 5.0, 'the reason')
+    assert 'no cable_states' in values()['last_outcome'] or 'no tip_pose' in values()[
+        'last_outcome']
 
 
 def test_a_new_goal_preempts_the_one_in_progress(harness):
