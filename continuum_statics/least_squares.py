@@ -65,6 +65,9 @@ def constrained_gauss_newton(evaluate, x0, max_iterations, step_tolerance, const
     """
     x = np.array(x0, dtype=float)
     res, jac, con, con_jac, evaluation = evaluate(x)
+    if not all(np.all(np.isfinite(a)) for a in (res, jac, con, con_jac)):
+        raise ValueError('the rod model is not finite at the start u(0) = %s 1/m: is the tip '
+                         'load far beyond what the rod can carry?' % np.round(x, 4).tolist())
     damping = 1e-6
 
     # constraints are physics, the residual is a wish: in the merit function a constraint
