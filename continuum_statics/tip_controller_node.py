@@ -169,11 +169,12 @@ class TipControllerNode(Node):
 
     def _on_parameter_change(self, name, value):
         if name == 'control_rate':
-            self.destroy_timer(self._timer)
-            self._timer = self.create_timer(1.0 / value, self._on_control,
-                                            callback_group=self._control_group)
-            if self._goal is None:
-                self._timer.cancel()
+            with self._lock:  # goals reset/cancel the timer under the same lock
+                self.destroy_timer(self._timer)
+                self._timer = self.create_timer(1.0 / value, self._on_control,
+                                                callback_group=self._control_group)
+                if self._goal is None:
+                    self._timer.cancel()
 
     # -- state inputs ----------------------------------------------------------------------
     def _reject(self, kind, reason):
