@@ -127,11 +127,6 @@ class Robot:
         u0 = bvp.solve_bvp(self, tip_force, tip_moment, u0_guess)
         return self.solve_ivp(u0, tip_force)
 
-    def passive_u0(self, tip_force=(0.0, 0.0, 0.0)):
-        """u(0) of the passive equilibrium (no cable moment) under a tip force (1/m)."""
-        tip_force = as_vector(tip_force, 3, 'tip_force')
-        return bvp.solve_bvp(self, tip_force, np.zeros(3), None)
-
     # -- cables ----------------------------------------------------------------------------
     def cable_lengths(self, shape):
         """Cable lengths (n_cables,) in m of a shape, order ``cable_names`` (eq. 11, errata)."""
@@ -139,11 +134,6 @@ class Robot:
         rotations = np.ascontiguousarray(shape.rotations)[None]
         return cable_lengths_batch(positions, rotations, self.guide_nodes,
                                    self.cable_offsets)[0]
-
-    def batch_cable_lengths(self, states):
-        """Cable lengths (B, n_cables) of (B, N, 18) kernel states."""
-        return cable_lengths_batch(states[:, :, 0:3], states[:, :, 3:12].reshape(
-            states.shape[0], states.shape[1], 3, 3), self.guide_nodes, self.cable_offsets)
 
     # -- Jacobians -------------------------------------------------------------------------
     def force_step(self):

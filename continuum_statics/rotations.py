@@ -1,4 +1,4 @@
-"""Rotation helpers: quaternions ([x, y, z, w], ROS order), hat and vee maps."""
+"""Rotation helpers: quaternions in ROS order [x, y, z, w]."""
 import numba
 import numpy as np
 
@@ -53,16 +53,3 @@ def rotation_to_quaternion(rotations):
     out = np.empty((flat.shape[0], 4))
     _quaternions(flat, out)
     return out.reshape(m.shape[:-2] + (4,))
-
-
-def hat(w):
-    """Skew-symmetric matrix of a 3-vector, so that ``hat(a) @ b == cross(a, b)``."""
-    return np.array([[0.0, -w[2], w[1]], [w[2], 0.0, -w[0]], [-w[1], w[0], 0.0]])
-
-
-def vee(m):
-    """3-vector of the skew-symmetric part of (..., 3, 3) matrices (inverse of :func:`hat`)."""
-    m = np.asarray(m)
-    return 0.5 * np.stack([m[..., 2, 1] - m[..., 1, 2],
-                           m[..., 0, 2] - m[..., 2, 0],
-                           m[..., 1, 0] - m[..., 0, 1]], axis=-1)
