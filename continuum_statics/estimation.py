@@ -11,6 +11,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from continuum_statics import bvp
+from continuum_statics.inputs import as_vector
 from continuum_statics.least_squares import constrained_gauss_newton
 from continuum_statics.shape import Shape
 
@@ -45,8 +46,6 @@ def estimate_shape(robot, cable_lengths, tip_force=(0.0, 0.0, 0.0), u0_guess=Non
     cables add to the moment. Damped Gauss-Newton from ``u0_guess`` (the previous estimate when
     tracking; default the small-deflection passive solution).
     """
-    from continuum_statics.robot import as_vector
-
     n_cables = len(robot.cable_names)
     measured = as_vector(cable_lengths, n_cables, 'cable_lengths')
     tip_force = as_vector(tip_force, 3, 'tip_force')

@@ -12,6 +12,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from continuum_statics import bvp
+from continuum_statics.inputs import as_vector
 from continuum_statics.least_squares import constrained_gauss_newton
 from continuum_statics.shape import Shape
 
@@ -49,8 +50,6 @@ def solve_tip_goal(robot, goal_position, tip_force=(0.0, 0.0, 0.0), u0_guess=Non
     :param u0_guess: start (1/m); default the passive equilibrium's small-deflection solution
     :param tolerance: position tolerance (m); default ``robot.solver.goal_tolerance``
     """
-    from continuum_statics.robot import as_vector
-
     goal = as_vector(goal_position, 3, 'goal_position')
     tip_force = as_vector(tip_force, 3, 'tip_force')
     tip_moment = as_vector(tip_moment, 3, 'tip_moment')
