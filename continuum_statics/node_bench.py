@@ -41,7 +41,7 @@ def cpu_seconds(pid):
     return (int(fields[11]) + int(fields[12])) / os.sysconf('SC_CLK_TCK')
 
 
-def stop(process, timeout=10.0):
+def stop(process, timeout=15.0):
     """SIGINT, then kill if it does not exit; return the exit code."""
     if process.poll() is None:
         process.send_signal(signal.SIGINT)

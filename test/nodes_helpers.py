@@ -1,7 +1,5 @@
 """Shared helpers of the node tests: a private rclpy context, deadlines, subprocess control."""
 import math
-import signal
-import subprocess
 import threading
 import time
 import uuid
@@ -11,6 +9,7 @@ import rclpy
 from rclpy.parameter import Parameter
 from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
 
+from continuum_statics.node_bench import stop as stop_process  # noqa: F401 (re-export)
 from continuum_statics.node_runner import make_executor
 
 #: What late joiners use for the latched outputs (backbone, tip_pose).
@@ -165,15 +164,3 @@ def all_finite_path(path):
 def pose_xyz(pose):
     """Position of a Pose as an array."""
     return np.array([pose.position.x, pose.position.y, pose.position.z])
-
-
-def stop_process(process, timeout=15.0):
-    """SIGINT, then kill; return the exit code (None-safe for processes already gone)."""
-    if process.poll() is None:
-        process.send_signal(signal.SIGINT)
-        try:
-            process.wait(timeout)
-        except subprocess.TimeoutExpired:
-            process.kill()
-            process.wait(5.0)
-    return process.returncode
