@@ -7,6 +7,8 @@ import os
 from pathlib import Path
 import random
 
+import pytest
+
 REPO = Path(__file__).resolve().parents[1]
 
 os.environ['ROS_AUTOMATIC_DISCOVERY_RANGE'] = 'LOCALHOST'
@@ -30,3 +32,15 @@ def pytest_sessionstart(session):
     robot.solve_tip_goal(shape.tip_position)
     robot.jacobian(shape.u0)
     robot.solve_bvp(tip_force=(0.0, 0.0, -0.1))
+
+
+@pytest.fixture
+def harness():
+    """Yield a private rclpy context with its own executors for in-process node tests."""
+    from nodes_helpers import Harness
+
+    harness = Harness()
+    try:
+        yield harness
+    finally:
+        harness.close()

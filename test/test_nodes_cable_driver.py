@@ -5,7 +5,6 @@ from conftest import REPO
 from nodes_helpers import (
     RELIABLE,
     Collector,
-    Harness,
     diagnostic_values,
     publish_until,
     wait_matched,
@@ -24,15 +23,6 @@ from continuum_statics.cable_driver_node import CableDriverNode  # noqa: E402
 
 pytestmark = pytest.mark.ros
 ROBOT = load_robot(REPO / 'config' / 'tendon_robot.yaml')
-
-
-@pytest.fixture
-def harness():
-    harness = Harness()
-    try:
-        yield harness
-    finally:
-        harness.close()
 
 
 def start(harness, **overrides):

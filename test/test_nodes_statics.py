@@ -5,7 +5,6 @@ from conftest import REPO
 from nodes_helpers import (
     LATCHED,
     Collector,
-    Harness,
     all_finite_path,
     call,
     diagnostic_values,
@@ -34,15 +33,6 @@ pytestmark = pytest.mark.ros
 ROBOT = load_robot(REPO / 'config' / 'tendon_robot.yaml')
 BENT = ROBOT.solve_ivp([2.0, 1.0, 0.0])
 NAMES = list(ROBOT.cable_names)
-
-
-@pytest.fixture
-def harness():
-    harness = Harness()
-    try:
-        yield harness
-    finally:
-        harness.close()
 
 
 class Rig:

@@ -7,7 +7,6 @@ from nodes_helpers import (
     LATCHED,
     RELIABLE,
     Collector,
-    Harness,
     call,
     diagnostic_values,
     pose_xyz,
@@ -67,15 +66,6 @@ class Stack:
     def values(self):
         found = diagnostic_values(self.diagnostics, 'tip_controller')
         return found[0] if found else {}
-
-
-@pytest.fixture
-def harness():
-    harness = Harness()
-    try:
-        yield harness
-    finally:
-        harness.close()
 
 
 def test_reachable_goal_is_reached_and_answered_with_the_backbone(harness):
