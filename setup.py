@@ -24,10 +24,10 @@ setup(
     extras_require={'test': ['pytest']},
     entry_points={
         'console_scripts': [
-            'statics = continuum_statics.statics_node:main',
-            'tip_controller = continuum_statics.tip_controller_node:main',
-            'cable_driver = continuum_statics.cable_driver_node:main',
-            'bringup = continuum_statics.bringup:main',
+            'statics = continuum_statics.nodes.statics_node:main',
+            'tip_controller = continuum_statics.nodes.tip_controller_node:main',
+            'cable_driver = continuum_statics.nodes.cable_driver_node:main',
+            'bringup = continuum_statics.nodes.bringup:main',
         ],
     },
 )

@@ -1,5 +1,7 @@
-"""Command line: ``python -m continuum_statics {solve,bench,bringup,demo} ...``."""
+"""Command line: ``python -m continuum_statics COMMAND ...`` (tools and nodes)."""
 import sys
+
+NODES = ('statics', 'tip_controller', 'cable_driver')
 
 USAGE = """usage: python -m continuum_statics COMMAND [options]
 
@@ -7,6 +9,8 @@ commands:
   solve     solve the boundary-value problem for a robot file and print the tip pose
   bench     benchmark the numeric core (--nodes: the ROS nodes over DDS)
   bringup   start the statics, tip_controller and cable_driver nodes in one process
+  statics | tip_controller | cable_driver
+            run one node alone, like `ros2 run` (options: --ros-args ...)
   demo      bringup with the simulated driver plus a client sending tip goals
 """
 
@@ -19,17 +23,17 @@ def main(argv=None):
         return 0 if argv else 2
     command, rest = argv[0], argv[1:]
     if command == 'solve':
-        from continuum_statics.cli import solve_main as run
+        from continuum_statics.tools.cli import solve_main as run
     elif command == 'bench':
         if '--nodes' in rest:
             rest.remove('--nodes')
-            from continuum_statics.node_bench import main as run
+            from continuum_statics.tools.node_bench import main as run
         else:
-            from continuum_statics.bench import main as run
+            from continuum_statics.tools.bench import main as run
     elif command == 'bringup':
-        from continuum_statics.bringup import main as run
+        from continuum_statics.nodes.bringup import main as run
     elif command == 'demo':
-        from continuum_statics.demo import main as run
+        from continuum_statics.tools.demo import main as run
     else:
         print('unknown command %r\n\n%s' % (command, USAGE), file=sys.stderr)
         return 2

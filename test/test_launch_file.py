@@ -19,7 +19,7 @@ def _constant(tree, name):
 
 def _console_scripts():
     text = (REPO / 'setup.py').read_text()
-    return dict(re.findall(r"'(\w+) = (continuum_statics\.\w+:main)'", text))
+    return dict(re.findall(r"'(\w+) = (continuum_statics[.\w]+:main)'", text))
 
 
 def test_launch_file_is_valid_python_with_the_three_executables():
@@ -51,9 +51,9 @@ def test_params_file_lists_every_declared_parameter():
     pytest.importorskip('rclpy')
     import rclpy
 
-    from continuum_statics.cable_driver_node import CableDriverNode
-    from continuum_statics.statics_node import StaticsNode
-    from continuum_statics.tip_controller_node import TipControllerNode
+    from continuum_statics.nodes.cable_driver_node import CableDriverNode
+    from continuum_statics.nodes.statics_node import StaticsNode
+    from continuum_statics.nodes.tip_controller_node import TipControllerNode
 
     params = yaml.safe_load((REPO / 'config' / 'continuum_robot.params.yaml').read_text())
     context = rclpy.Context()

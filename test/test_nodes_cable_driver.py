@@ -19,7 +19,7 @@ from rclpy.qos import qos_profile_sensor_data  # noqa: E402
 from sensor_msgs.msg import JointState  # noqa: E402
 
 from continuum_statics import load_robot  # noqa: E402
-from continuum_statics.cable_driver_node import CableDriverNode  # noqa: E402
+from continuum_statics.nodes.cable_driver_node import CableDriverNode  # noqa: E402
 
 pytestmark = pytest.mark.ros
 ROBOT = load_robot(REPO / 'config' / 'tendon_robot.yaml')

@@ -16,12 +16,16 @@ from sensor_msgs.msg import JointState  # noqa: E402
 from std_msgs.msg import Header  # noqa: E402
 
 from continuum_statics import load_robot  # noqa: E402
-from continuum_statics.backbone_sampling import BackboneSampler  # noqa: E402
-from continuum_statics.bringup import parse_args  # noqa: E402
-from continuum_statics.dedicated_intake import IntakeEntry  # noqa: E402
-from continuum_statics.marker_geometry import guide_and_cable_points  # noqa: E402
-from continuum_statics.node_params import ParamSpec, resolve_config_path  # noqa: E402
-from continuum_statics.ros_conversions import (  # noqa: E402
+from continuum_statics.core.backbone_sampling import BackboneSampler  # noqa: E402
+from continuum_statics.core.rotations import (  # noqa: E402
+    quaternion_to_rotation,
+    rotation_to_quaternion,
+)
+from continuum_statics.nodes.bringup import parse_args  # noqa: E402
+from continuum_statics.nodes.dedicated_intake import IntakeEntry  # noqa: E402
+from continuum_statics.nodes.marker_geometry import guide_and_cable_points  # noqa: E402
+from continuum_statics.nodes.node_params import ParamSpec, resolve_config_path  # noqa: E402
+from continuum_statics.nodes.ros_conversions import (  # noqa: E402
     BackboneMarkers,
     PoseSequenceEncoder,
     cable_index,
@@ -30,10 +34,6 @@ from continuum_statics.ros_conversions import (  # noqa: E402
     parse_joint_state,
     set_pose,
     tip_load,
-)
-from continuum_statics.rotations import (  # noqa: E402
-    quaternion_to_rotation,
-    rotation_to_quaternion,
 )
 
 ROBOT = load_robot(REPO / 'config' / 'tendon_robot.yaml')

@@ -27,7 +27,7 @@ from sensor_msgs.msg import JointState  # noqa: E402
 from visualization_msgs.msg import MarkerArray  # noqa: E402
 
 from continuum_statics import load_robot  # noqa: E402
-from continuum_statics.statics_node import StaticsNode  # noqa: E402
+from continuum_statics.nodes.statics_node import StaticsNode  # noqa: E402
 
 pytestmark = pytest.mark.ros
 ROBOT = load_robot(REPO / 'config' / 'tendon_robot.yaml')

@@ -25,9 +25,9 @@ from rclpy.qos import qos_profile_sensor_data  # noqa: E402
 from sensor_msgs.msg import JointState  # noqa: E402
 
 from continuum_statics import load_robot  # noqa: E402
-from continuum_statics.cable_driver_node import CableDriverNode  # noqa: E402
-from continuum_statics.statics_node import StaticsNode  # noqa: E402
-from continuum_statics.tip_controller_node import TipControllerNode  # noqa: E402
+from continuum_statics.nodes.cable_driver_node import CableDriverNode  # noqa: E402
+from continuum_statics.nodes.statics_node import StaticsNode  # noqa: E402
+from continuum_statics.nodes.tip_controller_node import TipControllerNode  # noqa: E402
 
 pytestmark = pytest.mark.ros
 ROBOT = load_robot(REPO / 'config' / 'tendon_robot.yaml')

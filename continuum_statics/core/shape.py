@@ -1,8 +1,8 @@
 """The solved backbone: a small immutable record of arrays, base to tip."""
 import numpy as np
 
-from continuum_statics.backbone_sampling import BackboneSampler
-from continuum_statics.rotations import rotation_to_quaternion
+from continuum_statics.core.backbone_sampling import BackboneSampler
+from continuum_statics.core.rotations import rotation_to_quaternion
 
 
 class Shape:

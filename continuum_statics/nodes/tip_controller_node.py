@@ -34,17 +34,17 @@ from rclpy.serialization import deserialize_message
 from sensor_msgs.msg import JointState
 from std_msgs.msg import Header
 
-from continuum_statics import diagnostics_util as diag
-from continuum_statics.cable_driver_node import COMMAND_QOS
-from continuum_statics.dedicated_intake import make_intake
-from continuum_statics.node_params import (
+from continuum_statics.nodes import diagnostics_util as diag
+from continuum_statics.nodes.cable_driver_node import COMMAND_QOS
+from continuum_statics.nodes.dedicated_intake import make_intake
+from continuum_statics.nodes.node_params import (
     ParameterTable,
     ParamSpec,
     diagnostics_rate_spec,
     load_robot_file,
     robot_file_spec,
 )
-from continuum_statics.ros_conversions import (
+from continuum_statics.nodes.ros_conversions import (
     cable_index,
     goal_position,
     joint_state,
@@ -52,7 +52,7 @@ from continuum_statics.ros_conversions import (
     pose_position,
     tip_load,
 )
-from continuum_statics.statics_node import LATCHED_QOS, LATEST_SENSOR_QOS
+from continuum_statics.nodes.statics_node import LATCHED_QOS, LATEST_SENSOR_QOS
 
 THROTTLE_S = 2.0
 #: How long a goal that arrives before the first tip_pose / cable_states waits for them, s.
@@ -535,7 +535,7 @@ class TipControllerNode(Node):
 
 def main(args=None):
     """Run the tip_controller node (``ros2 run continuum_statics tip_controller``)."""
-    from continuum_statics.node_runner import run_nodes
+    from continuum_statics.nodes.node_runner import run_nodes
     return run_nodes([TipControllerNode], args)
 
 

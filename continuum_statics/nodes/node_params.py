@@ -140,7 +140,7 @@ def share_dir():
             return path
     except Exception:  # not in an ament index (pip route), or AMENT_PREFIX_PATH unset
         pass
-    return Path(__file__).resolve().parents[1]
+    return Path(__file__).resolve().parents[2]
 
 
 def default_robot_file():

@@ -4,18 +4,18 @@ import math
 
 import numpy as np
 
-from continuum_statics import bvp, estimation, tip_goal
-from continuum_statics.inputs import as_vector
-from continuum_statics.kernel import (
+from continuum_statics.core import bvp, estimation, tip_goal
+from continuum_statics.core.inputs import as_vector
+from continuum_statics.core.kernel import (
     cable_lengths_batch,
     integrate_batch,
     pack_params,
     probe,
     tip_jacobian,
 )
-from continuum_statics.robot_file import read_robot_description
-from continuum_statics.rotations import quaternion_to_rotation
-from continuum_statics.shape import Shape
+from continuum_statics.core.robot_file import read_robot_description
+from continuum_statics.core.rotations import quaternion_to_rotation
+from continuum_statics.core.shape import Shape
 
 
 def load_robot(path):
@@ -103,7 +103,7 @@ class Robot:
     def solve_bvp(self, tip_force=(0.0, 0.0, 0.0), tip_moment=(0.0, 0.0, 0.0), u0_guess=None):
         """Shape under a tip force F (N) and tip moment (N m), both global: shoots on u(0).
 
-        See :func:`continuum_statics.bvp.solve_bvp`; raises :class:`bvp.ConvergenceError`.
+        See :func:`continuum_statics.core.bvp.solve_bvp`; raises :class:`bvp.ConvergenceError`.
         """
         tip_force = as_vector(tip_force, 3, 'tip_force')
         tip_moment = as_vector(tip_moment, 3, 'tip_moment')

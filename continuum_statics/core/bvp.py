@@ -8,7 +8,7 @@ previous one.
 """
 import numpy as np
 
-from continuum_statics.kernel import pack_params
+from continuum_statics.core.kernel import pack_params
 
 
 class ConvergenceError(RuntimeError):

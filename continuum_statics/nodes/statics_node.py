@@ -10,15 +10,15 @@ the robot's base frame. ``backbone_markers`` (visualization_msgs/MarkerArray) fo
 ``marker_rate``; ``/diagnostics`` at 1 Hz.
 
 Newest measurement, no backlog: ``cable_states`` is served by a thread of its own
-(:mod:`~continuum_statics.dedicated_intake`) from a short queue (``input_queue_depth``) that
+(:mod:`~continuum_statics.nodes.dedicated_intake`) from a short queue (``input_queue_depth``) that
 absorbs millisecond scheduling stalls; as soon as the oldest queued measurement is older than
 ``max_input_lag`` the queue is drained and only the newest is solved. (With depth 1, stalls of a
 few ms on a loaded 2-core machine lost 5-10 % of a 1 kHz stream.) Without the dedicated thread the
 subscription is depth 1 on the executor.
 
 Backbone and tip pose are published as serialized bytes filled from a template
-(:class:`~continuum_statics.ros_conversions.PoseSequenceEncoder`): converting a Path object costs
-rclpy ~0.2 ms, which matters at 1 kHz.
+(:class:`~continuum_statics.nodes.ros_conversions.PoseSequenceEncoder`): converting a Path
+object costs rclpy ~0.2 ms, which matters at 1 kHz.
 
 Bad input (unknown, repeated or missing names, size mismatch, NaN, a tip wrench in another frame)
 is dropped with a throttled warning and counted on diagnostics; the last good state stays
@@ -38,25 +38,25 @@ from sensor_msgs.msg import JointState
 from std_msgs.msg import Header
 from visualization_msgs.msg import MarkerArray
 
-from continuum_statics import diagnostics_util as diag
-from continuum_statics.backbone_sampling import BackboneSampler
-from continuum_statics.dedicated_intake import make_intake
-from continuum_statics.marker_geometry import guide_and_cable_points
-from continuum_statics.node_params import (
+from continuum_statics.core.backbone_sampling import BackboneSampler
+from continuum_statics.core.rotations import rotation_to_quaternion
+from continuum_statics.nodes import diagnostics_util as diag
+from continuum_statics.nodes.dedicated_intake import make_intake
+from continuum_statics.nodes.marker_geometry import guide_and_cable_points
+from continuum_statics.nodes.node_params import (
     ParameterTable,
     ParamSpec,
     diagnostics_rate_spec,
     load_robot_file,
     robot_file_spec,
 )
-from continuum_statics.ros_conversions import (
+from continuum_statics.nodes.ros_conversions import (
     BackboneMarkers,
     PoseSequenceEncoder,
     cable_index,
     parse_joint_state,
     tip_load,
 )
-from continuum_statics.rotations import rotation_to_quaternion
 
 #: Newest measurement only: best effort, keep last 1 (a slow cycle never builds a backlog).
 LATEST_SENSOR_QOS = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=1,
@@ -344,7 +344,7 @@ class StaticsNode(Node):
 
 def main(args=None):
     """Run the statics node (``ros2 run continuum_statics statics``)."""
-    from continuum_statics.node_runner import run_nodes
+    from continuum_statics.nodes.node_runner import run_nodes
     return run_nodes([StaticsNode], args)
 
 

@@ -10,10 +10,10 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from continuum_statics import bvp
-from continuum_statics.inputs import as_vector
-from continuum_statics.least_squares import constrained_gauss_newton
-from continuum_statics.shape import Shape
+from continuum_statics.core import bvp
+from continuum_statics.core.inputs import as_vector
+from continuum_statics.core.least_squares import constrained_gauss_newton
+from continuum_statics.core.shape import Shape
 
 
 @dataclass(frozen=True, eq=False)

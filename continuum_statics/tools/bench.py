@@ -20,7 +20,7 @@ from scipy.integrate import solve_ivp as scipy_solve_ivp
 
 from continuum_statics import load_robot
 
-CONFIG = Path(__file__).resolve().parents[1] / 'config'
+CONFIG = Path(__file__).resolve().parents[2] / 'config'
 
 
 def _config(name):

@@ -18,17 +18,17 @@ from rclpy.node import Node
 from rclpy.qos import QoSProfile, ReliabilityPolicy, qos_profile_sensor_data
 from sensor_msgs.msg import JointState
 
-from continuum_statics import diagnostics_util as diag
-from continuum_statics.dedicated_intake import PeriodicThread
 from continuum_statics.drivers import backend_class
-from continuum_statics.node_params import (
+from continuum_statics.nodes import diagnostics_util as diag
+from continuum_statics.nodes.dedicated_intake import PeriodicThread
+from continuum_statics.nodes.node_params import (
     ParameterTable,
     ParamSpec,
     diagnostics_rate_spec,
     load_robot_file,
     robot_file_spec,
 )
-from continuum_statics.ros_conversions import cable_index, joint_positions, joint_state
+from continuum_statics.nodes.ros_conversions import cable_index, joint_positions, joint_state
 
 #: Commands and goals: reliable, depth 10 (ARCHITECTURE.md, ROS interfaces).
 COMMAND_QOS = QoSProfile(depth=10, reliability=ReliabilityPolicy.RELIABLE)
@@ -212,7 +212,7 @@ class CableDriverNode(Node):
 
 def main(args=None):
     """Run the cable_driver node (``ros2 run continuum_statics cable_driver``)."""
-    from continuum_statics.node_runner import run_nodes
+    from continuum_statics.nodes.node_runner import run_nodes
     return run_nodes([CableDriverNode], args)
 
 

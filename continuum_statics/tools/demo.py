@@ -16,8 +16,8 @@ import time
 
 import numpy as np
 
-from continuum_statics.node_bench import ros_environment, stop
-from continuum_statics.node_params import default_robot_file
+from continuum_statics.nodes.node_params import default_robot_file
+from continuum_statics.tools.node_bench import ros_environment, stop
 
 #: Base bending u(0) (1/m) of the demo's goal shapes: reachable tips, all around the robot.
 GOAL_BENDINGS = [(2.0, 0.0), (0.0, 2.5), (-1.5, 1.5), (-2.0, -1.0), (1.0, -2.5), (0.5, 0.5),
@@ -46,8 +46,8 @@ def run_client(robot_file, namespace, goals=5, tolerance=1e-3, print_rows=True, 
     import rclpy
 
     from continuum_statics import load_robot
-    from continuum_statics.ros_conversions import path_positions
-    from continuum_statics.statics_node import LATCHED_QOS
+    from continuum_statics.nodes.ros_conversions import path_positions
+    from continuum_statics.nodes.statics_node import LATCHED_QOS
 
     robot = load_robot(robot_file)
     context = rclpy.Context()

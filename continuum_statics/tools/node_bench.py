@@ -23,7 +23,7 @@ import time
 
 import numpy as np
 
-from continuum_statics.node_params import default_robot_file, share_dir
+from continuum_statics.nodes.node_params import default_robot_file, share_dir
 
 
 def ros_environment():
@@ -72,8 +72,8 @@ def bench_statics(robot_file, rate, duration, warmup=2.0, parameters=()):
     from sensor_msgs.msg import JointState
 
     from continuum_statics import load_robot
-    from continuum_statics.dedicated_intake import DedicatedIntake
-    from continuum_statics.ros_conversions import seconds_to_stamp
+    from continuum_statics.nodes.dedicated_intake import DedicatedIntake
+    from continuum_statics.nodes.ros_conversions import seconds_to_stamp
 
     robot = load_robot(robot_file)
     period_count = int(round(rate * 2.0))  # two seconds of distinct lengths, then repeat
@@ -100,7 +100,7 @@ def bench_statics(robot_file, rate, duration, warmup=2.0, parameters=()):
             received.append((sec + nanosec * 1e-9, now))
 
     process = subprocess.Popen(
-        [sys.executable, '-m', 'continuum_statics.statics_node', '--ros-args',
+        [sys.executable, '-m', 'continuum_statics.nodes.statics_node', '--ros-args',
          '-r', '__ns:=' + namespace, '-p', 'robot_file:=' + robot_file,
          '--log-level', 'warn'] + [arg for p in parameters for arg in ('-p', p)])
     context = rclpy.Context()
@@ -199,7 +199,7 @@ def _spin_until_shutdown(executor):
 
 def bench_tip_goal(robot_file, goals=5):
     """Start bringup, call tip_goal for reachable goals and one unreachable; return figures."""
-    from continuum_statics import demo
+    from continuum_statics.tools import demo
 
     namespace = 'bench_goal'
     process = subprocess.Popen(

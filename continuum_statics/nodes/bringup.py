@@ -14,7 +14,7 @@ import argparse
 import os
 import sys
 
-from continuum_statics.node_params import share_dir
+from continuum_statics.nodes.node_params import share_dir
 
 USAGE_EPILOG = ('Arguments after --ros-args go to ROS, e.g. --ros-args --params-file '
                 'config/continuum_robot.params.yaml -r cable_states:=measured_lengths')
@@ -51,9 +51,9 @@ def node_factories(robot=None, driver=None, namespace='continuum'):
 
     from rclpy.parameter import Parameter
 
-    from continuum_statics.cable_driver_node import CableDriverNode
-    from continuum_statics.statics_node import StaticsNode
-    from continuum_statics.tip_controller_node import TipControllerNode
+    from continuum_statics.nodes.cable_driver_node import CableDriverNode
+    from continuum_statics.nodes.statics_node import StaticsNode
+    from continuum_statics.nodes.tip_controller_node import TipControllerNode
 
     common = []
     if robot is not None:
@@ -76,7 +76,7 @@ def main(argv=None):
         print('bringup: robot file %r does not exist' % options.robot, file=sys.stderr)
         return 2
     use_fast_discovery_profile()
-    from continuum_statics.node_runner import run_nodes
+    from continuum_statics.nodes.node_runner import run_nodes
     factories = node_factories(options.robot, options.driver, options.namespace.strip() or '/')
     return run_nodes(factories, args=['bringup'] + ros_args)
 

@@ -7,7 +7,7 @@ nodes are computed once per (grid, count) and each shape is then sampled in one 
 import numba
 import numpy as np
 
-from continuum_statics.rotations import _quaternion
+from continuum_statics.core.rotations import _quaternion
 
 
 @numba.njit(cache=True)

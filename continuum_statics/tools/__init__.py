@@ -1,0 +1,1 @@
+"""Command-line tools: solve, bench, demo (and record, plot, calibrate)."""
