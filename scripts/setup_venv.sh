@@ -1,21 +1,25 @@
 #!/usr/bin/env bash
-# Create .venv (Python 3.11) and install requirements.txt and the package (editable). Re-running
-# is a no-op while requirements.txt, setup.py and package.xml are unchanged.
+# Create a venv (Python 3.11; default .venv) and install a requirements file (default
+# requirements.txt) and the package (editable). Re-running is a no-op while the requirements file,
+# setup.py and package.xml are unchanged. The Jazzy route: VENV=.venv-jazzy
+# REQUIREMENTS=requirements-jazzy.txt scripts/setup_venv.sh
 set -euo pipefail
 cd "$(dirname "$0")/.."
 PYTHON=${PYTHON:-python3.11}
-stamp=.venv/.installed
-want=$(cat requirements.txt setup.py package.xml | sha256sum | cut -d' ' -f1)
+VENV=${VENV:-.venv}
+REQUIREMENTS=${REQUIREMENTS:-requirements.txt}
+stamp=$VENV/.installed
+want=$(cat "$REQUIREMENTS" setup.py package.xml | sha256sum | cut -d' ' -f1)
 if [ -f "$stamp" ] && [ "$(cat "$stamp")" = "$want" ]; then
   exit 0
 fi
 if ! command -v "$PYTHON" >/dev/null 2>&1; then
-  echo "setup_venv: $PYTHON not found; the ROS 2 Kilted wheels need CPython 3.11" >&2
+  echo "setup_venv: $PYTHON not found; the ROS 2 wheels need CPython 3.11" >&2
   exit 1
 fi
-[ -x .venv/bin/python ] || "$PYTHON" -m venv .venv
-.venv/bin/python -m pip install --quiet --upgrade pip
-.venv/bin/python -m pip install --quiet -r requirements.txt
-.venv/bin/python -m pip install --quiet --no-deps -e .
+[ -x "$VENV/bin/python" ] || "$PYTHON" -m venv "$VENV"
+"$VENV/bin/python" -m pip install --quiet --upgrade pip
+"$VENV/bin/python" -m pip install --quiet -r "$REQUIREMENTS"
+"$VENV/bin/python" -m pip install --quiet --no-deps -e .
 echo "$want" > "$stamp"
-echo "setup_venv: .venv ready"
+echo "setup_venv: $VENV ready"
