@@ -1,0 +1,358 @@
+"""``python -m continuum_statics plot BAG``: PNG figures of a recording (matplotlib, Agg).
+
+Reads a rosbag2 directory (ours or one from ``ros2 bag record``, MCAP or SQLite) or a single
+``.mcap`` file with the ``rosbags`` library and writes, for what the bag contains:
+
+- ``backbone.png``: backbone snapshots at several instants in 3-D (equal axis scale, base frame)
+- ``tip_path.png``: tip path in 3-D with the goals, and tip coordinates over time
+- ``cable_lengths.png``: commanded vs measured cable lengths over time
+- ``solver.png``: statics solve time and residual over time (from ``/diagnostics``)
+
+Topics are found by name and type (``.../backbone`` Path, ``.../tip_pose`` PoseStamped,
+``.../tip_goal_pose``, ``.../cable_commands``, ``.../cable_states``, ``/diagnostics``); a figure
+whose topics are missing is skipped with a note.
+"""
+import argparse
+from dataclasses import dataclass, field
+import os
+from pathlib import Path
+import sys
+
+import numpy as np
+
+#: Backbone snapshots drawn in backbone.png.
+SNAPSHOTS = 6
+
+
+@dataclass
+class Recording:
+    """What the figures need from a bag; times in s from the bag's start, lengths in m."""
+
+    start_ns: int = 0
+    frame_id: str = ''
+    snapshots: list = field(default_factory=list)      # [(t, (N, 3) positions)]
+    tip: list = field(default_factory=list)            # [(t, x, y, z)]
+    goals: list = field(default_factory=list)          # [(t, x, y, z)]
+    commanded: dict = field(default_factory=dict)      # name -> [(t, length)]
+    measured: dict = field(default_factory=dict)       # name -> [(t, length)]
+    solver: list = field(default_factory=list)         # [(t, median ms, max ms, residual m)]
+    topics: dict = field(default_factory=dict)         # topic -> message type
+
+
+def _point(p):
+    return (p.x, p.y, p.z)
+
+
+def _pick(connections, suffix, msgtype):
+    """Return the connections of the busiest ``.../suffix`` topic of type ``msgtype``."""
+    matching = [c for c in connections
+                if c.msgtype == msgtype and (c.topic == suffix or c.topic.endswith('/' + suffix))]
+    if not matching:
+        return []
+    counts = {}
+    for c in matching:
+        counts[c.topic] = counts.get(c.topic, 0) + c.msgcount
+    topic = max(sorted(counts), key=counts.get)
+    return [c for c in matching if c.topic == topic]
+
+
+def _float(text):
+    try:
+        return float(text)
+    except (TypeError, ValueError):
+        return float('nan')
+
+
+def read_recording(bag, snapshots=SNAPSHOTS):
+    """Read the figures' data from ``bag`` (directory or .mcap); see :class:`Recording`.
+
+    :raises ValueError: when the bag cannot be opened or read
+    """
+    from rosbags.highlevel import AnyReader
+    from rosbags.typesys import Stores, get_typestore
+
+    path = Path(bag)
+    if not path.exists():
+        raise ValueError('no such bag: %s' % path)
+    try:
+        reader = AnyReader([path], default_typestore=get_typestore(Stores.LATEST))
+        reader.open()
+    except Exception as error:  # rosbags raises several reader errors (and OSError)
+        raise ValueError('cannot read bag %s: %s' % (path, error)) from None
+    try:
+        return _read(reader, snapshots)
+    finally:
+        reader.close()
+
+
+def _read(reader, count):
+    rec = Recording(start_ns=reader.start_time)
+    connections = list(reader.connections)
+    rec.topics = {c.topic: c.msgtype for c in connections}
+    roles = {
+        'backbone': _pick(connections, 'backbone', 'nav_msgs/msg/Path'),
+        'tip_pose': _pick(connections, 'tip_pose', 'geometry_msgs/msg/PoseStamped'),
+        'goal': _pick(connections, 'tip_goal_pose', 'geometry_msgs/msg/PoseStamped'),
+        'commands': _pick(connections, 'cable_commands', 'sensor_msgs/msg/JointState'),
+        'states': _pick(connections, 'cable_states', 'sensor_msgs/msg/JointState'),
+        'diagnostics': _pick(connections, 'diagnostics', 'diagnostic_msgs/msg/DiagnosticArray'),
+    }
+    role_of = {c.id: role for role, conns in roles.items() for c in conns}
+    wanted = [c for conns in roles.values() for c in conns]
+    duration = max(reader.end_time - 1 - reader.start_time, 1)  # end_time: last stamp + 1
+    # Snapshot instants spread over the recording; the first backbone after each is kept.
+    targets = [reader.start_time + duration * i // max(count - 1, 1) for i in range(count)]
+    next_target = 0
+    tip_from_backbone = not roles['tip_pose']
+    last_goal = None
+    for connection, stamp, raw in (reader.messages(connections=wanted) if wanted else ()):
+        role = role_of[connection.id]
+        t = (stamp - reader.start_time) * 1e-9
+        if role == 'backbone':
+            take = next_target < len(targets) and stamp >= targets[next_target]
+            if not (take or tip_from_backbone):
+                continue
+            msg = reader.deserialize(raw, connection.msgtype)
+            if not msg.poses:
+                continue
+            rec.frame_id = rec.frame_id or msg.header.frame_id
+            if take:
+                positions = np.array([_point(p.pose.position) for p in msg.poses])
+                rec.snapshots.append((t, positions))
+                while next_target < len(targets) and stamp >= targets[next_target]:
+                    next_target += 1
+            if tip_from_backbone:
+                rec.tip.append((t, *_point(msg.poses[-1].pose.position)))
+        elif role == 'tip_pose':
+            msg = reader.deserialize(raw, connection.msgtype)
+            rec.frame_id = rec.frame_id or msg.header.frame_id
+            rec.tip.append((t, *_point(msg.pose.position)))
+        elif role == 'goal':
+            msg = reader.deserialize(raw, connection.msgtype)
+            rec.goals.append((t, *_point(msg.pose.position)))
+        elif role in ('commands', 'states'):
+            msg = reader.deserialize(raw, connection.msgtype)
+            series = rec.commanded if role == 'commands' else rec.measured
+            for name, length in zip(msg.name, msg.position):
+                series.setdefault(name, []).append((t, length))
+        else:
+            msg = reader.deserialize(raw, connection.msgtype)
+            for status in msg.status:
+                values = {kv.key: kv.value for kv in status.values}
+                if 'solve_time_median_ms' in values:
+                    rec.solver.append((t, _float(values['solve_time_median_ms']),
+                                       _float(values.get('solve_time_max_ms')),
+                                       _float(values.get('residual_m'))))
+                if 'goal_m' in values:  # the tip controller's current goal (service goals)
+                    goal = tuple(_float(v) for v in values['goal_m'].split()[:3])
+                    if len(goal) == 3 and goal != last_goal:
+                        rec.goals.append((t, *goal))
+                        last_goal = goal
+    return rec
+
+
+# -- figures --------------------------------------------------------------------------------
+def _pyplot():
+    import matplotlib
+
+    matplotlib.use('Agg')
+    import matplotlib.pyplot as plt
+
+    return plt
+
+
+def set_equal_3d(ax, points):
+    """Equal scale on the three axes of ``ax`` around ``points`` (M, 3), m."""
+    points = np.asarray(points, dtype=float).reshape(-1, 3)
+    points = points[np.all(np.isfinite(points), axis=1)]
+    if points.size == 0:
+        return
+    low, high = points.min(axis=0), points.max(axis=0)
+    centre = (low + high) / 2.0
+    half = max(float(np.max(high - low)) / 2.0, 1e-3) * 1.05
+    ax.set_xlim(centre[0] - half, centre[0] + half)
+    ax.set_ylim(centre[1] - half, centre[1] + half)
+    ax.set_zlim(centre[2] - half, centre[2] + half)
+    ax.set_box_aspect((1.0, 1.0, 1.0))
+
+
+def draw_base_frame(ax, size, frame_id):
+    """Axes of the base frame at its origin: x red, y green, z blue (RViz colours)."""
+    for axis, colour in zip(np.eye(3), ('tab:red', 'tab:green', 'tab:blue')):
+        ax.plot(*np.stack([np.zeros(3), axis * size]).T, color=colour, linewidth=2.0)
+    ax.text(0.0, 0.0, 0.0, ' ' + (frame_id or 'base'), fontsize=8)
+
+
+def _label_3d(ax, frame_id):
+    suffix = ' (%s)' % frame_id if frame_id else ''
+    ax.set_xlabel('x [m]' + suffix)
+    ax.set_ylabel('y [m]')
+    ax.set_zlabel('z [m]')
+
+
+def plot_backbones(output, backbones, goals=(), frame_id='', title='Backbone'):
+    """Write a 3-D PNG of backbones ``[(label, (N, 3) positions in m)]`` and goal points."""
+    plt = _pyplot()
+    fig = plt.figure(figsize=(7.5, 7.0))
+    ax = fig.add_subplot(projection='3d')
+    colours = plt.cm.viridis(np.linspace(0.0, 0.9, max(len(backbones), 1)))
+    points = [np.zeros((1, 3))]
+    for (label, positions), colour in zip(backbones, colours):
+        positions = np.asarray(positions, dtype=float)
+        ax.plot(*positions.T, color=colour, linewidth=2.5, label=label)
+        ax.scatter(*positions[-1], color=colour, s=18)
+        points.append(positions)
+    goals = np.asarray(goals, dtype=float).reshape(-1, 3)
+    if len(goals):
+        ax.scatter(*goals.T, marker='x', color='tab:red', s=50, label='goal')
+        points.append(goals)
+    points = np.concatenate(points)
+    extent = float(np.max(np.ptp(points, axis=0))) if len(points) > 1 else 0.1
+    draw_base_frame(ax, 0.15 * max(extent, 1e-3), frame_id)
+    set_equal_3d(ax, points)
+    _label_3d(ax, frame_id)
+    ax.set_title(title)
+    if backbones or len(goals):
+        ax.legend(loc='upper left', fontsize=8)
+    fig.tight_layout()
+    fig.savefig(output, dpi=100)
+    plt.close(fig)
+    return output
+
+
+def _figure_backbone(rec, output):
+    backbones = [('t = %.2f s' % t, positions) for t, positions in rec.snapshots]
+    return plot_backbones(output, backbones, frame_id=rec.frame_id,
+                          title='Backbone at %d instants' % len(backbones))
+
+
+def _figure_tip(rec, output):
+    plt = _pyplot()
+    tip = np.array(rec.tip, dtype=float).reshape(-1, 4)
+    goals = np.array(rec.goals, dtype=float).reshape(-1, 4)
+    fig = plt.figure(figsize=(13.0, 6.0))
+    ax = fig.add_subplot(1, 2, 1, projection='3d')
+    ax.plot(*tip[:, 1:].T, color='tab:blue', linewidth=1.5, label='tip')
+    if len(tip):
+        ax.scatter(*tip[0, 1:], color='tab:blue', marker='o', s=25, label='start')
+    if len(goals):
+        ax.scatter(*goals[:, 1:].T, color='tab:red', marker='x', s=50, label='goal')
+    points = np.concatenate([np.zeros((1, 3)), tip[:, 1:], goals[:, 1:]])
+    draw_base_frame(ax, 0.15 * max(float(np.max(np.ptp(points, axis=0))), 1e-3), rec.frame_id)
+    set_equal_3d(ax, points)
+    _label_3d(ax, rec.frame_id)
+    ax.set_title('Tip path and goals')
+    ax.legend(loc='upper left', fontsize=8)
+    ax2 = fig.add_subplot(1, 2, 2)
+    for i, (axis, colour) in enumerate(zip('xyz', ('tab:red', 'tab:green', 'tab:blue'))):
+        ax2.plot(tip[:, 0], tip[:, 1 + i] * 1e3, color=colour, label='tip %s' % axis)
+        if len(goals):
+            ax2.plot(goals[:, 0], goals[:, 1 + i] * 1e3, linestyle='none', marker='x',
+                     color=colour, label='goal %s' % axis)
+    ax2.set_xlabel('time [s]')
+    ax2.set_ylabel('tip position [mm]')
+    ax2.set_title('Tip coordinates over time')
+    ax2.grid(True, alpha=0.3)
+    ax2.legend(fontsize=8, ncol=2)
+    fig.tight_layout()
+    fig.savefig(output, dpi=100)
+    plt.close(fig)
+    return output
+
+
+def _figure_cables(rec, output):
+    plt = _pyplot()
+    names = sorted(set(rec.commanded) | set(rec.measured))
+    fig, axes = plt.subplots(len(names), 1, figsize=(9.0, 2.2 * len(names) + 1.0), sharex=True,
+                             squeeze=False)
+    for ax, name in zip(axes[:, 0], names):
+        if name in rec.measured:
+            data = np.array(rec.measured[name])
+            ax.plot(data[:, 0], data[:, 1] * 1e3, color='tab:blue', label='measured')
+        if name in rec.commanded:
+            data = np.array(rec.commanded[name])
+            ax.plot(data[:, 0], data[:, 1] * 1e3, color='tab:orange', linestyle='--',
+                    drawstyle='steps-post', label='commanded')
+        ax.set_ylabel('%s [mm]' % name)
+        ax.grid(True, alpha=0.3)
+        ax.legend(fontsize=8, loc='best')
+    axes[-1, 0].set_xlabel('time [s]')
+    axes[0, 0].set_title('Cable lengths: commanded vs measured')
+    fig.tight_layout()
+    fig.savefig(output, dpi=100)
+    plt.close(fig)
+    return output
+
+
+def _figure_solver(rec, output):
+    plt = _pyplot()
+    data = np.array(rec.solver, dtype=float)
+    fig, (ax1, ax2) = plt.subplots(2, 1, figsize=(9.0, 6.0), sharex=True)
+    ax1.plot(data[:, 0], data[:, 1], marker='.', label='median')
+    ax1.plot(data[:, 0], data[:, 2], marker='.', label='max')
+    ax1.set_ylabel('solve time [ms]')
+    ax1.set_title('Statics solver (from /diagnostics)')
+    ax1.grid(True, alpha=0.3)
+    ax1.legend(fontsize=8)
+    residual = data[:, 3]
+    ax2.plot(data[:, 0], residual, marker='.', color='tab:purple')
+    if np.any(residual > 0.0):
+        ax2.set_yscale('log')
+    ax2.set_ylabel('cable length residual [m]')
+    ax2.set_xlabel('time [s]')
+    ax2.grid(True, alpha=0.3)
+    fig.tight_layout()
+    fig.savefig(output, dpi=100)
+    plt.close(fig)
+    return output
+
+
+#: (file, what it needs, how to tell the data is there, figure function)
+FIGURES = (
+    ('backbone.png', 'a backbone (nav_msgs/Path) topic', lambda r: r.snapshots,
+     _figure_backbone),
+    ('tip_path.png', 'a tip_pose or backbone topic', lambda r: r.tip, _figure_tip),
+    ('cable_lengths.png', 'cable_commands or cable_states', lambda r: r.commanded or r.measured,
+     _figure_cables),
+    ('solver.png', 'statics status on /diagnostics', lambda r: r.solver, _figure_solver),
+)
+
+
+def plot_bag(bag, output_dir, log=print):
+    """Write the figures of ``bag`` into ``output_dir``; return the paths written."""
+    rec = read_recording(bag)
+    os.makedirs(output_dir, exist_ok=True)
+    written = []
+    for name, needs, present, figure in FIGURES:
+        if present(rec):
+            written.append(figure(rec, os.path.join(output_dir, name)))
+        else:
+            log('plot: skipped %s: the bag has no %s' % (name, needs))
+    return written
+
+
+def main(argv=None):
+    """Plot a recording; returns the exit code (1 if nothing could be plotted)."""
+    parser = argparse.ArgumentParser(
+        prog='python -m continuum_statics plot', description=__doc__.splitlines()[0])
+    parser.add_argument('bag', help='rosbag2 directory (or .mcap file)')
+    parser.add_argument('--output', '-o', default=None,
+                        help='directory for the PNGs (default <bag>_plots)')
+    args = parser.parse_args(list(sys.argv[1:] if argv is None else argv))
+    output = args.output or str(Path(args.bag).with_suffix('')).rstrip('/') + '_plots'
+    try:
+        written = plot_bag(args.bag, output)
+    except ValueError as error:
+        print('error: %s' % error, file=sys.stderr)
+        return 1
+    for path in written:
+        print('plot: wrote %s' % path)
+    if not written:
+        print('error: nothing to plot in %s' % args.bag, file=sys.stderr)
+        return 1
+    return 0
+
+
+
+if __name__ == '__main__':
+    sys.exit(main())

@@ -1,0 +1,322 @@
+"""``python -m continuum_statics record``: the robot's topics into a rosbag2 directory (MCAP).
+
+What ``ros2 bag record`` writes, without rosbag2 installed: a directory with ``metadata.yaml`` and
+one ``.mcap`` file (ros2 profile, cdr messages, ros2msg schemas), written by the ``rosbags``
+writer from the raw serialized messages (``raw=True`` subscriptions: nothing is deserialized).
+Memory stays bounded: the writer flushes a chunk every MiB and keeps only its small index.
+
+Default topics: everything in the robot's namespace (default ``continuum``) plus
+``/diagnostics``, subscribed as they appear. The subscription QoS follows the publishers, as
+``ros2 bag record`` does: reliable only if every publisher is, transient local only if every
+publisher is (so the latched backbone and tip pose are recorded even when they are not
+republished). Ctrl-C (SIGINT) or SIGTERM ends the recording with a complete bag.
+"""
+import argparse
+import datetime
+import importlib
+from importlib import metadata as package_metadata
+import os
+from pathlib import Path
+import signal
+import sys
+import time
+
+DEFAULT_NAMESPACE = 'continuum'
+#: Topics recorded besides the namespace's own (absolute names).
+EXTRA_TOPICS = ('/diagnostics',)
+#: How often the graph is searched for new topics (s).
+DISCOVERY_PERIOD = 0.5
+
+
+def ros_distro():
+    """Return the running ROS 2 distribution ('jazzy', 'kilted', ...), or '' if unknown."""
+    distro = os.environ.get('ROS_DISTRO', '')
+    if distro:
+        return distro
+    try:  # pip route: the rclpy wheel's version tells the distribution
+        major = int(package_metadata.version('ros-rclpy').split('.')[0])
+    except (package_metadata.PackageNotFoundError, ValueError):
+        return ''
+    return {7: 'jazzy', 9: 'kilted'}.get(major, '')
+
+
+def make_typestore():
+    """Return a rosbags type store of the running distribution (definitions and hashes)."""
+    from rosbags.typesys import Stores, get_typestore
+
+    store = {'humble': Stores.ROS2_HUMBLE, 'jazzy': Stores.ROS2_JAZZY,
+             'kilted': Stores.ROS2_KILTED}.get(ros_distro(), Stores.LATEST)
+    return get_typestore(store)
+
+
+def _interface_dirs():
+    """Prefixes whose ``share/<package>/msg`` hold installed .msg files (ament index, venv)."""
+    prefixes = [p for p in os.environ.get('AMENT_PREFIX_PATH', '').split(os.pathsep) if p]
+    return [Path(p) / 'share' for p in prefixes] + [Path(sys.prefix) / 'share']
+
+
+def register_type(typestore, msgtype):
+    """Make sure ``msgtype`` ('pkg/msg/Name') and its field types are in ``typestore``.
+
+    Standard types are already there; others are read from the installed .msg files.
+
+    :raises ValueError: when no definition of the type (or of a field type) is installed
+    """
+    from rosbags.typesys import get_types_from_msg
+
+    pending = [msgtype]
+    while pending:
+        name = pending.pop()
+        if name in typestore.fielddefs:
+            continue
+        package, _, short = name.split('/')
+        for share in _interface_dirs():
+            path = share / package / 'msg' / (short + '.msg')
+            if path.is_file():
+                break
+        else:
+            raise ValueError('no message definition for %s installed' % name)
+        types = get_types_from_msg(path.read_text(encoding='utf-8'), name)
+        missing = set()
+        for _, fields in types.values():
+            for _, (kind, detail) in fields:
+                for candidate in _nested_names(kind, detail):
+                    if candidate not in typestore.fielddefs and candidate not in types:
+                        missing.add(candidate)
+        if missing:
+            pending.append(name)
+            pending.extend(sorted(missing))
+            continue
+        typestore.register(types)
+
+
+def _nested_names(kind, detail):
+    """Names of message types a rosbags field refers to (plain, array or sequence)."""
+    from rosbags.typesys.base import Nodetype
+
+    if kind == Nodetype.NAME:
+        return [detail]
+    if kind in (Nodetype.ARRAY, Nodetype.SEQUENCE):
+        inner_kind, inner = detail[0]
+        return _nested_names(inner_kind, inner)
+    return []
+
+
+def message_class(msgtype):
+    """Return the message class of 'pkg/msg/Name' (raw subscriptions need it too)."""
+    package, kind, name = msgtype.split('/')
+    return getattr(importlib.import_module('%s.%s' % (package, kind)), name)
+
+
+def wanted(topic, namespace, topics):
+    """Return True if ``topic`` is to be recorded: listed, or in the namespace / an extra topic."""
+    if topics:
+        return topic in topics
+    prefix = '/' + namespace.strip('/') + '/'
+    return topic.startswith(prefix) or topic in EXTRA_TOPICS
+
+
+def absolute_topics(topics, namespace):
+    """Resolve relative topic names against the robot's namespace."""
+    ns = '/' + namespace.strip('/')
+    return {t if t.startswith('/') else '%s/%s' % (ns.rstrip('/'), t) for t in topics}
+
+
+class Recorder:
+    """Subscribes to wanted topics as they appear and writes every message to a rosbag2 writer.
+
+    All callbacks run in the thread that spins ``node``, which is also the one that adds
+    connections, so the writer needs no lock.
+    """
+
+    def __init__(self, node, writer, namespace=DEFAULT_NAMESPACE, topics=(), log=print):
+        self.node = node
+        self.writer = writer
+        self.namespace = namespace
+        self.topics = absolute_topics(topics, namespace)
+        self.log = log
+        self.typestore = make_typestore()
+        self.counts = {}
+        self.subscriptions = {}
+        self.skipped = {}
+
+    def discover(self):
+        """Subscribe to every wanted topic that has publishers and no subscription yet."""
+        for topic, types in self.node.get_topic_names_and_types():
+            if topic in self.subscriptions or topic in self.skipped:
+                continue
+            if not wanted(topic, self.namespace, self.topics):
+                continue
+            publishers = self.node.get_publishers_info_by_topic(topic)
+            if not publishers:
+                continue
+            if len(types) != 1:
+                self._skip(topic, 'more than one type on it: %s' % ', '.join(types))
+                continue
+            try:
+                self._subscribe(topic, types[0], publishers)
+            except (ValueError, ImportError, AttributeError) as error:
+                self._skip(topic, str(error))
+
+    def _skip(self, topic, reason):
+        self.skipped[topic] = reason
+        self.log('record: not recording %s: %s' % (topic, reason))
+
+    def _subscribe(self, topic, msgtype, publishers):
+        register_type(self.typestore, msgtype)
+        qos = subscription_qos(publishers)
+        connection = self.writer.add_connection(
+            topic, msgtype, typestore=self.typestore, serialization_format='cdr',
+            offered_qos_profiles=[offered_qos(info.qos_profile) for info in publishers])
+        self.counts[topic] = 0
+
+        def write(data, topic=topic, connection=connection):
+            self.writer.write(connection, time.time_ns(), data)
+            self.counts[topic] += 1
+
+        self.subscriptions[topic] = self.node.create_subscription(
+            message_class(msgtype), topic, write, qos, raw=True)
+
+
+def subscription_qos(publishers):
+    """Subscription QoS compatible with every publisher, as ``ros2 bag record`` picks it."""
+    from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
+
+    reliable = all(p.qos_profile.reliability == ReliabilityPolicy.RELIABLE for p in publishers)
+    latched = all(p.qos_profile.durability == DurabilityPolicy.TRANSIENT_LOCAL
+                  for p in publishers)
+    return QoSProfile(
+        depth=100,
+        reliability=ReliabilityPolicy.RELIABLE if reliable else ReliabilityPolicy.BEST_EFFORT,
+        durability=DurabilityPolicy.TRANSIENT_LOCAL if latched else DurabilityPolicy.VOLATILE)
+
+
+def offered_qos(profile):
+    """Convert a publisher's QoS to what rosbags writes as ``offered_qos_profiles``."""
+    from rclpy.qos import DurabilityPolicy, HistoryPolicy, ReliabilityPolicy
+    from rosbags.interfaces import (
+        Qos,
+        QosDurability,
+        QosHistory,
+        QosLiveliness,
+        QosReliability,
+        QosTime,
+    )
+
+    zero = QosTime(0, 0)
+    history = (QosHistory.KEEP_ALL if profile.history == HistoryPolicy.KEEP_ALL
+               else QosHistory.KEEP_LAST)
+    reliability = (QosReliability.RELIABLE if profile.reliability == ReliabilityPolicy.RELIABLE
+                   else QosReliability.BEST_EFFORT)
+    durability = (QosDurability.TRANSIENT_LOCAL
+                  if profile.durability == DurabilityPolicy.TRANSIENT_LOCAL
+                  else QosDurability.VOLATILE)
+    return Qos(history, int(profile.depth), reliability, durability, zero, zero,
+               QosLiveliness.AUTOMATIC, zero, False)
+
+
+def default_output():
+    """Return ``rosbag2_YYYY_MM_DD-HH_MM_SS``, the name ``ros2 bag record`` would pick."""
+    return datetime.datetime.now().strftime('rosbag2_%Y_%m_%d-%H_%M_%S')
+
+
+def record(output, duration=None, namespace=DEFAULT_NAMESPACE, topics=(), log=print,
+           stop_requested=lambda: False):
+    """Record until ``duration`` s have passed or ``stop_requested()``; return the counts.
+
+    :returns: (dict topic -> message count, recorded seconds)
+    :raises ValueError: when ``output`` exists (a bag is never overwritten)
+    """
+    import rclpy
+    from rclpy.signals import SignalHandlerOptions
+    from rosbags.rosbag2 import StoragePlugin, Writer
+    from rosbags.rosbag2.errors import WriterError
+
+    try:
+        writer = Writer(output, version=9, storage_plugin=StoragePlugin.MCAP)
+        writer.open()
+    except WriterError as error:
+        raise ValueError(str(error)) from None
+    context = rclpy.Context()
+    rclpy.init(context=context, signal_handler_options=SignalHandlerOptions.NO)
+    node = rclpy.create_node('recorder', namespace='/', context=context,
+                             start_parameter_services=False)
+    executor = rclpy.executors.SingleThreadedExecutor(context=context)
+    executor.add_node(node)
+    recorder = Recorder(node, writer, namespace, topics, log)
+    start = time.monotonic()
+    next_discovery = start
+    try:
+        while not stop_requested():
+            now = time.monotonic()
+            if duration is not None and now - start >= duration:
+                break
+            if now >= next_discovery:
+                recorder.discover()
+                next_discovery = now + DISCOVERY_PERIOD
+            executor.spin_once(timeout_sec=0.05)
+    finally:
+        elapsed = time.monotonic() - start
+        executor.shutdown()
+        node.destroy_node()
+        rclpy.try_shutdown(context=context)
+        writer.close()
+    return dict(recorder.counts), elapsed
+
+
+def main(argv=None):
+    """Record the robot's topics; prints messages per topic. Returns the exit code."""
+    parser = argparse.ArgumentParser(
+        prog='python -m continuum_statics record',
+        description="Record the robot's topics into a rosbag2 directory (metadata.yaml + MCAP, "
+                    'cdr), readable by ros2 bag, Foxglove and rosbags. Ctrl-C ends it.')
+    parser.add_argument('--output', '-o', default=None,
+                        help='bag directory to create (default rosbag2_<date>-<time>)')
+    parser.add_argument('--duration', type=float, default=None,
+                        help='stop after this many seconds (default: until Ctrl-C)')
+    parser.add_argument('--namespace', default=DEFAULT_NAMESPACE,
+                        help='robot namespace whose topics are recorded (default %(default)s)')
+    parser.add_argument('--topics', nargs='+', default=(), metavar='TOPIC',
+                        help='record only these topics (relative names are in the namespace)')
+    args = parser.parse_args(list(sys.argv[1:] if argv is None else argv))
+    if args.duration is not None and not args.duration > 0.0:
+        parser.error('--duration must be > 0 s')
+    output = args.output or default_output()
+    stop = []
+
+    def on_signal(signum, frame):
+        stop.append(signum)
+
+    previous = {sig: signal.signal(sig, on_signal) for sig in (signal.SIGINT, signal.SIGTERM)}
+    what = (' '.join(sorted(absolute_topics(args.topics, args.namespace))) if args.topics
+            else '/%s/* and %s' % (args.namespace.strip('/'), ' '.join(EXTRA_TOPICS)))
+    print('record: %s -> %s (ROS_DOMAIN_ID %s)%s' % (
+        what, output, os.environ.get('ROS_DOMAIN_ID', '0'),
+        '' if args.duration else '; Ctrl-C to stop'), flush=True)
+    try:
+        counts, elapsed = record(output, args.duration, args.namespace, args.topics,
+                                 stop_requested=lambda: bool(stop))
+    except ValueError as error:
+        print('error: %s' % error, file=sys.stderr)
+        return 1
+    finally:
+        for sig, handler in previous.items():
+            signal.signal(sig, handler)
+    print_summary(output, counts, elapsed)
+    return 0
+
+
+def print_summary(output, counts, elapsed):
+    """Print messages and rate per topic."""
+    print('record: %.1f s into %s' % (elapsed, output))
+    print('%-44s %9s %9s' % ('topic', 'messages', 'rate[Hz]'))
+    for topic in sorted(counts):
+        print('%-44s %9d %9.1f' % (topic, counts[topic], counts[topic] / max(elapsed, 1e-9)))
+    print('%-44s %9d' % ('total', sum(counts.values())), flush=True)
+    if not counts:
+        print('record: no topics found: is the robot running in this ROS_DOMAIN_ID and '
+              'namespace?', flush=True)
+
+
+if __name__ == '__main__':
+    sys.exit(main())
