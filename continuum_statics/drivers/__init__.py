@@ -1,12 +1,13 @@
-"""Cable actuator backends for ``cable_driver``: the interface and the simulated backend."""
+"""Cable actuator backends for ``cable_driver``: the interface and the backends."""
 from continuum_statics.drivers.base import (
     ENTRY_POINT_GROUP,
     BackendOption,
     BackendStatus,
     CableBackend,
     CableReading,
+    ConnectionLost,
     backend_class,
 )
 
 __all__ = ['backend_class', 'BackendOption', 'BackendStatus', 'CableBackend', 'CableReading',
-           'ENTRY_POINT_GROUP']
+           'ConnectionLost', 'ENTRY_POINT_GROUP']

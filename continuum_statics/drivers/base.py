@@ -23,6 +23,22 @@ ENTRY_POINT_GROUP = 'continuum_statics.cable_backends'
 #: Diagnostic levels, same numbers as diagnostic_msgs/DiagnosticStatus (no ROS import here).
 OK, WARN, ERROR = 0, 1, 2
 
+#: Backends shipped with the package: name -> 'module:Class' (imported only when selected, so
+#: a missing SDK only matters to the backend that needs it).
+BUILTIN_BACKENDS = {
+    'sim': 'continuum_statics.drivers.sim:SimulatedCableBackend',
+    'dynamixel': 'continuum_statics.drivers.dynamixel:DynamixelCableBackend',
+    'canopen': 'continuum_statics.drivers.canopen_drive:CanopenCableBackend',
+    'ros2_control': 'continuum_statics.drivers.ros2_control:Ros2ControlCableBackend',
+}
+
+
+class ConnectionLost(OSError):
+    """The port or bus is gone (adapter unplugged, bus off): the node reconnects with backoff.
+
+    Raised by ``start``, ``command``, ``hold`` and ``read``; the message names the port or bus.
+    """
+
 
 @dataclass(frozen=True)
 class BackendOption:
@@ -108,6 +124,21 @@ class CableBackend(abc.ABC):
         """Return the actuators' :class:`BackendStatus` (override to report real health)."""
         return BackendStatus()
 
+    #: Option holding the actuator positions of the straight pose (``set_home`` writes it).
+    zero_option = None
+
+    def reset(self):
+        """Clear actuator faults (reboot, fault reset) and re-enable; return what was done."""
+        return 'nothing to reset'
+
+    def set_home(self):
+        """Record the current actuator positions as the straight pose; return the new zeros.
+
+        :returns: list of positions for :attr:`zero_option` (what the node writes to its home file)
+        :raises ValueError: when the backend has no home
+        """
+        raise ValueError('backend %r has no homing' % self.name)
+
     def set_option(self, key, value):
         """Change one option at run time; raise ValueError if it cannot change while running."""
         raise ValueError('backend %r cannot change option %r while running' % (self.name, key))
@@ -116,21 +147,15 @@ class CableBackend(abc.ABC):
         """Release the actuators (called once, when the node is destroyed)."""
 
 
-def builtin_backends():
-    """Return the backends shipped with the package, by name."""
-    from continuum_statics.drivers.sim import SimulatedCableBackend
-    return {SimulatedCableBackend.name: SimulatedCableBackend}
-
-
 def backend_class(spec):
     """Return the backend class for ``spec``: a built-in or entry-point name, or ``module:Class``.
 
     :raises ValueError: when no backend of that name exists (the message lists the known names)
     """
     spec = str(spec).strip()
-    known = builtin_backends()
+    known = BUILTIN_BACKENDS
     if spec in known:
-        return known[spec]
+        return _load(known[spec], spec)
     try:
         entry_points = importlib.metadata.entry_points(group=ENTRY_POINT_GROUP)
     except TypeError:  # Python < 3.10 API; kept for old robot computers
@@ -139,15 +164,19 @@ def backend_class(spec):
         if entry_point.name == spec:
             return _check_backend(entry_point.load(), spec)
     if ':' in spec:
-        module_name, _, class_name = spec.partition(':')
-        try:
-            cls = getattr(importlib.import_module(module_name), class_name)
-        except (ImportError, AttributeError) as error:
-            raise ValueError('cannot load cable backend %r: %s' % (spec, error)) from None
-        return _check_backend(cls, spec)
+        return _load(spec, spec)
     names = sorted(set(known) | {entry_point.name for entry_point in entry_points})
     raise ValueError('unknown cable backend %r; known: %s, or a "module:Class" spec'
                      % (spec, ', '.join(names)))
+
+
+def _load(target, spec):
+    module_name, _, class_name = target.partition(':')
+    try:
+        cls = getattr(importlib.import_module(module_name), class_name)
+    except (ImportError, AttributeError) as error:
+        raise ValueError('cannot load cable backend %r: %s' % (spec, error)) from None
+    return _check_backend(cls, spec)
 
 
 def _check_backend(cls, spec):
