@@ -48,10 +48,12 @@ def test_starts_at_the_straight_rod_lengths(harness):
     assert msg.header.stamp.sec > 0
 
 
-def test_follows_commands_and_clamps_to_the_limits(harness):
-    _, states, diagnostics, commands = start(harness, **{'sim.max_speed': 0.5})
+def test_follows_commands_and_clamps_within_the_margin(harness):
+    _, states, diagnostics, commands = start(harness, length_margin=0.002,
+                                             **{'sim.max_speed': 0.5})
     high = float(ROBOT.cable_length_limits[1][1])
-    publish_until(commands, JointState(name=['cable_0', 'cable_1'], position=[0.305, high + 0.05]),
+    command = JointState(name=['cable_0', 'cable_1'], position=[0.305, high + 0.0015])
+    publish_until(commands, command,
                   lambda: abs(lengths_of(states.last)['cable_0'] - 0.305) < 1e-6
                   and abs(lengths_of(states.last)['cable_1'] - high) < 1e-6, 10.0,
                   'cable_0 at 0.305 m and cable_1 clamped at its maximum')
@@ -60,6 +62,27 @@ def test_follows_commands_and_clamps_to_the_limits(harness):
                                ROBOT.straight_cable_lengths[2], atol=1e-12)
     wait_until(lambda: (diagnostic_values(diagnostics, 'cable_driver') or ({},))[0].get(
         'commands_clamped', '0') != '0', 5.0, 'the clamp on diagnostics')
+
+
+def test_commands_beyond_the_margin_are_rejected_and_a_correct_one_recovers(harness):
+    _, states, diagnostics, commands = start(harness, length_margin=0.002, command_timeout=0.2,
+                                             **{'sim.max_speed': 0.5})
+    high = float(ROBOT.cable_length_limits[1][1])
+    commands.publish(JointState(name=['cable_0', 'cable_1'], position=[0.29, high + 0.05]))
+    wait_until(lambda: 'outside the length limits' in (diagnostic_values(
+        diagnostics, 'cable_driver') or ({},))[0].get('last_rejection', ''), 5.0,
+        'the rejection on diagnostics')
+    values, status = diagnostic_values(diagnostics, 'cable_driver')
+    assert 'cable_1 0.3800 m not in [0.2700, 0.3300]' in values['last_rejection']
+    assert status.level == b'\x01'
+    # Nothing of the rejected command was carried out, not even the valid cable_0.
+    np.testing.assert_allclose(states.last.position, ROBOT.straight_cable_lengths, atol=1e-12)
+    # The watchdog holds (no valid command for 0.2 s); a correct command moves again.
+    wait_until(lambda: (diagnostic_values(diagnostics, 'cable_driver') or ({},))[0].get(
+        'holding') == 'True', 5.0, 'holding')
+    publish_until(commands, JointState(name=['cable_0'], position=[0.29]),
+                  lambda: abs(lengths_of(states.last)['cable_0'] - 0.29) < 1e-6, 10.0,
+                  'cable_0 at 0.29 m after the rejection and the hold')
 
 
 BAD_COMMANDS = [
@@ -140,3 +163,22 @@ def test_valid_parameter_sets_apply(harness):
                                      Parameter('sim.noise_std', value=1e-5)])
     assert all(result.successful for result in results)
     assert driver.backend.noise_std == 1e-5
+
+
+def test_a_robot_without_cables_is_said_once_and_the_driver_stays_quiet(harness):
+    from rcl_interfaces.msg import Log
+
+    client = harness.client()
+    logs = Collector(client, Log, '/rosout', RELIABLE)
+    diagnostics = Collector(client, DiagnosticArray, '/diagnostics', 10)
+    states = Collector(client, JointState, 'cable_states', qos_profile_sensor_data)
+    wait_until(lambda: client.count_publishers('/rosout') >= 1, 10.0, 'rosout')
+    harness.add(CableDriverNode, robot_file=str(REPO / 'config' / 'jones2009_nitinol_rod.yaml'))
+    wait_until(lambda: sum(1 for a in diagnostics.messages for s in a.status
+                           if s.name.endswith('cable_driver')) >= 20, 10.0, '20 diagnostics')
+    _, status = diagnostic_values(diagnostics, 'cable_driver')
+    assert status.level == b'\x00' and 'no cables' in status.message
+    said = [m.msg for m in logs.messages if 'nothing to drive' in m.msg]
+    assert len(said) == 1, [m.msg for m in logs.messages]
+    assert 'no cables' in said[0]
+    assert len(states) == 0

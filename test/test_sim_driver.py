@@ -120,7 +120,7 @@ def test_registry_knows_sim_and_module_specs():
 
 
 @pytest.mark.parametrize('spec, message', [
-    ('dynamixel', 'unknown cable backend .*known: sim'),
+    ('stepper', 'unknown cable backend .*known: canopen, dynamixel, ros2_control, sim'),
     ('continuum_statics.drivers.sim:Nope', 'cannot load'),
     ('no_such_module_xyz:Backend', 'cannot load'),
     ('continuum_statics.drivers.base:BackendStatus', 'not a CableBackend'),

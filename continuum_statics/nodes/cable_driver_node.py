@@ -3,12 +3,28 @@
 Subscribes ``cable_commands`` (sensor_msgs/JointState, target cable lengths in m by name) and
 publishes ``cable_states`` (measured lengths in m, speeds in m/s, tensions in N where the backend
 knows them) at ``publish_rate``. The actuators sit behind a :class:`~continuum_statics.drivers.
-CableBackend`, chosen with the read-only ``backend`` parameter.
+CableBackend`, chosen with the read-only ``backend`` parameter (``sim``, ``dynamixel``,
+``canopen``, ``ros2_control``, an entry point or ``module:Class``); its options are the
+parameters ``<backend>.<option>``.
 
-Bad commands (unknown or repeated names, NaN, sizes that do not match) are dropped with a throttled
-warning and counted on diagnostics; lengths outside the robot's limits are clamped with a warning.
-When no command arrives for ``command_timeout`` s the watchdog makes the backend hold position.
+- Bad commands (unknown or repeated names, NaN, sizes that do not match) are dropped with a
+  throttled warning and counted on diagnostics. A length outside the robot's limits by at most
+  ``length_margin`` is clamped (encoder quantisation, rounding); further out the whole command is
+  rejected with the reason: a clamped set of lengths is a shape nobody asked for.
+- When no command arrives for ``command_timeout`` s the watchdog makes the backend hold
+  position; the next valid command moves again.
+- A lost port or bus (the backend raises :class:`~continuum_statics.drivers.ConnectionLost`) is
+  ERROR on /diagnostics naming it; no cable_states are published until the backend reads again;
+  the node reconnects with a backoff doubling up to ``reconnect_max_interval`` and then holds
+  where the cables are until a new command.
+- Commands are refused (with the reason) while the port is lost or an actuator is faulted;
+  ``~/reset`` (std_srvs/Trigger) clears faults through the backend's ``reset()``.
+- ``~/set_home`` (std_srvs/Trigger) makes the current actuator positions the straight pose and
+  writes them to ``home_file`` (YAML), which is loaded at start.
+- A robot file without cables: the node says so once and stays up without publishing.
 """
+import os
+from pathlib import Path
 import sys
 import threading
 import time
@@ -17,8 +33,10 @@ import numpy as np
 from rclpy.node import Node
 from rclpy.qos import QoSProfile, ReliabilityPolicy, qos_profile_sensor_data
 from sensor_msgs.msg import JointState
+from std_srvs.srv import Trigger
+import yaml
 
-from continuum_statics.drivers import backend_class
+from continuum_statics.drivers import ConnectionLost, backend_class
 from continuum_statics.nodes import diagnostics_util as diag
 from continuum_statics.nodes.dedicated_intake import PeriodicThread
 from continuum_statics.nodes.node_params import (
@@ -33,6 +51,8 @@ from continuum_statics.nodes.ros_conversions import cable_index, joint_positions
 #: Commands and goals: reliable, depth 10 (ARCHITECTURE.md, ROS interfaces).
 COMMAND_QOS = QoSProfile(depth=10, reliability=ReliabilityPolicy.RELIABLE)
 THROTTLE_S = 2.0
+#: First reconnection delay after a lost port or bus, s (doubles up to reconnect_max_interval).
+FIRST_RETRY_S = 0.1
 
 
 def _check_backend(value):
@@ -41,6 +61,44 @@ def _check_backend(value):
     except ValueError as error:
         return str(error)
     return None
+
+
+def load_home_file(path, backend_name, zero_option, cable_names):
+    """Return the zero positions stored in ``path`` for this backend, or None if no file.
+
+    :raises ValueError: a file that is not for this backend or these cables (says which)
+    """
+    path = Path(path).expanduser()
+    if not path.is_file():
+        return None
+    try:
+        data = yaml.safe_load(path.read_text()) or {}
+    except (OSError, yaml.YAMLError) as error:
+        raise ValueError('home_file %s: %s' % (path, error)) from None
+    if not isinstance(data, dict) or data.get('backend') != backend_name:
+        raise ValueError('home_file %s was written for backend %r, not %r' % (
+            path, data.get('backend') if isinstance(data, dict) else None, backend_name))
+    if list(data.get('cable_names', [])) != list(cable_names):
+        raise ValueError('home_file %s is for cables %s, not %s' % (
+            path, data.get('cable_names'), list(cable_names)))
+    zeros = data.get(zero_option)
+    if not isinstance(zeros, list) or len(zeros) != len(cable_names):
+        raise ValueError('home_file %s: %s needs %d values' % (path, zero_option,
+                                                               len(cable_names)))
+    return zeros
+
+
+def write_home_file(path, backend_name, zero_option, cable_names, zeros):
+    """Write the home positions atomically (a crash never leaves half a file)."""
+    path = Path(path).expanduser()
+    path.parent.mkdir(parents=True, exist_ok=True)
+    data = {'backend': backend_name, 'cable_names': list(cable_names),
+            zero_option: [z.item() if hasattr(z, 'item') else z for z in zeros],
+            'written': time.strftime('%Y-%m-%dT%H:%M:%S%z')}
+    tmp = path.with_name(path.name + '.tmp')
+    tmp.write_text('# straight pose of the cable actuators, written by cable_driver/set_home\n'
+                   + yaml.safe_dump(data, sort_keys=False))
+    os.replace(tmp, path)
 
 
 class CableDriverNode(Node):
@@ -53,12 +111,18 @@ class CableDriverNode(Node):
         specs = [
             robot_file_spec('cable names, length limits'),
             diagnostics_rate_spec(),
-            ParamSpec('backend', 'sim', 'cable actuator backend: sim, an entry point of group '
-                      'continuum_statics.cable_backends, or module:Class', read_only=True,
-                      check=_check_backend),
+            ParamSpec('backend', 'sim', 'cable actuator backend: sim, dynamixel, canopen, '
+                      'ros2_control, an entry point of group continuum_statics.cable_backends, '
+                      'or module:Class', read_only=True, check=_check_backend),
             ParamSpec('publish_rate', 200.0, 'cable_states publish rate, Hz', 1.0, 2000.0),
             ParamSpec('command_timeout', 0.5, 'hold position when no command arrives for this '
                       'long, s (0: never)', 0.0, 3600.0),
+            ParamSpec('length_margin', 0.002, 'commands outside the length limits by at most '
+                      'this are clamped, further out rejected, m', 0.0, 0.1),
+            ParamSpec('home_file', '', 'YAML of the actuator positions at the straight pose '
+                      '(written by ~/set_home, loaded at start; empty: none)', read_only=True),
+            ParamSpec('reconnect_max_interval', 2.0, 'longest wait between two reconnection '
+                      'attempts after a lost port or bus, s', 0.1, 60.0),
         ]
         self._params = ParameterTable(self, specs)
         self.robot = load_robot_file(self._params['robot_file'])
@@ -70,31 +134,61 @@ class CableDriverNode(Node):
         self._options = ParameterTable(self, option_specs)
         options = {spec.name[len(prefix):]: self._options[spec.name] for spec in option_specs}
         self.cable_names = tuple(self.robot.cable_names)
-        self._limits = np.asarray(self.robot.cable_length_limits, dtype=float)
-        self.backend = self._backend_cls(self.cable_names, self._limits,
-                                         self.robot.straight_cable_lengths, **options)
-        self.backend.start(time.monotonic())
+        self._limits = np.asarray(self.robot.cable_length_limits, dtype=float).reshape(-1, 2)
+        self._home_file = self._params['home_file']
+        zero_option = self._backend_cls.zero_option
+        if self._home_file and zero_option and self.cable_names:
+            zeros = load_home_file(self._home_file, self._backend_cls.name, zero_option,
+                                   self.cable_names)
+            if zeros is not None:
+                options[zero_option] = zeros
+                self.get_logger().info('home positions from %s: %s = %s' % (
+                    self._home_file, zero_option, zeros))
 
+        self._problems = diag.Problems()
+        self._clamped = 0
+        self._commands = 0
+        self._refused = 0
+        self._backend_error = ''
+        self._connection_error = ''
+        self._connected = False
+        self._retry_delay = FIRST_RETRY_S
+        self._next_attempt = 0.0
+        self._reconnects = 0
+        self._status = None
+        self._rate = diag.RateMeter()
+        self._state_msg = JointState()
+        self._lock = threading.Lock()  # backend calls come from the executor and the loop
         self._targets = np.array(self.robot.straight_cable_lengths, dtype=float)
         self._last_reading = None
         self._last_command_time = None
         self._holding = True
-        self._problems = diag.Problems()
-        self._clamped = 0
-        self._commands = 0
-        self._backend_error = ''
-        self._rate = diag.RateMeter()
-        self._state_msg = JointState()
-        self._lock = threading.Lock()  # backend calls come from the executor and the loop
+        self._diagnostics = self.create_publisher(diag.DiagnosticArray, '/diagnostics', 10)
+        self.create_timer(1.0 / self._params['diagnostics_rate'], self._publish_diagnostics)
+        self._loop = None
+        self.backend = None
+        if not self.cable_names:
+            # A passive rod (no cables): say it once, stay up, publish only diagnostics.
+            self.get_logger().warning(
+                'robot %r has no cables: cable_driver has nothing to drive (a passive rod); '
+                'it stays up and publishes no cable_states' % self.robot.name)
+            self._params.on_change = self._on_parameter_change
+            return
+
+        self.backend = self._backend_cls(self.cable_names, self._limits,
+                                         self.robot.straight_cable_lengths, **options)
+        if hasattr(self.backend, 'attach_ros'):  # ros2_control: the node lends it topics
+            self._attach_ros_topics()
+        self._connect(time.monotonic())
 
         self._publisher = self.create_publisher(JointState, 'cable_states',
                                                 qos_profile_sensor_data)
-        self._diagnostics = self.create_publisher(diag.DiagnosticArray, '/diagnostics', 10)
         self.create_subscription(JointState, 'cable_commands', self._on_command, COMMAND_QOS)
+        self.create_service(Trigger, '~/reset', self._on_reset)
+        self.create_service(Trigger, '~/set_home', self._on_set_home)
         # cable_states from a thread of its own: steadier and ~10x cheaper than a 200 Hz timer.
         self._loop = PeriodicThread(self, self._params['publish_rate'], self._on_timer,
                                     'cable_driver_publish')
-        self.create_timer(1.0 / self._params['diagnostics_rate'], self._publish_diagnostics)
         # Applied only after everything above exists.
         self._params.on_change = self._on_parameter_change
         self._options.on_change = self._on_option_change
@@ -103,18 +197,81 @@ class CableDriverNode(Node):
             self._backend_cls.name, len(self.cable_names), ', '.join(self.cable_names),
             self._params['publish_rate']))
 
+    def _attach_ros_topics(self):
+        """Give a ROS-topic backend (ros2_control) a command publisher and joint_states."""
+        from std_msgs.msg import Float64MultiArray
+
+        backend = self.backend
+        publisher = self.create_publisher(Float64MultiArray, backend.command_topic, COMMAND_QOS)
+
+        def send(positions):
+            publisher.publish(Float64MultiArray(data=[float(p) for p in positions]))
+
+        def on_joint_state(msg):
+            backend.on_joint_state(msg.name, msg.position, msg.velocity, msg.effort,
+                                   time.monotonic())
+
+        self.create_subscription(JointState, backend.state_topic, on_joint_state,
+                                 qos_profile_sensor_data)
+        backend.attach_ros(send)
+
+    # -- connection -------------------------------------------------------------------------
+    def _connect(self, now):
+        """Try ``backend.start``; on ConnectionLost schedule the next try (caller holds lock)."""
+        try:
+            self.backend.start(now)
+        except ConnectionLost as error:
+            self._lost(error, now)
+            return False
+        if self._connection_error:
+            self._reconnects += 1
+            self.get_logger().info('reconnected: %s is back' % self._backend_cls.name)
+        self._connected = True
+        self._connection_error = ''
+        self._retry_delay = FIRST_RETRY_S
+        # After a (re)connection the cables stay where they are until a new command.
+        self._holding = True
+        self._last_reading = None
+        return True
+
+    def _lost(self, error, now):
+        first = self._connected or not self._connection_error
+        self._connected = False
+        self._connection_error = str(error)
+        self._next_attempt = now + self._retry_delay
+        if first:
+            self.get_logger().error('%s: %s; reconnecting' % (self._backend_cls.name, error))
+        else:
+            self.get_logger().warning('still no connection: %s (next try in %.2g s)' % (
+                error, self._retry_delay), throttle_duration_sec=THROTTLE_S)
+        self._retry_delay = min(2.0 * self._retry_delay,
+                                self._params['reconnect_max_interval'])
+
+    # -- parameters ---------------------------------------------------------------------------
     def _on_parameter_change(self, name, value):
-        if name == 'publish_rate':
+        if name == 'publish_rate' and self._loop is not None:
             self._loop.rate = value
 
     def _on_option_change(self, name, value):
         with self._lock:
             self.backend.set_option(name.split('.', 1)[1], value)
 
+    # -- commands -----------------------------------------------------------------------------
     def _reject(self, kind, reason):
         self._problems.add(kind, reason)
         self.get_logger().warning('dropped %s: %s' % (kind, reason),
                                   throttle_duration_sec=THROTTLE_S)
+
+    def _refusal(self):
+        """Why commands cannot be carried out now, or ''."""
+        if not self._connected:
+            return 'actuators not connected (%s)' % self._connection_error
+        if self._backend_error:
+            return 'backend failed (%s)' % self._backend_error
+        status = self._status
+        if status is not None and status.level >= diag.ERROR:
+            return 'actuator fault: %s' % status.message
+        return ''
 
     def _on_command(self, msg):
         try:
@@ -124,23 +281,34 @@ class CableDriverNode(Node):
             self._reject('cable_commands', error)
             return
         low, high = self._limits[index, 0], self._limits[index, 1]
+        margin = self._params['length_margin']
+        outside = np.flatnonzero((lengths < low - margin) | (lengths > high + margin))
+        if outside.size:
+            self._reject('cable_commands', 'outside the length limits by more than '
+                         'length_margin %g m: %s' % (margin, ', '.join(
+                             '%s %.4f m not in [%.4f, %.4f]' % (
+                                 msg.name[i], lengths[i], low[i], high[i]) for i in outside)))
+            return
         clamped = np.clip(lengths, low, high)
         if np.any(clamped != lengths):
             self._clamped += 1
-            bad = np.flatnonzero(clamped != lengths)
-            self.get_logger().warning(
-                'clamped cable command(s) to the length limits: %s' % ', '.join(
-                    '%s %.4f m -> %.4f m' % (msg.name[i], lengths[i], clamped[i]) for i in bad),
-                throttle_duration_sec=THROTTLE_S)
         with self._lock:
+            refusal = self._refusal()
+            if refusal:
+                self._refused += 1
+                self._reject('cable_commands', 'refused: ' + refusal)
+                return
             now = time.monotonic()
             targets = self._targets.copy()  # stored only once the backend took it
             if self._holding and self._last_reading is not None:
                 # After a hold, cables not named in this command stay where they are.
-                targets = self._last_reading.copy()
+                targets = np.clip(self._last_reading, self._limits[:, 0], self._limits[:, 1])
             targets[index] = clamped
             try:
                 self.backend.command(targets, now)
+            except ConnectionLost as error:
+                self._lost(error, now)
+                return
             except Exception as error:  # a real backend may fail; the node stays up
                 self._backend_failure('command', error)
                 return
@@ -154,11 +322,15 @@ class CableDriverNode(Node):
         self.get_logger().error('backend %s' % self._backend_error,
                                 throttle_duration_sec=THROTTLE_S)
 
+    # -- the loop ---------------------------------------------------------------------------
     def _on_timer(self):
         now = time.monotonic()
         timeout = self._params['command_timeout']
-        try:
-            with self._lock:
+        with self._lock:
+            if not self._connected:
+                if now < self._next_attempt or not self._connect(now):
+                    return
+            try:
                 if (not self._holding and timeout > 0.0 and self._last_command_time is not None
                         and now - self._last_command_time > timeout):
                     self.backend.hold(now)
@@ -166,47 +338,129 @@ class CableDriverNode(Node):
                     self.get_logger().info('no cable command for %.3g s: holding position'
                                            % timeout)
                 reading = self.backend.read(now)
-            joint_state(self.cable_names, reading.lengths, self.get_clock().now().to_msg(),
-                        reading.velocities, reading.tensions, msg=self._state_msg)
-        except Exception as error:  # ValueError on NaN from a backend, or a hardware error
-            self._backend_failure('read', error)
-            return
-        self._backend_error = ''
-        self._last_reading = np.asarray(reading.lengths, dtype=float)
+                self._status = self.backend.status()
+                joint_state(self.cable_names, reading.lengths, self.get_clock().now().to_msg(),
+                            reading.velocities, reading.tensions, msg=self._state_msg)
+            except ConnectionLost as error:
+                self._lost(error, now)
+                return
+            except Exception as error:  # ValueError on NaN from a backend, or a hardware error
+                self._backend_failure('read', error)
+                return
+            self._backend_error = ''
+            self._last_reading = np.asarray(reading.lengths, dtype=float)
         self._publisher.publish(self._state_msg)
         self._rate.tick()
 
-    def _publish_diagnostics(self):
+    # -- services -----------------------------------------------------------------------------
+    def _on_reset(self, request, response):
+        if self.backend is None:
+            response.success, response.message = False, 'robot has no cables: nothing to reset'
+            return response
         with self._lock:
-            status = self.backend.status()
-        level, message = status.level, status.message
-        if self._backend_error:
-            level, message = diag.ERROR, self._backend_error
-        elif self._problems.recent(2.0):
-            level, message = max(level, diag.WARN), 'rejected ' + self._problems.last_reason
-        elif self._holding:
-            message = '%s; holding position (no command)' % message
-        values = {
-            'backend': self._backend_cls.name,
-            'publish_rate_hz': self._rate.report(),
-            'commands_accepted': self._commands,
-            'commands_clamped': self._clamped,
-            'holding': self._holding,
-        }
-        values.update(self._problems.values())
-        values.update(status.values)
+            try:
+                if not self._connected:
+                    self._retry_delay = FIRST_RETRY_S
+                    ok = self._connect(time.monotonic())
+                    message = 'reconnected' if ok else 'still not connected: %s' % (
+                        self._connection_error)
+                    response.success, response.message = ok, message
+                    return response
+                message = self.backend.reset()
+                self._status = self.backend.status()
+                self._backend_error = ''
+                self._holding = True
+                response.success = self._status.level < diag.ERROR
+                response.message = message if response.success else '%s; still: %s' % (
+                    message, self._status.message)
+            except ConnectionLost as error:
+                self._lost(error, time.monotonic())
+                response.success, response.message = False, str(error)
+            except Exception as error:
+                response.success, response.message = False, 'reset failed: %s' % error
+        self.get_logger().info('reset: %s' % response.message)
+        return response
+
+    def _on_set_home(self, request, response):
+        if self.backend is None:
+            response.success, response.message = False, 'robot has no cables: nothing to home'
+            return response
+        with self._lock:
+            try:
+                if not self._connected:
+                    raise ValueError('actuators not connected (%s)' % self._connection_error)
+                zeros = self.backend.set_home()
+                self._holding = True
+                self._last_reading = None
+                self._targets = np.array(self.robot.straight_cable_lengths, dtype=float)
+                self.backend.hold(time.monotonic())
+            except Exception as error:
+                response.success, response.message = False, 'set_home failed: %s' % error
+                return response
+        option = self._backend_cls.zero_option
+        message = '%s = %s' % (option, zeros)
+        if self._home_file:
+            try:
+                write_home_file(self._home_file, self._backend_cls.name, option,
+                                self.cable_names, zeros)
+                message += ', written to %s' % self._home_file
+            except OSError as error:
+                response.success = False
+                response.message = '%s, but home_file not written: %s' % (message, error)
+                return response
+        else:
+            message += ' (not saved: home_file is empty)'
+        response.success, response.message = True, message
+        self.get_logger().info('set_home: %s' % message)
+        return response
+
+    # -- diagnostics --------------------------------------------------------------------------
+    def _publish_diagnostics(self):
+        values = {'backend': self._backend_cls.name}
+        if self.backend is None:
+            level, message = diag.OK, 'robot has no cables: nothing to drive'
+        else:
+            with self._lock:
+                status = self.backend.status()
+            level, message = status.level, status.message
+            if not self._connected:
+                level, message = diag.ERROR, 'connection lost: %s' % self._connection_error
+            elif self._backend_error:
+                level, message = diag.ERROR, self._backend_error
+            elif level < diag.ERROR and self._problems.recent(2.0):
+                level, message = max(level, diag.WARN), 'rejected ' + self._problems.last_reason
+            elif level == diag.OK and self._holding:
+                message = '%s; holding position (no command)' % message
+            values.update({
+                'connected': self._connected,
+                'reconnects': self._reconnects,
+                'publish_rate_hz': self._rate.report(),
+                'commands_accepted': self._commands,
+                'commands_clamped': self._clamped,
+                'commands_refused': self._refused,
+                'holding': self._holding,
+            })
+            values.update(self._problems.values())
+            values.update(status.values)
         self._diagnostics.publish(diag.diagnostic_array(
             self.get_clock().now().to_msg(), self.get_fully_qualified_name().lstrip('/'),
             self.robot.name, level, message, values))
 
     def destroy_node(self):
         """Stop publishing, hold and release the actuators, then destroy the node."""
-        self._loop.stop()
-        try:
-            self.backend.hold(time.monotonic())
-            self.backend.close()
-        except Exception as error:
-            self.get_logger().error('backend shutdown failed: %s' % error)
+        if self._loop is not None:
+            self._loop.stop()
+        if self.backend is not None:
+            with self._lock:
+                try:
+                    if self._connected:
+                        self.backend.hold(time.monotonic())
+                except Exception as error:
+                    self.get_logger().warning('hold at shutdown failed: %s' % error)
+                try:
+                    self.backend.close()
+                except Exception as error:
+                    self.get_logger().error('backend shutdown failed: %s' % error)
         return super().destroy_node()
 
 
