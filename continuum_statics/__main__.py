@@ -12,6 +12,9 @@ commands:
   statics | tip_controller | cable_driver
             run one node alone, like `ros2 run` (options: --ros-args ...)
   demo      bringup with the simulated driver plus a client sending tip goals
+  record    record the robot's topics into a rosbag2 directory (MCAP; Ctrl-C to stop)
+  plot      PNG figures of a recording (backbone, tip path, cable lengths, solver)
+  calibrate fit robot-file parameters (E, base orientation, ...) to measured tip positions
 """
 
 
@@ -34,6 +37,12 @@ def main(argv=None):
         from continuum_statics.nodes.bringup import main as run
     elif command == 'demo':
         from continuum_statics.tools.demo import main as run
+    elif command == 'record':
+        from continuum_statics.tools.record import main as run
+    elif command == 'plot':
+        from continuum_statics.tools.plot import main as run
+    elif command == 'calibrate':
+        from continuum_statics.tools.calibrate import main as run
     else:
         print('unknown command %r\n\n%s' % (command, USAGE), file=sys.stderr)
         return 2
