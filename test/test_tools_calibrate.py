@@ -14,7 +14,7 @@ import numpy as np
 import pytest
 import yaml
 
-from continuum_statics import load_robot, Robot
+from continuum_statics import Robot, load_robot
 from continuum_statics.tools import calibrate
 
 PAPER_ROD = REPO / 'config' / 'jones2009_nitinol_rod.yaml'
