@@ -28,6 +28,10 @@ EXTRA_TOPICS = ('/diagnostics',)
 DISCOVERY_PERIOD = 0.5
 
 
+def _print(text):
+    print(text, flush=True)
+
+
 def ros_distro():
     """Return the running ROS 2 distribution ('jazzy', 'kilted', ...), or '' if unknown."""
     distro = os.environ.get('ROS_DISTRO', '')
@@ -129,7 +133,7 @@ class Recorder:
     connections, so the writer needs no lock.
     """
 
-    def __init__(self, node, writer, namespace=DEFAULT_NAMESPACE, topics=(), log=print):
+    def __init__(self, node, writer, namespace=DEFAULT_NAMESPACE, topics=(), log=_print):
         self.node = node
         self.writer = writer
         self.namespace = namespace
@@ -176,6 +180,7 @@ class Recorder:
 
         self.subscriptions[topic] = self.node.create_subscription(
             message_class(msgtype), topic, write, qos, raw=True)
+        self.log('record: recording %s (%s)' % (topic, msgtype))
 
 
 def subscription_qos(publishers):
@@ -220,7 +225,7 @@ def default_output():
     return datetime.datetime.now().strftime('rosbag2_%Y_%m_%d-%H_%M_%S')
 
 
-def record(output, duration=None, namespace=DEFAULT_NAMESPACE, topics=(), log=print,
+def record(output, duration=None, namespace=DEFAULT_NAMESPACE, topics=(), log=_print,
            stop_requested=lambda: False):
     """Record until ``duration`` s have passed or ``stop_requested()``; return the counts.
 

@@ -1,0 +1,177 @@
+"""``record`` against the real nodes (bringup subprocess), read back with ``rosbags``; ``plot``.
+
+One recording for the module: bringup (simulated driver) in a namespace of its own, the recorder
+as a user runs it (``python -m continuum_statics record``, stopped with SIGINT), and a tip goal
+sent on ``tip_goal_pose`` meanwhile so that commands, goals and motion are in the bag.
+"""
+import math
+import os
+from pathlib import Path
+import signal
+import subprocess
+import sys
+import threading
+import time
+import uuid
+
+from conftest import REPO
+from nodes_helpers import LATCHED, RELIABLE, Collector, pose_xyz, stop_process
+import numpy as np
+import pytest
+import yaml
+
+rclpy = pytest.importorskip('rclpy')
+from geometry_msgs.msg import PoseStamped  # noqa: E402
+from rosbags.highlevel import AnyReader  # noqa: E402
+
+from continuum_statics import load_robot  # noqa: E402
+from continuum_statics.tools import plot  # noqa: E402
+
+pytestmark = pytest.mark.ros
+ROBOT = load_robot(REPO / 'config' / 'tendon_robot.yaml')
+PNG_SIGNATURE = b'\x89PNG\r\n\x1a\n'
+
+
+class Lines:
+    """Collects a subprocess's output lines in a thread, so tests can wait for one."""
+
+    def __init__(self, process):
+        self.lines = []
+        self.thread = threading.Thread(target=self._read, args=(process,), daemon=True)
+        self.thread.start()
+
+    def _read(self, process):
+        for line in process.stdout:
+            self.lines.append(line.rstrip('\n'))
+
+    def text(self):
+        return '\n'.join(self.lines)
+
+
+def spin_until(executor, predicate, timeout, what, processes=()):
+    deadline = time.monotonic() + timeout
+    while not predicate():
+        for process in processes:
+            assert process.poll() is None, '%s exited early' % process.args
+        assert time.monotonic() < deadline, 'timed out after %g s waiting for %s' % (timeout, what)
+        executor.spin_once(timeout_sec=0.02)
+
+
+@pytest.fixture(scope='module')
+def recording(tmp_path_factory):
+    """Record bringup for a few seconds around one tip goal; yield (bag, recorder output, ns)."""
+    namespace = 'rec_' + uuid.uuid4().hex[:8]
+    bag = tmp_path_factory.mktemp('record') / 'bag'
+    env = os.environ.copy()
+    bringup = subprocess.Popen(
+        [sys.executable, '-m', 'continuum_statics', 'bringup', '--namespace', namespace,
+         '--ros-args', '--log-level', 'warn'], cwd=REPO, env=env, stdout=subprocess.DEVNULL,
+        stderr=subprocess.STDOUT)
+    recorder = subprocess.Popen(
+        [sys.executable, '-m', 'continuum_statics', 'record', '--namespace', namespace,
+         '--output', str(bag)], cwd=REPO, env=env, stdout=subprocess.PIPE,
+        stderr=subprocess.STDOUT, text=True)
+    output = Lines(recorder)
+    context = rclpy.Context()
+    rclpy.init(context=context)
+    executor = rclpy.executors.SingleThreadedExecutor(context=context)
+    node = rclpy.create_node('record_test_client', namespace=namespace, context=context)
+    executor.add_node(node)
+    try:
+        tips = Collector(node, PoseStamped, 'tip_pose', LATCHED)
+        goals = node.create_publisher(PoseStamped, 'tip_goal_pose', RELIABLE)
+        wanted = ['/%s/%s' % (namespace, t) for t in ('backbone', 'tip_pose', 'cable_states',
+                                                      'cable_commands', 'tip_goal_pose')]
+        wanted.append('/diagnostics')
+        spin_until(executor, lambda: all('record: recording %s ' % t in output.text()
+                                         for t in wanted),
+                   60.0, 'the recorder to subscribe to %s' % wanted, [bringup, recorder])
+        # The streaming goal reaches the controller and the recorder (both reliable).
+        spin_until(executor, lambda: goals.get_subscription_count() >= 2, 30.0,
+                   'tip_goal_pose subscribers', [bringup, recorder])
+        goal = ROBOT.solve_ivp([1.5, -1.0, 0.0]).tip_position
+        msg = PoseStamped()
+        msg.header.frame_id = 'base_link'
+        msg.pose.position.x, msg.pose.position.y, msg.pose.position.z = (float(v) for v in goal)
+        msg.pose.orientation.w = 1.0
+        goals.publish(msg)
+        spin_until(executor, lambda: tips.last is not None and np.linalg.norm(
+            pose_xyz(tips.last.pose) - goal) < 2e-3, 60.0, 'the tip at the goal', [bringup])
+        # More tip poses after the goal, so /diagnostics (1 Hz) is in as well.
+        count = len(tips)
+        spin_until(executor, lambda: len(tips) > count + 200, 30.0, 'more tip poses',
+                   [bringup, recorder])
+        recorder.send_signal(signal.SIGINT)
+        recorder.wait(timeout=30)
+        output.thread.join(timeout=5)
+    finally:
+        executor.shutdown()
+        node.destroy_node()
+        rclpy.try_shutdown(context=context)
+        stop_process(recorder)
+        stop_process(bringup)
+    assert recorder.returncode == 0, output.text()
+    yield bag, output.text(), namespace
+
+
+def read_counts(bag):
+    with AnyReader([Path(bag)]) as reader:
+        counts = {}
+        for connection, _, _ in reader.messages():
+            counts[connection.topic] = counts.get(connection.topic, 0) + 1
+        return counts
+
+
+def test_record_writes_a_rosbag2_mcap_directory_readable_by_rosbags(recording):
+    bag, output, namespace = recording
+    metadata = yaml.safe_load((bag / 'metadata.yaml').read_text())['rosbag2_bagfile_information']
+    assert metadata['storage_identifier'] == 'mcap'
+    assert [f['path'] for f in metadata['files']] == ['bag.mcap'] and (bag / 'bag.mcap').is_file()
+    topics = {t['topic_metadata']['name']: t for t in metadata['topics_with_message_count']}
+    assert all(t['topic_metadata']['serialization_format'] == 'cdr' for t in topics.values())
+    assert topics['/%s/backbone' % namespace]['topic_metadata']['type'] == 'nav_msgs/msg/Path'
+    # Every message the metadata announces is in the MCAP file, topic by topic.
+    counts = read_counts(bag)
+    assert counts == {name: t['message_count'] for name, t in topics.items()}
+    assert sum(counts.values()) == metadata['message_count']
+    for topic in ('backbone', 'tip_pose', 'cable_states', 'cable_commands'):
+        assert counts['/%s/%s' % (namespace, topic)] >= 10, counts
+    assert counts['/diagnostics'] >= 2
+    # The recorder's report per topic matches what is in the bag.
+    for topic, count in counts.items():
+        assert any(line.split()[:2] == [topic, str(count)] for line in output.splitlines()), (
+            topic, count, output)
+
+
+def test_recorded_path_deserializes_to_a_finite_backbone(recording):
+    bag, _, namespace = recording
+    with AnyReader([Path(bag)]) as reader:
+        connections = [c for c in reader.connections if c.topic == '/%s/backbone' % namespace]
+        paths = [reader.deserialize(raw, c.msgtype)
+                 for c, _, raw in reader.messages(connections=connections)]
+    last = paths[-1]
+    points = np.array([[p.pose.position.x, p.pose.position.y, p.pose.position.z]
+                       for p in last.poses])
+    assert last.header.frame_id == 'base_link' and len(last.poses) == 20
+    assert np.all(np.isfinite(points))
+    np.testing.assert_allclose(points[0], [0.0, 0.0, 0.0], atol=1e-9)
+    # Base to tip along the rod: the polyline is as long as the rod (inextensible to 1e-3).
+    assert math.isclose(np.sum(np.linalg.norm(np.diff(points, axis=0), axis=1)), ROBOT.length,
+                        rel_tol=1e-3)
+
+
+def test_plot_writes_every_figure_of_a_recording(recording, tmp_path):
+    bag, _, _ = recording
+    result = subprocess.run([sys.executable, '-m', 'continuum_statics', 'plot', str(bag),
+                             '--output', str(tmp_path)], capture_output=True, text=True,
+                            timeout=300)
+    assert result.returncode == 0, result.stderr
+    for name in ('backbone.png', 'tip_path.png', 'cable_lengths.png', 'solver.png'):
+        data = (tmp_path / name).read_bytes()
+        assert data.startswith(PNG_SIGNATURE) and len(data) > 20000, name
+    recording_data = plot.read_recording(bag)
+    goals = np.array(recording_data.goals)[:, 1:]
+    np.testing.assert_allclose(goals[0], ROBOT.solve_ivp([1.5, -1.0, 0.0]).tip_position,
+                               atol=1e-6)
+    assert len(recording_data.snapshots) >= 3
+    assert set(recording_data.commanded) == set(ROBOT.cable_names)
