@@ -3,13 +3,17 @@
 Starts ``bringup`` (statics, tip_controller, simulated cable_driver) as a subprocess; this process
 is the client: it sends reachable tip goals (tips of shapes the robot can take) and one goal 2 m
 away through the ``tip_goal`` service (nav_msgs/srv/GetPlan), prints goal, reached tip, error and
-time for each, and a final line of figures. Exit code 0 when every reachable goal was reached
+time for each, and a final line of figures. It also draws the backbone of every answered plan
+(the reached state) in one PNG (``--plot``, default ``demo_backbones.png``) and prints where.
+The demo runs in a private ROS domain (``--domain-id``, default random in 100-199), so it never
+talks to a robot on the user's domain. Exit code 0 when every reachable goal was reached
 within the tolerance, the unreachable one was answered with an empty plan, and bringup stopped
 cleanly on SIGINT.
 """
 import argparse
 import math
 import os
+import random
 import subprocess
 import sys
 import time
@@ -87,7 +91,8 @@ def run_client(robot_file, namespace, goals=5, tolerance=1e-3, print_rows=True, 
             error = math.nan if tip is None else float(np.linalg.norm(tip - position))
             reached = tip is not None and error <= tolerance * (1.0 + 1e-6)
             rows.append({'goal': position, 'tip': tip, 'error': error, 'time': elapsed,
-                         'reachable': reachable, 'reached': reached})
+                         'reachable': reachable, 'reached': reached,
+                         'backbone': path_positions(plan) if plan.poses else None})
             if print_rows:
                 print('%-28s %-28s %9s %7.2f  %s' % (
                     _mm(position), '(empty plan)' if tip is None else _mm(tip),
@@ -107,6 +112,20 @@ def _mm(position):
     return '%7.1f %7.1f %7.1f' % tuple(np.where(np.abs(millimetres) < 0.05, 0.0, millimetres))
 
 
+def write_plot(output, robot_file, reached):
+    """Draw the backbone of every reached goal with the goals; print the file's path."""
+    from continuum_statics import load_robot
+    from continuum_statics.tools.plot import plot_backbones
+
+    robot = load_robot(robot_file)
+    backbones = [('goal %d' % (i + 1), row['backbone']) for i, row in enumerate(reached)]
+    plot_backbones(output, backbones, goals=[row['goal'] for row in reached],
+                   frame_id=robot.base_frame_id,
+                   title='%s: backbone at each reached goal' % robot.name)
+    print('demo: backbone at each reached goal drawn in %s' % os.path.abspath(output),
+          flush=True)
+
+
 def main(argv=None):
     """Run the demo; returns the exit code."""
     parser = argparse.ArgumentParser(prog='python -m continuum_statics demo',
@@ -116,7 +135,12 @@ def main(argv=None):
     parser.add_argument('--goals', type=int, default=5, help='reachable goals (max %d)'
                         % len(GOAL_BENDINGS))
     parser.add_argument('--tolerance', type=float, default=1e-3, help='tip tolerance, m')
+    parser.add_argument('--plot', default='demo_backbones.png',
+                        help='PNG of the backbone at each reached goal (default %(default)s)')
+    parser.add_argument('--domain-id', type=int, default=random.randint(100, 199),
+                        help='private ROS_DOMAIN_ID of the demo (default: random in 100-199)')
     options = parser.parse_args(list(sys.argv[1:] if argv is None else argv))
+    os.environ['ROS_DOMAIN_ID'] = str(options.domain_id)
     ros_environment()
     robot_file = os.path.abspath(options.robot)
     print('demo: bringup (simulated cables, robot %s, namespace /%s) + tip_goal client'
@@ -147,6 +171,8 @@ def main(argv=None):
               np.median(times) if times.size else math.nan,
               times.max() if times.size else math.nan,
               unreachable[0]['time'] * 1e3 if unreachable else math.nan, code))
+    if options.plot:
+        write_plot(options.plot, robot_file, reached)
     ok = (len(reached) == len(reachable) and all(row['tip'] is None for row in unreachable)
           and code == 0)
     return 0 if ok else 1
