@@ -1,4 +1,10 @@
-"""``python -m continuum_statics solve``: the boundary-value problem from the command line."""
+"""``python -m continuum_statics solve``: the shape of a robot from the command line.
+
+Without cable inputs: the boundary-value problem of the rod under a tip load (cables slack).
+``--tensions``: forward statics under cable tensions (N). ``--cable-lengths``: the shape
+estimated from measured cable lengths (m), as the statics node does (with ``--tensions`` too when
+the tensions are measured). ``--plot FILE.png`` draws the backbone in 3-D.
+"""
 import argparse
 import json
 import sys
@@ -9,31 +15,65 @@ from continuum_statics.core.rotations import rotation_to_quaternion
 
 
 def solve_main(argv=None):
-    """Solve the BVP for a robot file and print the tip pose (the whole shape with --json)."""
+    """Solve for a robot file and print the tip pose (the whole shape with --json)."""
     parser = argparse.ArgumentParser(
         prog='python -m continuum_statics solve',
-        description='Shape of a continuum robot under a tip force and moment (Cosserat BVP).')
+        description='Shape of a continuum robot under a tip force and moment (Cosserat rod), '
+                    'optionally with cable tensions or measured cable lengths.')
     parser.add_argument('--robot', required=True, help='robot file (YAML)')
     parser.add_argument('--tip-force', nargs=3, type=float, default=[0.0, 0.0, 0.0],
                         metavar=('FX', 'FY', 'FZ'), help='tip force, base frame (N)')
     parser.add_argument('--tip-moment', nargs=3, type=float, default=[0.0, 0.0, 0.0],
                         metavar=('MX', 'MY', 'MZ'), help='tip moment, base frame (N m)')
+    parser.add_argument('--tensions', nargs='+', type=float, default=None, metavar='T',
+                        help='cable tensions (N, >= 0), one per cable in robot-file order')
+    parser.add_argument('--cable-lengths', nargs='+', type=float, default=None, metavar='L',
+                        help='measured cable lengths (m), one per cable in robot-file order')
+    parser.add_argument('--plot', default=None, metavar='FILE.png',
+                        help='draw the backbone in 3-D into this PNG')
     parser.add_argument('--json', action='store_true', help='print the whole shape as JSON')
     args = parser.parse_args(argv)
+    estimate = None
     try:
         robot = load_robot(args.robot)
+        for name, values in (('--tensions', args.tensions),
+                             ('--cable-lengths', args.cable_lengths)):
+            if values is not None and len(values) != len(robot.cable_names):
+                raise ValueError('%s needs %d values, one per cable (%s), got %d' % (
+                    name, len(robot.cable_names), ', '.join(robot.cable_names) or 'none',
+                    len(values)))
         start = time.perf_counter()
-        shape = robot.solve_bvp(tip_force=args.tip_force, tip_moment=args.tip_moment)
+        if args.cable_lengths is not None:
+            extra = {} if args.tensions is None else {'tensions': args.tensions}
+            estimate = robot.estimate_shape(args.cable_lengths, tip_force=args.tip_force,
+                                            tip_moment=args.tip_moment, **extra)
+            shape = estimate.shape
+        elif args.tensions is not None:
+            shape = robot.solve_tensions(args.tensions, tip_force=args.tip_force,
+                                         tip_moment=args.tip_moment)
+        else:
+            shape = robot.solve_bvp(tip_force=args.tip_force, tip_moment=args.tip_moment)
         elapsed = time.perf_counter() - start
     except (ValueError, ConvergenceError) as error:
         print('error: %s' % error, file=sys.stderr)
         return 1
+    if args.plot:
+        _plot(args, robot, shape)
     quaternion = rotation_to_quaternion(shape.tip_rotation)
     if args.json:
-        print(json.dumps({'robot': robot.name, 'frame_id': robot.base_frame_id,
-                          'tip_position': shape.tip_position.tolist(),
-                          'tip_quaternion_xyzw': quaternion.tolist(),
-                          'shape': shape.to_dict()}))
+        result = {'robot': robot.name, 'frame_id': robot.base_frame_id,
+                  'tip_position': shape.tip_position.tolist(),
+                  'tip_quaternion_xyzw': quaternion.tolist(),
+                  'cable_lengths': robot.cable_lengths(shape).tolist(),
+                  'shape': shape.to_dict()}
+        if estimate is not None:
+            result['estimate'] = {'converged': bool(estimate.converged),
+                                  'residual_m': float(estimate.residual),
+                                  'iterations': int(estimate.iterations),
+                                  'message': estimate.message}
+        if args.plot:
+            result['plot'] = args.plot
+        print(json.dumps(result))
         return 0
     x, y, z = shape.tip_position
     print('robot %s, frame %s, tip force %s N, tip moment %s N m'
@@ -42,4 +82,25 @@ def solve_main(argv=None):
     print('tip orientation xyzw %+.6f %+.6f %+.6f %+.6f' % tuple(quaternion))
     print('base bending u(0) [1/m] %+.5f %+.5f %+.5f   solved in %.2f ms'
           % (*shape.u0, elapsed * 1e3))
+    if robot.cable_names:
+        print('cable lengths   [m]  %s' % '  '.join(
+            '%s=%.6f' % item for item in zip(robot.cable_names, robot.cable_lengths(shape))))
+    if estimate is not None:
+        print('estimate: %s, cable length residual %.3g m, %d iterations%s' % (
+            'converged' if estimate.converged else 'NOT converged', estimate.residual,
+            estimate.iterations, (': ' + estimate.message) if estimate.message else ''))
+    if args.plot:
+        print('backbone drawn in %s' % args.plot)
     return 0
+
+
+def _plot(args, robot, shape):
+    from continuum_statics.tools.plot import plot_backbones
+
+    loads = 'tip force %s N' % ' '.join('%g' % f for f in args.tip_force)
+    if args.tensions is not None:
+        loads += ', tensions %s N' % ' '.join('%g' % t for t in args.tensions)
+    if args.cable_lengths is not None:
+        loads = 'from cable lengths, ' + loads
+    plot_backbones(args.plot, [(loads, shape.positions)], frame_id=robot.base_frame_id,
+                   title='%s: backbone' % robot.name)

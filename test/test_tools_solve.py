@@ -1,0 +1,61 @@
+"""``solve --cable-lengths / --tensions / --plot``: the command line against the Python API."""
+import json
+import subprocess
+import sys
+
+from conftest import REPO
+import numpy as np
+import pytest
+
+from continuum_statics import Robot, load_robot
+
+TENDON = REPO / 'config' / 'tendon_robot.yaml'
+PNG_SIGNATURE = b'\x89PNG\r\n\x1a\n'
+
+
+def solve(*args):
+    result = subprocess.run([sys.executable, '-m', 'continuum_statics', 'solve', '--robot',
+                             str(TENDON), *args], capture_output=True, text=True, timeout=300)
+    return result
+
+
+def test_cable_lengths_give_back_the_shape_they_came_from(tmp_path):
+    robot = load_robot(TENDON)
+    shape = robot.solve_ivp([2.0, -1.0, 0.0])
+    lengths = robot.cable_lengths(shape)
+    png = tmp_path / 'backbone.png'
+    result = solve('--cable-lengths', *('%.12f' % v for v in lengths), '--plot', str(png),
+                   '--json')
+    assert result.returncode == 0, result.stderr
+    data = json.loads(result.stdout)
+    assert data['estimate']['converged']
+    np.testing.assert_allclose(data['tip_position'], shape.tip_position, atol=1e-6)
+    np.testing.assert_allclose(data['cable_lengths'], lengths, atol=1e-8)
+    assert png.read_bytes().startswith(PNG_SIGNATURE) and png.stat().st_size > 20000
+
+
+@pytest.mark.skipif(not hasattr(Robot, 'solve_tensions'), reason='core without solve_tensions')
+def test_tensions_bend_toward_the_pulled_cable():
+    result = solve('--tensions', '2.0', '0', '0', '0', '--json')
+    assert result.returncode == 0, result.stderr
+    data = json.loads(result.stdout)
+    # cable_0 runs at +x in the rod's frame (= base frame here): pulling it bends the tip to +x
+    # and shortens it the most.
+    assert data['tip_position'][0] > 0.01
+    assert np.argmin(data['cable_lengths']) == 0
+    slack = json.loads(solve('--json').stdout)
+    assert slack['tip_position'] != data['tip_position']
+
+
+def test_human_output_names_the_cables():
+    result = solve('--tip-force', '0', '0', '-0.1')
+    assert result.returncode == 0, result.stderr
+    assert 'cable lengths' in result.stdout and 'cable_3=' in result.stdout
+
+
+@pytest.mark.parametrize('option', ['--tensions', '--cable-lengths'])
+def test_wrong_number_of_cable_values_is_a_clear_error(option):
+    result = solve(option, '0.3', '0.3')
+    assert result.returncode == 1
+    assert '%s needs 4 values, one per cable (cable_0, cable_1, cable_2, cable_3), got 2' % (
+        option) in result.stderr
