@@ -1,14 +1,17 @@
 """Start statics, tip_controller and cable_driver on a robot computer (ROS 2 Jazzy or Kilted).
 
 ``ros2 launch continuum_statics continuum_robot.launch.py [robot_file:=FILE] [driver:=sim]
-[namespace:=continuum] [params_file:=FILE]``
+[namespace:=continuum] [params_file:=FILE] [rviz:=true]``
 
 Each node runs as its own process from the package's executables; all read ``params_file``
 (default: the package's ``config/continuum_robot.params.yaml``), then ``robot_file`` and, for the
-driver, ``driver`` override the file. Without ROS installed, ``python -m continuum_statics
-bringup`` starts the same nodes in one process.
+driver, ``driver`` override the file. ``rviz:=true`` also starts rviz2 (install
+``ros-<distro>-rviz2``) in the same namespace with the package's ``config/continuum_robot.rviz``
+(backbone Path, tip pose, markers; fixed frame base_link). Without ROS installed,
+``python -m continuum_statics bringup`` starts the same nodes in one process.
 """
 from launch.actions import DeclareLaunchArgument
+from launch.conditions import IfCondition
 from launch.launch_description import LaunchDescription
 from launch.substitutions import LaunchConfiguration, PathJoinSubstitution
 from launch_ros.actions import Node
@@ -16,7 +19,7 @@ from launch_ros.substitutions import FindPackageShare
 
 PACKAGE = 'continuum_statics'
 EXECUTABLES = ('statics', 'tip_controller', 'cable_driver')
-CONFIG_FILES = ('tendon_robot.yaml', 'continuum_robot.params.yaml')
+CONFIG_FILES = ('tendon_robot.yaml', 'continuum_robot.params.yaml', 'continuum_robot.rviz')
 
 
 def generate_launch_description():
@@ -37,6 +40,8 @@ def generate_launch_description():
         DeclareLaunchArgument('params_file',
                               default_value=PathJoinSubstitution([config, CONFIG_FILES[1]]),
                               description='node parameters (ros__parameters layout)'),
+        DeclareLaunchArgument('rviz', default_value='false',
+                              description='true: also start rviz2 (continuum_robot.rviz)'),
     ]
     nodes = []
     for executable in EXECUTABLES:
@@ -46,4 +51,7 @@ def generate_launch_description():
         nodes.append(Node(package=PACKAGE, executable=executable, name=executable,
                           namespace=namespace, parameters=[params_file, overrides],
                           output='screen', emulate_tty=True))
+    nodes.append(Node(package='rviz2', executable='rviz2', name='rviz2', namespace=namespace,
+                      arguments=['-d', PathJoinSubstitution([config, CONFIG_FILES[2]])],
+                      condition=IfCondition(LaunchConfiguration('rviz')), output='screen'))
     return LaunchDescription(arguments + nodes)
