@@ -93,7 +93,7 @@ def test_estimation_round_trip_recovers_tip(u0):
     assert cold.residual < 1e-8
     # warm start from a nearby estimate, as the node does every cycle
     nearby = robot.estimate_shape(lengths + 1e-3 * np.array([1, -1, -1, 1]) / 2, force)
-    warm = robot.estimate_shape(lengths, force, u0_guess=nearby.u0)
+    warm = robot.estimate_shape(lengths, force, warm_start=nearby)
     assert warm.converged
     assert np.linalg.norm(warm.shape.tip_position - truth.tip_position) < 1e-6
     assert warm.iterations <= cold.iterations

@@ -1,10 +1,11 @@
-"""Boundary-value problem by shooting on the base bending u(0) (paper section III.E).
+"""Boundary-value problems with known loads, by shooting on the base bending u(0) (sec. III.E).
 
-The IVP from the base gives a tip moment m(L) = R(L) C u(L); Newton's method with a
-finite-difference Jacobian (one batched kernel call per iteration) and a backtracking line search
-drives m(L) - tau to zero. When a direct solve fails (very large loads from a poor start), the
-loads are applied in increasing fractions (load continuation), each solve warm-started from the
-previous one.
+The cable loads (section moments and/or tensions) and the tip load are given; the IVP from the
+base yields the tip moment balance (M(L) minus the external tip moment, three equations), and
+Newton's method with a finite-difference Jacobian (one batched kernel call per iteration) and a
+backtracking line search drives it to zero. When a direct solve fails (very large loads from a
+poor start), all loads, gravity included, are applied in increasing fractions (load continuation),
+each solve warm-started from the previous one.
 """
 import numpy as np
 
@@ -15,86 +16,108 @@ class ConvergenceError(RuntimeError):
     """A solver did not reach its tolerance within its iteration limit."""
 
 
-def linear_guess(robot, tip_force, tip_moment, body_force=None):
+def linear_guess(robot, tip_force, tip_moment, body_force=None, loads=None, fixed=None):
     """u(0) that balances the loads on the straight rod: the small-deflection solution.
 
-    m(0) = tau + L d x F + (L^2 / 2) d x f for a straight rod along d (eqs. 3, 5 integrated).
+    m(0) = tau + L d x F + (L^2 / 2) d x f for a straight rod along d (eqs. 3, 5 integrated),
+    plus the cables' moments, which the straight rod carries unchanged down to the base.
     """
     body_force = robot.body_force if body_force is None else body_force
     axis = robot.base_rotation[:, 2]
     length = robot.length
     base_moment = (tip_moment + length * np.cross(axis, tip_force)
                    + 0.5 * length ** 2 * np.cross(axis, body_force))
-    return (robot.base_rotation.T @ base_moment) / robot.c
+    local = robot.base_rotation.T @ base_moment
+    if loads is not None and len(robot.cable_names):
+        moments, tensions = robot.loads(loads, fixed)
+        local = local + moments.sum(axis=0)
+        if robot.cable_model == 'distributed':  # tensions act on the cross-section: t (e3 x l)
+            local = local + np.cross([0.0, 0.0, 1.0], robot.cable_offsets).T @ tensions
+    return local / robot.c
 
 
-def _newton(robot, params, tip_force, tip_moment, u0):
-    """Shooting from ``u0``; returns (u0, converged, iterations)."""
+def _newton(robot, params, loads, fixed, tip_force, tip_moment):
+    """Shooting on ``loads[:3]`` = u(0) with the rest of the state held; (state, converged)."""
     settings = robot.solver
-    scale = robot.length / robot.c[0]  # tip moment (N m) -> change of tip angle (rad)
-    h = robot.bending_step()
-    forces = np.tile(tip_force, (4, 1))
-    offsets = np.vstack([np.zeros(3), h * np.eye(3)])
+    n_cables = len(robot.cable_names)
+    balance = slice(6 + n_cables, 9 + n_cables)
+    state = np.array(loads, dtype=float)
 
-    def residuals(bendings):
-        tips = robot.integrate(forces[:len(bendings)], bendings, params)[:, -1]
-        rot = tips[:, 3:12].reshape(-1, 3, 3)
-        moments = np.einsum('bij,bj->bi', rot, robot.c * tips[:, 15:18])
-        return (moments - tip_moment) * scale
+    def residual(x):
+        values, jac, _ = robot.probe(x, 3, tip_force, tip_moment, fixed, params)
+        return values[balance], jac[balance]
 
-    res = residuals(u0 + offsets)
-    for iteration in range(1, settings.max_iterations + 1):
-        error = np.linalg.norm(res[0])
+    res, jac = residual(state)
+    for _ in range(settings.max_iterations):
+        error = np.linalg.norm(res)
         if not np.isfinite(error):
-            return u0, False, iteration
+            return state, False
         if error <= settings.bvp_tolerance:
-            return u0, True, iteration
-        jac = (res[1:] - res[0]).T / h
+            return state, True
         try:
-            step = -np.linalg.solve(jac, res[0])
+            step = -np.linalg.solve(jac, res)
         except np.linalg.LinAlgError:
-            step = -np.linalg.lstsq(jac, res[0], rcond=None)[0]
-        # backtracking on |residual|^2 (Armijo); each trial is a full batched evaluation
+            step = -np.linalg.lstsq(jac, res, rcond=None)[0]
+        # backtracking on |residual|^2 (Armijo); each trial is one batched evaluation
         alpha = 1.0
         for _ in range(12):
-            trial = u0 + alpha * step
-            trial_res = residuals(trial + offsets)
-            if np.linalg.norm(trial_res[0]) <= (1.0 - 1e-4 * alpha) * error:
+            trial = state.copy()
+            trial[:3] += alpha * step
+            trial_res, trial_jac = residual(trial)
+            if np.linalg.norm(trial_res) <= (1.0 - 1e-4 * alpha) * error:
                 break
             alpha *= 0.5
         else:
-            return u0, False, iteration
-        u0, res = trial, trial_res
-    return u0, np.linalg.norm(res[0]) <= settings.bvp_tolerance, settings.max_iterations
+            return state, False
+        state, res, jac = trial, trial_res, trial_jac
+    return state, bool(np.linalg.norm(res) <= settings.bvp_tolerance)
 
 
-def solve_bvp(robot, tip_force, tip_moment, u0_guess=None):
-    """u(0) (1/m) such that the rod carries the tip force F and tip moment tau (global frame).
+def solve_fixed_loads(robot, loads, fixed, tip_force, tip_moment):
+    """Direct shooting from ``loads[:3]``; returns (state, converged). Never raises."""
+    return _newton(robot, robot.params, loads, fixed, tip_force, tip_moment)
 
-    Direct Newton from ``u0_guess`` (default: the small-deflection solution); on failure, load
-    continuation in 4, 16 then 64 increments of F, tau and gravity from the unloaded rod.
+
+def solve_loaded(robot, loads, fixed, tip_force, tip_moment, start=None):
+    """Solver state (u(0) solved, cable loads from ``loads[3:]`` and ``fixed``) at equilibrium.
+
+    :param loads: solver state whose section-moment coordinates are held (u(0) is ignored)
+    :param fixed: cable tensions (N) or None
+    :param start: state whose u(0) starts the Newton iteration (default the linear guess)
+    :raises ConvergenceError: no convergence, even with load continuation in 64 increments
     """
-    start = linear_guess(robot, tip_force, tip_moment) if u0_guess is None else u0_guess
-    u0, converged, _ = _newton(robot, robot.params, tip_force, tip_moment, start)
+    loads = np.array(loads, dtype=float)
+    fixed = robot._fixed(fixed)
+    if start is not None:
+        loads[:3] = start[:3]
+    else:
+        loads[:3] = linear_guess(robot, tip_force, tip_moment, loads=loads, fixed=fixed)
+    state, converged = _newton(robot, robot.params, loads, fixed, tip_force, tip_moment)
     if converged:
-        return u0
+        return state
     for increments in (4, 16, 64):
-        u0 = np.zeros(3)
+        state = np.zeros_like(loads)
         for k in range(1, increments + 1):
             fraction = k / increments
             body_force = fraction * robot.body_force
             params = pack_params(robot.c, robot.d, body_force, robot.base_position,
                                  robot.base_rotation)
+            step_loads = fraction * loads
             force, moment = fraction * tip_force, fraction * tip_moment
             if k == 1:
-                u0 = linear_guess(robot, force, moment, body_force)
-            u0, converged, _ = _newton(robot, params, force, moment, u0)
+                step_loads[:3] = linear_guess(robot, force, moment, body_force, step_loads,
+                                              fraction * fixed)
+            else:
+                step_loads[:3] = state[:3]
+            state, converged = _newton(robot, params, step_loads, fraction * fixed, force,
+                                       moment)
             if not converged:
                 break
         if converged:
-            return u0
+            return state
     raise ConvergenceError(
-        'BVP did not converge for tip force %s N and tip moment %s N m (tolerance %g, %d '
-        'iterations, continuation up to 64 increments)'
+        'BVP did not converge for tip force %s N, tip moment %s N m and cable loads %s '
+        '(tolerance %g, %d iterations, continuation up to 64 increments)'
         % (np.round(tip_force, 6).tolist(), np.round(tip_moment, 6).tolist(),
-           robot.solver.bvp_tolerance, robot.solver.max_iterations))
+           np.round(robot.loads(loads, fixed)[1], 4).tolist(), robot.solver.bvp_tolerance,
+           robot.solver.max_iterations))

@@ -1,10 +1,12 @@
-"""Shape estimation: measured cable lengths and a tip force -> u(0) -> shape (paper sec. V.A).
+"""Shape estimation: measured cable lengths (and tensions) + tip load -> shape (paper sec. V.A).
 
-Unknown: the base bending u(0). Equations: the model's cable lengths (eq. 11) match the
-measurements in the least-squares sense, and the tip moment has no component the cables cannot
-apply (:attr:`Robot.free_moment_basis`): no twisting moment about the backbone, and no bending
-about an axis the cable holes do not span, so unobservable bending stays at the passive
-equilibrium instead of being fixed by an arbitrary regulariser.
+Unknowns: the solver state x = [u(0); each section's cable moment in the span its cables can
+apply] (:mod:`continuum_statics.core.robot`). Equations: the model's cable lengths (eq. 11) match
+the measurements in the least-squares sense, subject to the tip moment balance (three equations).
+Cables cannot twist the rod and can only bend it about axes their holes span, so unobservable
+bending stays at the passive equilibrium instead of being fixed by an arbitrary regulariser.
+With measured tensions the shape is the forward statics of those tensions (the lengths then only
+measure how well model and measurement agree).
 """
 from dataclasses import dataclass
 
@@ -15,17 +17,20 @@ from continuum_statics.core.inputs import as_vector
 from continuum_statics.core.least_squares import constrained_gauss_newton
 from continuum_statics.core.shape import Shape
 
+#: RMS length residual (m) above which an estimate says in its message that it is a best fit.
+BEST_FIT_NOTE = 1e-6
+
 
 @dataclass(frozen=True, eq=False)
 class ShapeEstimate:
     """Result of :func:`estimate_shape`.
 
-    :ivar shape: estimated backbone
+    :ivar shape: estimated backbone (its ``state`` warm-starts the next estimate)
     :ivar u0: estimated base bending (1/m)
-    :ivar converged: the solver reached a stationary point with the constraints satisfied
+    :ivar converged: the solver reached a stationary point with the tip balance satisfied
     :ivar residual: RMS difference between model and measured cable lengths (m)
-    :ivar iterations: Gauss-Newton iterations used
-    :ivar observable_bending: number of bending directions the cables observe (0, 1 or 2)
+    :ivar iterations: Gauss-Newton (or shooting) iterations used
+    :ivar observable_bending: bending directions the cables observe (2 per section at most)
     :ivar message: what limited the estimate, empty when nothing did
     """
 
@@ -37,42 +42,73 @@ class ShapeEstimate:
     observable_bending: int
     message: str
 
+    @property
+    def state(self):
+        """Solver state x of the estimate."""
+        return self.shape.state
 
-def estimate_shape(robot, cable_lengths, tip_force=(0.0, 0.0, 0.0), u0_guess=None,
-                   tip_moment=(0.0, 0.0, 0.0)):
+
+def estimate_shape(robot, cable_lengths, tip_force=(0.0, 0.0, 0.0), tip_moment=(0.0, 0.0, 0.0),
+                   tensions=None, start=None):
     """Estimate the shape from measured cable lengths (m, ``robot.cable_names`` order).
 
-    ``tip_force`` (N) and ``tip_moment`` (N m) are the external tip load in the base frame; the
-    cables add to the moment. Damped Gauss-Newton from ``u0_guess`` (the previous estimate when
+    ``tip_force`` (N) and ``tip_moment`` (N m) are the external tip load in the base frame.
+    ``tensions`` (N, >= 0) when measured; ``start`` a solver state (the previous estimate when
     tracking; default the small-deflection passive solution).
     """
     n_cables = len(robot.cable_names)
     measured = as_vector(cable_lengths, n_cables, 'cable_lengths')
     tip_force = as_vector(tip_force, 3, 'tip_force')
     tip_moment = as_vector(tip_moment, 3, 'tip_moment')
-    if u0_guess is None:
-        u0_guess = bvp.linear_guess(robot, tip_force, tip_moment)
-    u0_guess = as_vector(u0_guess, 3, 'u0_guess')
+    observable = robot.observable_bending
+    notes = []
+    if observable < 2 * max(len(robot.sections), 1) and n_cables:
+        notes.append('%d cable(s) observe %d of %d bending directions; the rest is held at the '
+                     'passive equilibrium' % (n_cables, observable, 2 * len(robot.sections)))
+    if tensions is not None:
+        tensions = as_vector(tensions, n_cables, 'tensions')
+        if np.any(tensions < 0.0):
+            raise ValueError('tensions must be >= 0 N, got %s' % np.round(tensions, 6).tolist())
+        try:
+            state = bvp.solve_loaded(robot, robot.passive_state(), tensions, tip_force,
+                                     tip_moment, start)
+            converged = True
+        except bvp.ConvergenceError as error:
+            state, converged = robot.passive_state(), False
+            notes.insert(0, str(error))
+        states = robot.integrate_state(state, tip_force, tensions)
+        shape = robot.make_shape(state, tip_force, states, tensions)
+        residual = _rms(robot.cable_lengths(shape) - measured)
+        notes.insert(0, 'shape from the measured tensions')
+        return _result(shape, converged, residual, 0, observable, notes)
 
-    cables = slice(3, 3 + n_cables)
-    free = slice(3 + n_cables, None)
+    if start is None:
+        start = robot.passive_state(bvp.linear_guess(robot, tip_force, tip_moment))
+    cables = slice(6, 6 + n_cables)
+    balance = slice(6 + n_cables, 9 + n_cables)
+    size = robot.state_size
 
     def evaluate(x):
-        values, jac, states = robot.probe(x, tip_force, tip_moment)
-        return values[cables] - measured, jac[cables], values[free], jac[free], states
+        values, jac, states = robot.probe(x, size, tip_force, tip_moment)
+        return values[cables] - measured, jac[cables], values[balance], jac[balance], states
 
     result = constrained_gauss_newton(
-        evaluate, u0_guess, robot.solver.max_iterations, robot.solver.estimate_tolerance,
-        constraint_weight=robot.length ** 2 / robot.c[0])
-    observable = 3 - robot.free_moment_basis.shape[1]
-    message = ''
-    if observable < 2:
-        message = ('%d cable(s) observe %d of 2 bending directions; the rest is held at the '
-                   'passive equilibrium' % (n_cables, observable))
+        evaluate, start, robot.solver.max_iterations, robot.solver.estimate_tolerance,
+        constraint_weight=robot.length)
+    residual = _rms(result.residual)
     if not result.stationary:
-        message = ('not converged in %d iterations; ' % result.iterations + message).rstrip('; ')
-    residual = float(np.sqrt(np.mean(result.residual ** 2))) if n_cables else 0.0
-    shape = robot._shape(result.x, tip_force, result.evaluation)
-    return ShapeEstimate(shape=shape, u0=result.x, converged=result.stationary,
-                         residual=residual, iterations=result.iterations,
-                         observable_bending=observable, message=message)
+        notes.insert(0, 'not converged in %d iterations' % result.iterations)
+    if residual > BEST_FIT_NOTE:
+        notes.insert(0, 'best fit: the lengths fit no shape to RMS %.3g m' % residual)
+    shape = robot.make_shape(result.x, tip_force, result.evaluation)
+    return _result(shape, result.stationary, residual, result.iterations, observable, notes)
+
+
+def _rms(values):
+    return float(np.sqrt(np.mean(values ** 2))) if len(values) else 0.0
+
+
+def _result(shape, converged, residual, iterations, observable, notes):
+    return ShapeEstimate(shape=shape, u0=shape.u0, converged=bool(converged), residual=residual,
+                         iterations=iterations, observable_bending=observable,
+                         message='; '.join(notes))

@@ -1,27 +1,38 @@
-"""Compiled fixed-step integration of the Cosserat rod initial-value problem (paper Table I).
+"""Compiled integration of the Cosserat rod with cable loads (paper Table I; R&W 2011).
 
-State along the arc length s (unstretched, m), all in SI units:
-  r (3)    backbone position, global frame                 r' = R v          (eq. 1)
-  R (3x3)  orientation, local -> global                    R' = R hat(u)     (eq. 2)
-  v - e3   local shear/stretch strain (3)                  v' from eq. 8
-  u (3)    local bending/twist strain, 1/m                 u' from eq. 9
-with the initial stretch v(0) from the base force balance (eq. 10). The kernel stores v - e3
-rather than v: it is what n = D (v - e3) needs, and v itself would lose five of its sixteen
-digits to the 1 of the unstretched rod (axial strains are ~1e-5), which limited the BVP's
-attainable tip-moment residual.
+State along the unstretched arc length s (m), SI units:
+  r (3)    backbone position, global frame               r' = R v          (eq. 1)
+  R (3x3)  orientation, local -> global                  R' = R hat(u)     (eq. 2)
+  M (3)    moment of every load beyond s about r(s): external (tip, gravity) and, for the
+           distributed cable model, the cables' own tension (global)   M' = -r' x N
+with N(s) = F + f (L - s) the force of the tip load F and the weight f beyond s (eqs. 3, 4 and 10
+integrated: no cable term, because a cable's pull on its end disk and its pressure along the
+backbone are internal to the rod-and-cable system). The strains follow algebraically from the
+constitutive laws (eqs. 6, 7):
+  point_moment (the paper):  C u = R^T M,  D (v - e3) = R^T N;  the cables of a section add a
+                             point moment t_j R (e3 x l_j) at its end disk, where M jumps
+  distributed (R&W 2011):    C u = R^T M - sum_j t_j l_j x tau_j,
+                             D (v - e3) = R^T N - sum_j t_j tau_j
+                             over the cables passing s, tau_j = (v + u x l_j) / |v + u x l_j| the
+                             cable's local tangent (straight routing), by a few Newton steps.
 
-The scheme is the classical fourth-order Runge-Kutta method on the 18 state components,
-followed each step by one Newton step of the polar decomposition, R <- R (3 I - R^T R) / 2, which
-pulls R back onto SO(3) without changing the order (the drift it removes is O(h^5)).
+The frame is integrated on SE(3) by the fourth-order Runge-Kutta-Munthe-Kaas method: the classical
+RK4 tableau applied to the twist (v, u) in the Lie algebra with dexp^-1 truncated after the double
+commutator, then (r, R) <- (r, R) exp(Theta). A segment of constant strain (a circular arc or
+helix) is therefore integrated exactly at any step count; M is integrated by the same RK4 stages.
 
-Everything is written with scalars and small preallocated arrays so numba compiles it to tight
-loops; ``cache=True`` keeps the machine code on disk between processes.
+Output node layout (STATE_SIZE = 21): r (3), R row-major (9), v - e3 (3), u (3) (both the left
+limit at the node), M (3) after any point moment at the node. v - e3 is kept rather than v because
+axial strains are ~1e-5. Everything is scalar code over preallocated arrays so numba compiles it
+to tight loops; ``cache=True`` keeps the machine code on disk between processes.
 """
+import math
+
 import numba
 import numpy as np
 
-STATE_SIZE = 18  # r (3), R row-major (9), v - e3 (3), u (3)
-
+STATE_SIZE = 21
+POINT_MOMENT, DISTRIBUTED = 0, 1
 
 # Layout of the ``params`` vector (see :func:`pack_params`).
 _C, _C_INV, _D, _D_INV, _F_BODY, _R0, _ROT0 = 0, 3, 6, 9, 12, 15, 18
@@ -43,240 +54,599 @@ def pack_params(c, d, f_body, r0, rot0):
 
 
 @numba.njit(cache=True, inline='always')
-def _derivative(y, p, out):
-    """Right-hand side of eqs. 1, 2, 8, 9 for the state ``y``; writes ``out``."""
-    c0, c1, c2 = p[_C], p[_C + 1], p[_C + 2]
-    d0, d1, d2 = p[_D], p[_D + 1], p[_D + 2]
-    f0, f1, f2 = p[_F_BODY], p[_F_BODY + 1], p[_F_BODY + 2]
-    r00, r01, r02 = y[3], y[4], y[5]
-    r10, r11, r12 = y[6], y[7], y[8]
-    r20, r21, r22 = y[9], y[10], y[11]
-    w0, w1, w2 = y[12], y[13], y[14]  # v - e3
-    v0, v1, v2 = w0, w1, w2 + 1.0
-    u0, u1, u2 = y[15], y[16], y[17]
-    # eq. 1: r' = R v
-    out[0] = r00 * v0 + r01 * v1 + r02 * v2
-    out[1] = r10 * v0 + r11 * v1 + r12 * v2
-    out[2] = r20 * v0 + r21 * v1 + r22 * v2
-    # eq. 2: R' = R hat(u); column j of R hat(u) is R times column j of hat(u)
-    out[3] = u2 * r01 - u1 * r02
-    out[4] = -u2 * r00 + u0 * r02
-    out[5] = u1 * r00 - u0 * r01
-    out[6] = u2 * r11 - u1 * r12
-    out[7] = -u2 * r10 + u0 * r12
-    out[8] = u1 * r10 - u0 * r11
-    out[9] = u2 * r21 - u1 * r22
-    out[10] = -u2 * r20 + u0 * r22
-    out[11] = u1 * r20 - u0 * r21
-    # local internal force n^l = D (v - e3) (eq. 6) and moment m^l = C u (eq. 7)
-    n0 = d0 * w0
-    n1 = d1 * w1
-    n2 = d2 * w2
-    m0 = c0 * u0
-    m1 = c1 * u1
-    m2 = c2 * u2
-    # local body force R^T f
-    fl0 = r00 * f0 + r10 * f1 + r20 * f2
-    fl1 = r01 * f0 + r11 * f1 + r21 * f2
-    fl2 = r02 * f0 + r12 * f1 + r22 * f2
-    # eq. 8: v' = D^-1 (-R^T f - u x n^l)
-    out[12] = (-fl0 - (u1 * n2 - u2 * n1)) * p[_D_INV]
-    out[13] = (-fl1 - (u2 * n0 - u0 * n2)) * p[_D_INV + 1]
-    out[14] = (-fl2 - (u0 * n1 - u1 * n0)) * p[_D_INV + 2]
-    # eq. 9: u' = C^-1 (-u x m^l - v x n^l)
-    out[15] = (-(u1 * m2 - u2 * m1) - (v1 * n2 - v2 * n1)) * p[_C_INV]
-    out[16] = (-(u2 * m0 - u0 * m2) - (v2 * n0 - v0 * n2)) * p[_C_INV + 1]
-    out[17] = (-(u0 * m1 - u1 * m0) - (v0 * n1 - v1 * n0)) * p[_C_INV + 2]
+def _so3_exp(w0, w1, w2, out):
+    """Rodrigues: out (9, row-major) = exp(hat(w))."""
+    t2 = w0 * w0 + w1 * w1 + w2 * w2
+    if t2 < 1e-6:
+        a = 1.0 - t2 / 6.0 * (1.0 - t2 / 20.0)
+        b = 0.5 - t2 / 24.0 * (1.0 - t2 / 30.0)
+    else:
+        t = math.sqrt(t2)
+        a = math.sin(t) / t
+        half = math.sin(0.5 * t) / t
+        b = 2.0 * half * half
+    out[0] = 1.0 - b * (w1 * w1 + w2 * w2)
+    out[1] = -a * w2 + b * w0 * w1
+    out[2] = a * w1 + b * w0 * w2
+    out[3] = a * w2 + b * w0 * w1
+    out[4] = 1.0 - b * (w0 * w0 + w2 * w2)
+    out[5] = -a * w0 + b * w1 * w2
+    out[6] = -a * w1 + b * w0 * w2
+    out[7] = a * w0 + b * w1 * w2
+    out[8] = 1.0 - b * (w0 * w0 + w1 * w1)
 
 
 @numba.njit(cache=True, inline='always')
-def _orthonormalise(y):
-    """One Newton step of the polar decomposition on the rotation block of ``y`` (in place).
+def _se3_translation(rho, w, out):
+    """Out (3) = V(w) rho, the translation of exp((rho, w)) with V = I + b hat(w) + c hat(w)^2."""
+    t2 = w[0] * w[0] + w[1] * w[1] + w[2] * w[2]
+    if t2 < 1e-6:
+        b = 0.5 - t2 / 24.0 * (1.0 - t2 / 30.0)
+        c = 1.0 / 6.0 - t2 / 120.0 * (1.0 - t2 / 42.0)
+    else:
+        t = math.sqrt(t2)
+        half = math.sin(0.5 * t) / t
+        b = 2.0 * half * half
+        c = (t - math.sin(t)) / (t2 * t)
+    x0 = w[1] * rho[2] - w[2] * rho[1]  # w x rho
+    x1 = w[2] * rho[0] - w[0] * rho[2]
+    x2 = w[0] * rho[1] - w[1] * rho[0]
+    y0 = w[1] * x2 - w[2] * x1  # w x (w x rho)
+    y1 = w[2] * x0 - w[0] * x2
+    y2 = w[0] * x1 - w[1] * x0
+    out[0] = rho[0] + b * x0 + c * y0
+    out[1] = rho[1] + b * x1 + c * y1
+    out[2] = rho[2] + b * x2 + c * y2
 
-    R <- 1.5 R - 0.5 R (R^T R); written with scalars so no array is allocated per step.
-    """
-    a00, a01, a02 = y[3], y[4], y[5]
-    a10, a11, a12 = y[6], y[7], y[8]
-    a20, a21, a22 = y[9], y[10], y[11]
-    g00 = a00 * a00 + a10 * a10 + a20 * a20
-    g11 = a01 * a01 + a11 * a11 + a21 * a21
-    g22 = a02 * a02 + a12 * a12 + a22 * a22
-    g01 = a00 * a01 + a10 * a11 + a20 * a21
-    g02 = a00 * a02 + a10 * a12 + a20 * a22
-    g12 = a01 * a02 + a11 * a12 + a21 * a22
-    y[3] = 1.5 * a00 - 0.5 * (a00 * g00 + a01 * g01 + a02 * g02)
-    y[4] = 1.5 * a01 - 0.5 * (a00 * g01 + a01 * g11 + a02 * g12)
-    y[5] = 1.5 * a02 - 0.5 * (a00 * g02 + a01 * g12 + a02 * g22)
-    y[6] = 1.5 * a10 - 0.5 * (a10 * g00 + a11 * g01 + a12 * g02)
-    y[7] = 1.5 * a11 - 0.5 * (a10 * g01 + a11 * g11 + a12 * g12)
-    y[8] = 1.5 * a12 - 0.5 * (a10 * g02 + a11 * g12 + a12 * g22)
-    y[9] = 1.5 * a20 - 0.5 * (a20 * g00 + a21 * g01 + a22 * g02)
-    y[10] = 1.5 * a21 - 0.5 * (a20 * g01 + a21 * g11 + a22 * g12)
-    y[11] = 1.5 * a22 - 0.5 * (a20 * g02 + a21 * g12 + a22 * g22)
+
+@numba.njit(cache=True, inline='always')
+def _matmul9(a, b, out):
+    """Out = a b for row-major 3x3 matrices stored as 9-vectors."""
+    for i in range(3):
+        for j in range(3):
+            out[3 * i + j] = (a[3 * i] * b[j] + a[3 * i + 1] * b[3 + j]
+                              + a[3 * i + 2] * b[6 + j])
 
 
 @numba.njit(cache=True)
-def integrate_batch(s_grid, params, tip_forces, base_bendings):
+def _strain(rot, moment, force, p, model, tensions, offsets, active, u, w):
+    """Strains u (1/m) and v - e3 at a cross-section from the moment M and force N beyond it.
+
+    ``u`` and ``w`` hold the previous values on entry (the start of the Newton iteration of the
+    distributed model) and the result on exit; ``active[j]`` says whether cable j passes here.
+    """
+    ml0 = rot[0] * moment[0] + rot[3] * moment[1] + rot[6] * moment[2]  # R^T M
+    ml1 = rot[1] * moment[0] + rot[4] * moment[1] + rot[7] * moment[2]
+    ml2 = rot[2] * moment[0] + rot[5] * moment[1] + rot[8] * moment[2]
+    nl0 = rot[0] * force[0] + rot[3] * force[1] + rot[6] * force[2]  # R^T N
+    nl1 = rot[1] * force[0] + rot[4] * force[1] + rot[7] * force[2]
+    nl2 = rot[2] * force[0] + rot[5] * force[1] + rot[8] * force[2]
+    any_active = False
+    if model == DISTRIBUTED:
+        for j in range(active.shape[0]):
+            if active[j] and tensions[j] != 0.0:
+                any_active = True
+    if not any_active:  # eqs. 6, 7 inverted
+        u[0] = ml0 * p[_C_INV]
+        u[1] = ml1 * p[_C_INV + 1]
+        u[2] = ml2 * p[_C_INV + 2]
+        w[0] = nl0 * p[_D_INV]
+        w[1] = nl1 * p[_D_INV + 1]
+        w[2] = nl2 * p[_D_INV + 2]
+        return
+    for _ in range(20):
+        sm0 = sm1 = sm2 = 0.0  # sum t l x tau
+        sn0 = sn1 = sn2 = 0.0  # sum t tau
+        k00 = p[_C]
+        k11 = p[_C + 1]
+        k22 = p[_C + 2]
+        k01 = k02 = k12 = 0.0
+        for j in range(active.shape[0]):
+            t = tensions[j]
+            if not active[j] or t == 0.0:
+                continue
+            l0, l1, l2 = offsets[j, 0], offsets[j, 1], offsets[j, 2]
+            q0 = w[0] + u[1] * l2 - u[2] * l1  # v + u x l
+            q1 = w[1] + u[2] * l0 - u[0] * l2
+            q2 = w[2] + 1.0 + u[0] * l1 - u[1] * l0
+            inv = 1.0 / math.sqrt(q0 * q0 + q1 * q1 + q2 * q2)
+            tau0, tau1, tau2 = q0 * inv, q1 * inv, q2 * inv
+            sm0 += t * (l1 * tau2 - l2 * tau1)
+            sm1 += t * (l2 * tau0 - l0 * tau2)
+            sm2 += t * (l0 * tau1 - l1 * tau0)
+            sn0 += t * tau0
+            sn1 += t * tau1
+            sn2 += t * tau2
+            # d(l x tau)/du ~ (|l|^2 I - l l^T) / |q| (the normalisation's share is second order)
+            s = t * inv
+            ll = l0 * l0 + l1 * l1 + l2 * l2
+            k00 += s * (ll - l0 * l0)
+            k11 += s * (ll - l1 * l1)
+            k22 += s * (ll - l2 * l2)
+            k01 -= s * l0 * l1
+            k02 -= s * l0 * l2
+            k12 -= s * l1 * l2
+        r0 = ml0 - p[_C] * u[0] - sm0
+        r1 = ml1 - p[_C + 1] * u[1] - sm1
+        r2 = ml2 - p[_C + 2] * u[2] - sm2
+        # solve the symmetric 3x3 system K du = r by its adjugate
+        a00 = k11 * k22 - k12 * k12
+        a01 = k02 * k12 - k01 * k22
+        a02 = k01 * k12 - k02 * k11
+        a11 = k00 * k22 - k02 * k02
+        a12 = k01 * k02 - k00 * k12
+        a22 = k00 * k11 - k01 * k01
+        det = k00 * a00 + k01 * a01 + k02 * a02
+        du0 = (a00 * r0 + a01 * r1 + a02 * r2) / det
+        du1 = (a01 * r0 + a11 * r1 + a12 * r2) / det
+        du2 = (a02 * r0 + a12 * r1 + a22 * r2) / det
+        u[0] += du0
+        u[1] += du1
+        u[2] += du2
+        w[0] = (nl0 - sn0) * p[_D_INV]
+        w[1] = (nl1 - sn1) * p[_D_INV + 1]
+        w[2] = (nl2 - sn2) * p[_D_INV + 2]
+        size = abs(u[0]) + abs(u[1]) + abs(u[2])
+        if abs(du0) + abs(du1) + abs(du2) <= 1e-14 * (1.0 + size):
+            break
+
+
+@numba.njit(cache=True, inline='always')
+def _cross_into(a0, a1, a2, b, out, k):
+    """out[k:k+3] = a x b."""
+    out[k] = a1 * b[2] - a2 * b[1]
+    out[k + 1] = a2 * b[0] - a0 * b[2]
+    out[k + 2] = a0 * b[1] - a1 * b[0]
+
+
+@numba.njit(cache=True)
+def _dexpinv(theta, xi, out, tmp):
+    """Out = dexp^-1_(-theta)(xi) on se(3), series truncated after the double commutator.
+
+    For g' = g hat(xi) (strains act in the body frame) and g = g_n exp(theta), theta' =
+    dexp^-1_(-theta)(xi) = xi + [theta, xi] / 2 + [theta, [theta, xi]] / 12 + ...
+    Twists are (rho, w) = (v, u) 6-vectors; [a, b] = (w_a x rho_b - w_b x rho_a, w_a x w_b).
+    """
+    # tmp = [theta, xi]
+    _cross_into(theta[3], theta[4], theta[5], xi[0:3], tmp, 0)
+    _cross_into(xi[3], xi[4], xi[5], theta[0:3], out, 0)
+    for i in range(3):
+        tmp[i] -= out[i]
+    _cross_into(theta[3], theta[4], theta[5], xi[3:6], tmp, 3)
+    # out = [theta, tmp]
+    _cross_into(theta[3], theta[4], theta[5], tmp[0:3], out, 0)
+    a0 = tmp[4] * theta[2] - tmp[5] * theta[1]
+    a1 = tmp[5] * theta[0] - tmp[3] * theta[2]
+    a2 = tmp[3] * theta[1] - tmp[4] * theta[0]
+    out[0] -= a0
+    out[1] -= a1
+    out[2] -= a2
+    _cross_into(theta[3], theta[4], theta[5], tmp[3:6], out, 3)
+    for i in range(6):
+        out[i] = xi[i] + 0.5 * tmp[i] + out[i] / 12.0
+
+
+@numba.njit(cache=True)
+def _base_stretch(rot, force, p, model, tensions, offsets, active, u, w):
+    """v(0) - e3 for a given u(0): D (v - e3) = R^T N - sum t tau(u, v), by fixed-point steps."""
+    nl0 = rot[0] * force[0] + rot[3] * force[1] + rot[6] * force[2]
+    nl1 = rot[1] * force[0] + rot[4] * force[1] + rot[7] * force[2]
+    nl2 = rot[2] * force[0] + rot[5] * force[1] + rot[8] * force[2]
+    w[0], w[1], w[2] = nl0 * p[_D_INV], nl1 * p[_D_INV + 1], nl2 * p[_D_INV + 2]
+    if model != DISTRIBUTED:
+        return
+    for _ in range(6):  # converges by a factor t / EA per step
+        sn0 = sn1 = sn2 = 0.0
+        for j in range(active.shape[0]):
+            t = tensions[j]
+            if not active[j] or t == 0.0:
+                continue
+            l0, l1, l2 = offsets[j, 0], offsets[j, 1], offsets[j, 2]
+            q0 = w[0] + u[1] * l2 - u[2] * l1
+            q1 = w[1] + u[2] * l0 - u[0] * l2
+            q2 = w[2] + 1.0 + u[0] * l1 - u[1] * l0
+            inv = t / math.sqrt(q0 * q0 + q1 * q1 + q2 * q2)
+            sn0 += inv * q0
+            sn1 += inv * q1
+            sn2 += inv * q2
+        w[0] = (nl0 - sn0) * p[_D_INV]
+        w[1] = (nl1 - sn1) * p[_D_INV + 1]
+        w[2] = (nl2 - sn2) * p[_D_INV + 2]
+
+
+@numba.njit(cache=True)
+def integrate_batch(s_grid, params, model, tip_forces, base_bendings, disk_moments, tensions,
+                    offsets, cable_end_node, section_end_node):
     """Integrate a batch of initial-value problems from base to tip.
 
     :param s_grid: (N,) node arc lengths, s_grid[0] = 0, s_grid[-1] = rod length (m)
     :param params: rod constants and base pose, from :func:`pack_params`
+    :param model: POINT_MOMENT or DISTRIBUTED
     :param tip_forces: (B, 3) tip force F per problem, global frame (N)
     :param base_bendings: (B, 3) u(0) per problem, local frame (1/m)
-    :returns: (B, N, 18) states: r (m), R row-major, v - e3, u (1/m) at every node
+    :param disk_moments: (B, S, 3) point moment at each section's end disk, local frame (N m)
+    :param tensions: (B, n_cables) cable tensions for the distributed model (N)
+    :param offsets: (n_cables, 3) hole positions in the local frame (m)
+    :param cable_end_node: (n_cables,) node of each cable's end disk
+    :param section_end_node: (S,) node of each section's end disk
+    :returns: (B, N, 21) states, layout in the module docstring
     """
     n_batch = base_bendings.shape[0]
     n_nodes = s_grid.shape[0]
+    n_cables = offsets.shape[0]
     length = s_grid[n_nodes - 1]
     states = np.empty((n_batch, n_nodes, STATE_SIZE))
-    tmp = np.empty(STATE_SIZE)
-    k1 = np.empty(STATE_SIZE)
-    k2 = np.empty(STATE_SIZE)
-    k3 = np.empty(STATE_SIZE)
-    k4 = np.empty(STATE_SIZE)
+    active = np.zeros(n_cables, dtype=np.bool_)
+    rot, rot_stage, expo = np.empty(9), np.empty(9), np.empty(9)
+    moment, moment_stage, force = np.empty(3), np.empty(3), np.empty(3)
+    u, w, trans = np.empty(3), np.empty(3), np.empty(3)
+    theta, xi, tmp, tmp2 = np.empty(6), np.empty(6), np.empty(6), np.empty(6)
+    k = np.empty((4, 6))
+    km = np.empty((4, 3))
+    stage_c = (0.0, 0.5, 0.5, 1.0)
     for b in range(n_batch):
+        tens = tensions[b]
         y = states[b, 0]
+        for i in range(9):
+            rot[i] = params[_ROT0 + i]
+            y[3 + i] = rot[i]
         for i in range(3):
             y[i] = params[_R0 + i]
-        for i in range(9):
-            y[3 + i] = params[_ROT0 + i]
-        # eq. 10: n(0) = F + rho*A*g*L*e_g, so v(0) - e3 = D^-1 R(0)^T n(0)
+            force[i] = tip_forces[b, i] + params[_F_BODY + i] * length  # eq. 10: n(0)
+            u[i] = base_bendings[b, i]
+        for j in range(n_cables):
+            active[j] = cable_end_node[j] >= 1
+        # v(0) for the given u(0) (eq. 10 with the cables' pull); M(0) then follows from u(0)
+        _base_stretch(rot, force, params, model, tens, offsets, active, u, w)
+        # M(0) = R(0) (C u(0) + sum t l x tau)
+        ml0, ml1, ml2 = params[_C] * u[0], params[_C + 1] * u[1], params[_C + 2] * u[2]
+        if model == DISTRIBUTED:
+            for j in range(n_cables):
+                t = tens[j]
+                if not active[j] or t == 0.0:
+                    continue
+                l0, l1, l2 = offsets[j, 0], offsets[j, 1], offsets[j, 2]
+                q0 = w[0] + u[1] * l2 - u[2] * l1
+                q1 = w[1] + u[2] * l0 - u[0] * l2
+                q2 = w[2] + 1.0 + u[0] * l1 - u[1] * l0
+                inv = t / math.sqrt(q0 * q0 + q1 * q1 + q2 * q2)
+                ml0 += inv * (l1 * q2 - l2 * q1)
+                ml1 += inv * (l2 * q0 - l0 * q2)
+                ml2 += inv * (l0 * q1 - l1 * q0)
         for i in range(3):
-            n_base = 0.0
-            for j in range(3):
-                n_base += params[_ROT0 + 3 * j + i] * (
-                    tip_forces[b, j] + params[_F_BODY + j] * length)
-            y[12 + i] = n_base * params[_D_INV + i]
-            y[15 + i] = base_bendings[b, i]
+            moment[i] = rot[3 * i] * ml0 + rot[3 * i + 1] * ml1 + rot[3 * i + 2] * ml2
+            y[12 + i] = w[i]
+            y[15 + i] = u[i]
+            y[18 + i] = moment[i]
         for node in range(1, n_nodes):
-            h = s_grid[node] - s_grid[node - 1]
-            y = states[b, node - 1]
-            _derivative(y, params, k1)
-            for i in range(STATE_SIZE):
-                tmp[i] = y[i] + 0.5 * h * k1[i]
-            _derivative(tmp, params, k2)
-            for i in range(STATE_SIZE):
-                tmp[i] = y[i] + 0.5 * h * k2[i]
-            _derivative(tmp, params, k3)
-            for i in range(STATE_SIZE):
-                tmp[i] = y[i] + h * k3[i]
-            _derivative(tmp, params, k4)
-            y_next = states[b, node]
-            for i in range(STATE_SIZE):
-                y_next[i] = y[i] + h / 6.0 * (k1[i] + 2.0 * (k2[i] + k3[i]) + k4[i])
-            _orthonormalise(y_next)
+            s0 = s_grid[node - 1]
+            h = s_grid[node] - s0
+            for j in range(n_cables):
+                active[j] = cable_end_node[j] >= node
+            for i in range(6):
+                theta[i] = 0.0
+            for stage in range(4):
+                if stage == 0:
+                    for i in range(9):
+                        rot_stage[i] = rot[i]
+                    for i in range(3):
+                        moment_stage[i] = moment[i]
+                else:
+                    scale = 1.0 if stage == 3 else 0.5
+                    for i in range(6):
+                        theta[i] = scale * k[stage - 1, i]
+                    _so3_exp(theta[3], theta[4], theta[5], expo)
+                    _matmul9(rot, expo, rot_stage)
+                    for i in range(3):
+                        moment_stage[i] = moment[i] + scale * km[stage - 1, i]
+                s = s0 + stage_c[stage] * h
+                for i in range(3):
+                    force[i] = tip_forces[b, i] + params[_F_BODY + i] * (length - s)
+                _strain(rot_stage, moment_stage, force, params, model, tens, offsets, active,
+                        u, w)
+                xi[0], xi[1], xi[2] = w[0], w[1], w[2] + 1.0
+                xi[3], xi[4], xi[5] = u[0], u[1], u[2]
+                if stage == 0:
+                    for i in range(6):
+                        k[0, i] = h * xi[i]
+                else:
+                    _dexpinv(theta, xi, tmp, tmp2)
+                    for i in range(6):
+                        k[stage, i] = h * tmp[i]
+                # M' = -r' x N with r' = R v
+                d0 = rot_stage[0] * xi[0] + rot_stage[1] * xi[1] + rot_stage[2] * xi[2]
+                d1 = rot_stage[3] * xi[0] + rot_stage[4] * xi[1] + rot_stage[5] * xi[2]
+                d2 = rot_stage[6] * xi[0] + rot_stage[7] * xi[1] + rot_stage[8] * xi[2]
+                km[stage, 0] = -h * (d1 * force[2] - d2 * force[1])
+                km[stage, 1] = -h * (d2 * force[0] - d0 * force[2])
+                km[stage, 2] = -h * (d0 * force[1] - d1 * force[0])
+            for i in range(6):
+                theta[i] = (k[0, i] + 2.0 * (k[1, i] + k[2, i]) + k[3, i]) / 6.0
+            for i in range(3):
+                moment[i] += (km[0, i] + 2.0 * (km[1, i] + km[2, i]) + km[3, i]) / 6.0
+            # (r, R) <- (r, R) exp(theta)
+            _se3_translation(theta[0:3], theta[3:6], trans)
+            _so3_exp(theta[3], theta[4], theta[5], expo)
+            prev = states[b, node - 1]
+            y = states[b, node]
+            for i in range(3):
+                y[i] = prev[i] + rot[3 * i] * trans[0] + rot[3 * i + 1] * trans[1] \
+                    + rot[3 * i + 2] * trans[2]
+            _matmul9(rot, expo, rot_stage)
+            for i in range(9):
+                rot[i] = rot_stage[i]
+                y[3 + i] = rot[i]
+            for i in range(3):
+                force[i] = tip_forces[b, i] + params[_F_BODY + i] * (length - s_grid[node])
+            _strain(rot, moment, force, params, model, tens, offsets, active, u, w)
+            if model == POINT_MOMENT:
+                for sec in range(section_end_node.shape[0]):
+                    if section_end_node[sec] == node:
+                        for i in range(3):
+                            moment[i] -= (rot[3 * i] * disk_moments[b, sec, 0]
+                                          + rot[3 * i + 1] * disk_moments[b, sec, 1]
+                                          + rot[3 * i + 2] * disk_moments[b, sec, 2])
+            for i in range(3):
+                y[12 + i] = w[i]
+                y[15 + i] = u[i]
+                y[18 + i] = moment[i]
     return states
 
 
 @numba.njit(cache=True)
-def cable_lengths_batch(positions, rotations, guide_nodes, offsets):
+def cable_lengths_batch(states, guide_nodes, offsets, cable_last_guide):
     """Cable lengths (B, n_cables) of a batch of shapes (paper eq. 11, errata applied).
 
-    A cable runs through its hole at every guide node, starting at the base disk: its length is
-    the sum of the straight distances between consecutive holes. ``guide_nodes`` are indices into
-    the shape's nodes, base disk (node 0) first; ``offsets`` (n_cables, 3) are the hole positions
-    in the rod's local frame (m).
+    A cable runs through its hole at every guide node from the base disk (guide 0, node 0) up to
+    and including its end disk ``guide_nodes[cable_last_guide[j]]``: its length is the sum of the
+    straight distances between consecutive holes. ``offsets`` (n_cables, 3) are the hole
+    positions in the rod's local frame (m).
     """
-    n_batch = positions.shape[0]
+    n_batch = states.shape[0]
     n_cables = offsets.shape[0]
     lengths = np.zeros((n_batch, n_cables))
     previous = np.empty(3)
     for b in range(n_batch):
         for j in range(n_cables):
-            for g in range(guide_nodes.shape[0]):
-                node = guide_nodes[g]
+            for g in range(cable_last_guide[j] + 1):
+                y = states[b, guide_nodes[g]]
                 total = 0.0
                 for i in range(3):
-                    hole = positions[b, node, i]
-                    for k in range(3):
-                        hole += rotations[b, node, i, k] * offsets[j, k]
+                    hole = y[i] + (y[3 + 3 * i] * offsets[j, 0] + y[4 + 3 * i] * offsets[j, 1]
+                                   + y[5 + 3 * i] * offsets[j, 2])
                     if g > 0:
                         total += (hole - previous[i]) ** 2
                     previous[i] = hole
                 if g > 0:
-                    lengths[b, j] += np.sqrt(total)
+                    lengths[b, j] += math.sqrt(total)
     return lengths
 
 
 @numba.njit(cache=True)
-def _perturbed(tip_force, base_bending, force_step, bending_step):
-    """Batch of 7 loads for forward differences: nominal, F + h e_k, then u(0) + h e_k.
+def _section_tensions(moment, cables, offsets, out):
+    """Least-norm tensions t >= 0 of one section's cables whose moments sum to ``moment``.
 
-    Rows 3..6 of the bendings pair with rows 0..3 of the forces for a u(0)-only batch.
+    The moment a cable applies is t (e3 x l) (local, in the cross-section plane); antagonistic
+    cables stay slack. Enumerates the supports: the optimum is the least-norm solution on its own
+    support, so the smallest feasible candidate is it. ``cables`` indexes ``offsets``; writes
+    ``out[cables]``. A moment no combination can apply gets the best clipped candidate.
     """
-    forces = np.empty((7, 3))
-    bendings = np.empty((7, 3))
-    for b in range(7):
-        for i in range(3):
-            forces[b, i] = tip_force[i]
-            bendings[b, i] = base_bending[i]
-    for k in range(3):
-        forces[1 + k, k] += force_step
-        bendings[4 + k, k] += bending_step
-    return forces, bendings
+    n = cables.shape[0]
+    for j in range(n):
+        out[cables[j]] = 0.0
+    b0, b1 = moment[0], moment[1]
+    if n == 0 or (b0 == 0.0 and b1 == 0.0):
+        return
+    best, best_miss = 1e300, 1e300
+    best_mask = 0
+    best_l0, best_l1 = 0.0, 0.0
+    scale = 0.0
+    for j in range(n):
+        scale = max(scale, offsets[cables[j], 0] ** 2 + offsets[cables[j], 1] ** 2)
+    for mask in range(1, 1 << n):
+        # Gram matrix of the arms a_j = e3 x l_j = (-l_y, l_x) on this support
+        g00 = g01 = g11 = 0.0
+        for j in range(n):
+            if mask & (1 << j):
+                a0, a1 = -offsets[cables[j], 1], offsets[cables[j], 0]
+                g00 += a0 * a0
+                g01 += a0 * a1
+                g11 += a1 * a1
+        det = g00 * g11 - g01 * g01
+        if det > 1e-12 * scale * scale:
+            l0 = (g11 * b0 - g01 * b1) / det
+            l1 = (g00 * b1 - g01 * b0) / det
+        else:  # arms in line: least-norm on their common direction
+            l0 = b0 / max(g00 + g11, 1e-300)
+            l1 = b1 / max(g00 + g11, 1e-300)
+        norm, miss, feasible = 0.0, 0.0, True
+        m0 = m1 = 0.0
+        for j in range(n):
+            if mask & (1 << j):
+                a0, a1 = -offsets[cables[j], 1], offsets[cables[j], 0]
+                t = a0 * l0 + a1 * l1
+                if t < 0.0:
+                    feasible = False
+                    t = 0.0
+                norm += t * t
+                m0 += t * a0
+                m1 += t * a1
+        miss = (m0 - b0) ** 2 + (m1 - b1) ** 2
+        tol = 1e-20 * (b0 * b0 + b1 * b1)
+        if feasible and miss <= tol:
+            miss = 0.0
+        if miss < best_miss - tol or (miss <= best_miss + tol and norm < best):
+            best, best_miss, best_mask = norm, miss, mask
+            best_l0, best_l1 = l0, l1
+    for j in range(n):
+        if best_mask & (1 << j):
+            a0, a1 = -offsets[cables[j], 1], offsets[cables[j], 0]
+            out[cables[j]] = max(0.0, a0 * best_l0 + a1 * best_l1)
 
 
 @numba.njit(cache=True)
-def probe(s_grid, params, tip_force, tip_moment, base_bending, step, guide_nodes, offsets,
-          free_basis):
-    """Tip position, cable lengths and free tip-moment components, with forward differences.
+def loads_from_state(x, fixed_tensions, model, bases, ranks, bending_stiffness, section_cables,
+                     section_cable_count, offsets, disk_moments, tensions):
+    """Section point moments and cable tensions of one solver state (in place).
 
-    One call integrates u(0) and u(0) + step * e_k (k = 0, 1, 2) and returns:
-    values (3 + n_cables + k,) = [tip position (m); cable lengths (m); the components along
-    ``free_basis`` of C u(L) - R(L)^T tau, the local tip moment the cables would have to supply
-    beyond the external tip moment tau (N m)],
-    their Jacobian (same rows, 3 columns) with respect to u(0), and the nominal (N, 18) states.
-    This is everything one Gauss-Newton iteration of the estimator or the tip-goal solver needs.
+    ``x`` = [u(0) (3); per section, the coordinates of the section's cable moment in its basis
+    ``bases[k]`` (3, 2 local; ``ranks[k]`` columns used), in units of E I (1/m)].
+    ``fixed_tensions`` (measured or commanded, N) add to the tensions the moments imply.
     """
-    forces, bendings = _perturbed(tip_force, base_bending, 0.0, step)
-    states = integrate_batch(s_grid, params, forces[0:4], bendings[3:7])
-    n_nodes = states.shape[1]
-    rotations = states[:, :, 3:12].copy().reshape(4, n_nodes, 3, 3)
-    lengths = cable_lengths_batch(states[:, :, 0:3], rotations, guide_nodes, offsets)
+    n_sections = bases.shape[0]
     n_cables = offsets.shape[0]
-    n_free = free_basis.shape[1]
-    rows = 3 + n_cables + n_free
-    table = np.empty((4, rows))
-    for b in range(4):
+    moment = np.empty(3)
+    col = 3
+    for j in range(n_cables):
+        tensions[j] = 0.0
+    for k in range(n_sections):
         for i in range(3):
-            table[b, i] = states[b, n_nodes - 1, i]
-        for j in range(n_cables):
-            table[b, 3 + j] = lengths[b, j]
-        tip = states[b, n_nodes - 1]
-        for k in range(n_free):
-            moment = 0.0
+            moment[i] = 0.0
+            for c in range(ranks[k]):
+                moment[i] += bases[k, i, c] * x[col + c] * bending_stiffness
+        col += ranks[k]
+        cables = section_cables[k, :section_cable_count[k]]
+        if model == DISTRIBUTED:
+            if ranks[k] > 0:
+                _section_tensions(moment, cables, offsets, tensions)
             for i in range(3):
-                # R(L)^T tau: column i of R (row-major at tip[3:12]) dotted with tau
-                external = (tip[3 + i] * tip_moment[0] + tip[6 + i] * tip_moment[1]
-                            + tip[9 + i] * tip_moment[2])
-                moment += free_basis[i, k] * (params[_C + i] * tip[15 + i] - external)
-            table[b, 3 + n_cables + k] = moment
+                disk_moments[k, i] = 0.0
+        else:
+            for i in range(3):
+                disk_moments[k, i] = moment[i]
+            for j in cables:  # t (e3 x l)
+                t = fixed_tensions[j]
+                disk_moments[k, 0] -= t * offsets[j, 1]
+                disk_moments[k, 1] += t * offsets[j, 0]
+    for j in range(n_cables):
+        tensions[j] += fixed_tensions[j]
+
+
+@numba.njit(cache=True)
+def _counts(section_cables):
+    """Count the valid (>= 0) entries in each row of the padded section cable table."""
+    counts = np.zeros(section_cables.shape[0], dtype=np.int64)
+    for k in range(section_cables.shape[0]):
+        for j in range(section_cables.shape[1]):
+            if section_cables[k, j] >= 0:
+                counts[k] += 1
+    return counts
+
+
+@numba.njit(cache=True)
+def probe(s_grid, params, model, tip_force, tip_moment, x, n_free, step, fixed_tensions, layout_i,
+          bases, ranks, section_cables, offsets, guide_nodes, cable_last_guide, cable_end_node,
+          section_end_node):
+    """Model outputs at a solver state and their forward-difference Jacobian.
+
+    Integrates ``x`` and ``x + step e_k`` for the first ``n_free`` components in one batch
+    (columns of point moments at the tip are exact and need no integration) and returns
+    values = [tip position (3, m); tip z axis (3); cable lengths (n_cables, m);
+    (M_end - tau) L / (E I) (3), the tip moment balance, zero at equilibrium],
+    jacobian (rows of values, n_free columns), and the nominal (N, 21) states.
+    ``layout_i`` = [index of the first moment coordinate of each section whose end disk is the
+    tip node (point model: exact columns), or -1].
+    """
+    n_x = x.shape[0]
+    n_cables = offsets.shape[0]
+    n_sections = bases.shape[0]
+    n_nodes = s_grid.shape[0]
+    length = s_grid[n_nodes - 1]
+    ei = params[_C]
+    exact = np.zeros(n_x, dtype=np.bool_)
+    if model == POINT_MOMENT:
+        for k in range(n_sections):
+            if section_end_node[k] == n_nodes - 1 and layout_i[k] >= 0:
+                for c in range(ranks[k]):
+                    exact[layout_i[k] + c] = True
+    columns = [-1]
+    for col in range(n_free):
+        if not exact[col]:
+            columns.append(col)
+    n_batch = len(columns)
+    forces = np.empty((n_batch, 3))
+    bendings = np.empty((n_batch, 3))
+    moments = np.empty((n_batch, n_sections, 3))
+    tensions = np.empty((n_batch, n_cables))
+    trial = np.empty(n_x)
+    counts = _counts(section_cables)
+    for b in range(n_batch):
+        for i in range(n_x):
+            trial[i] = x[i]
+        if columns[b] >= 0:
+            trial[columns[b]] += step
+        loads_from_state(trial, fixed_tensions, model, bases, ranks, ei, section_cables,
+                         counts, offsets, moments[b], tensions[b])
+        for i in range(3):
+            forces[b, i] = tip_force[i]
+            bendings[b, i] = trial[i]
+    states = integrate_batch(s_grid, params, model, forces, bendings, moments, tensions,
+                             offsets, cable_end_node, section_end_node)
+    lengths = cable_lengths_batch(states, guide_nodes, offsets, cable_last_guide)
+    rows = 9 + n_cables
+    table = np.empty((n_batch, rows))
+    scale = length / ei
+    for b in range(n_batch):
+        tip = states[b, n_nodes - 1]
+        for i in range(3):
+            table[b, i] = tip[i]
+            table[b, 3 + i] = tip[5 + 3 * i]  # column 2 of R
+            table[b, 6 + n_cables + i] = (tip[18 + i] - tip_moment[i]) * scale
+        for j in range(n_cables):
+            table[b, 6 + j] = lengths[b, j]
     values = table[0].copy()
-    jacobian = np.empty((rows, 3))
-    for r in range(rows):
-        for k in range(3):
-            jacobian[r, k] = (table[k + 1, r] - table[0, r]) / step
+    jacobian = np.zeros((rows, n_free))
+    for b in range(1, n_batch):
+        col = columns[b]
+        for r in range(rows):
+            jacobian[r, col] = (table[b, r] - table[0, r]) / step
+    # exact columns: a point moment B c E I at the tip only moves M_end by -R(L) B c E I
+    tip = states[0, n_nodes - 1]
+    for k in range(n_sections):
+        if model != POINT_MOMENT or section_end_node[k] != n_nodes - 1 or layout_i[k] < 0:
+            continue
+        for c in range(ranks[k]):
+            col = layout_i[k] + c
+            if col >= n_free:
+                continue
+            for i in range(3):
+                g = (tip[3 + 3 * i] * bases[k, 0, c] + tip[4 + 3 * i] * bases[k, 1, c]
+                     + tip[5 + 3 * i] * bases[k, 2, c])
+                jacobian[6 + n_cables + i, col] = -g * ei * scale
     return values, jacobian, states[0].copy()
 
 
 @numba.njit(cache=True)
-def tip_jacobian(s_grid, params, tip_force, base_bending, force_step, bending_step):
+def tip_jacobian(s_grid, params, model, tip_force, base_bending, disk_moments, tensions, offsets,
+                 cable_end_node, section_end_node, force_step, bending_step):
     """6x6 tip Jacobian by forward differences (paper sec. V.B) from one batch of 7 IVPs.
 
     Rows: tip position (m) then tip rotation angle (rad), from vee(dR R^T), the paper's
-    omega-hat = R-dot R^T; columns: tip force F (N) then u(0) (1/m).
+    omega-hat = R-dot R^T; columns: tip force F (N) then u(0) (1/m); cable loads held fixed.
     """
-    forces, bendings = _perturbed(tip_force, base_bending, force_step, bending_step)
-    states = integrate_batch(s_grid, params, forces, bendings)
+    forces = np.empty((7, 3))
+    bendings = np.empty((7, 3))
+    moments = np.empty((7, disk_moments.shape[0], 3))
+    tens = np.empty((7, tensions.shape[0]))
+    for b in range(7):
+        for i in range(3):
+            forces[b, i] = tip_force[i]
+            bendings[b, i] = base_bending[i]
+        moments[b] = disk_moments
+        tens[b] = tensions
+    for k in range(3):
+        forces[1 + k, k] += force_step
+        bendings[4 + k, k] += bending_step
+    states = integrate_batch(s_grid, params, model, forces, bendings, moments, tens, offsets,
+                             cable_end_node, section_end_node)
     tip = states.shape[1] - 1
     jac = np.empty((6, 6))
+    w = np.empty((3, 3))
     for col in range(6):
         b = col + 1
         h = force_step if col < 3 else bending_step
         for i in range(3):
             jac[i, col] = (states[b, tip, i] - states[0, tip, i]) / h
-        # dR R^T, with R row-major at state[3:12]
-        w = np.empty((3, 3))
         for i in range(3):
             for j in range(3):
                 acc = 0.0

@@ -89,6 +89,17 @@ def constrained_gauss_newton(evaluate, x0, max_iterations, step_tolerance, const
             trial = x + step
             t_res, t_jac, t_con, t_con_jac, t_eval = evaluate(trial)
             t_merit = merit(t_res, t_con)
+            if not (np.isfinite(t_merit) and t_merit < current) and len(t_con):
+                # second-order correction: the step left the curved constraint surface; pull the
+                # trial back onto it before judging it (avoids the Maratos effect's tiny steps)
+                correction, _ = _step(np.zeros(0), np.zeros((0, len(x))), t_con, t_con_jac, 0.0)
+                if np.all(np.isfinite(correction)):
+                    c_trial = trial + correction
+                    c_eval = evaluate(c_trial)
+                    c_merit = merit(c_eval[0], c_eval[2])
+                    if np.isfinite(c_merit) and c_merit < current:
+                        trial, (t_res, t_jac, t_con, t_con_jac, t_eval) = c_trial, c_eval
+                        t_merit = c_merit
             if np.isfinite(t_merit) and t_merit < current:
                 damping = max(damping / 4.0, 1e-9)
                 break

@@ -1,4 +1,13 @@
-"""The robot model: a validated description plus the solvers that act on it (no ROS)."""
+"""The robot model: a validated description plus the solvers that act on it (no ROS).
+
+Solver state. Every solve works on one vector x = [u(0) (3, 1/m); per section, the coordinates of
+the bending moment its cables apply, in an orthonormal basis of the moments they can apply (the
+span of e3 x l_j: 0, 1 or 2 coordinates), divided by E I (1/m)] plus ``fixed_tensions`` (N,
+measured or given tensions). The point_moment model applies each section's moment at its end
+disk; the distributed model turns it into the least-norm non-negative cable tensions (antagonists
+slack) and loads the rod with them all along the cables. Equilibrium is the tip moment balance
+(:func:`kernel.probe` rows ``balance``): three equations whatever the number of sections.
+"""
 import dataclasses
 import math
 
@@ -7,8 +16,11 @@ import numpy as np
 from continuum_statics.core import bvp, estimation, tip_goal
 from continuum_statics.core.inputs import as_vector
 from continuum_statics.core.kernel import (
+    DISTRIBUTED,
+    POINT_MOMENT,
     cable_lengths_batch,
     integrate_batch,
+    loads_from_state,
     pack_params,
     probe,
     tip_jacobian,
@@ -26,8 +38,8 @@ def load_robot(path):
 def _grid(length, guides, steps):
     """Integration nodes with a node at every guide, and the guide node indices.
 
-    Each stretch between breakpoints gets ceil(steps * stretch / L) RK4 steps, so no step is
-    longer than L / steps. The cable path starts at the base disk, node 0.
+    Each stretch between breakpoints gets ceil(steps * stretch / L) steps, so no step is longer
+    than L / steps. The cable path starts at the base disk, node 0.
     """
     breaks = np.unique(np.concatenate([[0.0, length], guides]))
     pieces, guide_nodes = [np.zeros(1)], [0]
@@ -42,8 +54,37 @@ def _grid(length, guides, steps):
     return grid, np.array(guide_nodes, dtype=np.int64)
 
 
+def _moment_basis(offsets):
+    """Orthonormal basis (3, rank) of the local moments t (e3 x l) a set of cables can apply."""
+    arms = np.cross([0.0, 0.0, 1.0], np.reshape(offsets, (-1, 3)))
+    if arms.shape[0] == 0:
+        return np.zeros((3, 0))
+    _, sing, vt = np.linalg.svd(arms)
+    rank = int(np.sum(sing > 1e-9 * max(sing[0], 1e-300)))
+    return vt[:rank].T.copy()
+
+
+@dataclasses.dataclass(frozen=True, eq=False)
+class Equilibrium:
+    """A model equilibrium for given cable loads (:meth:`Robot.equilibrium_between`).
+
+    :ivar shape: backbone; ``shape.state`` and ``shape.fixed_tensions`` are the solver state
+    :ivar cable_lengths: (n_cables,) m, ``robot.cable_names`` order
+    :ivar converged: the tip moment balance reached its tolerance
+    """
+
+    shape: Shape
+    cable_lengths: np.ndarray
+    converged: bool
+
+    @property
+    def state(self):
+        """Solver state x (see the module docstring)."""
+        return self.shape.state
+
+
 class Robot:
-    """A continuum robot: rod, base pose, gravity, cables and guides, solver settings.
+    """A continuum robot: rod, base pose, gravity, sections with cables, solver settings.
 
     Immutable once built; every solve is a pure function of its arguments. SI units throughout:
     m, N, N m, 1/m for the bending strain u.
@@ -60,9 +101,12 @@ class Robot:
         self.base_rotation = quaternion_to_rotation(description.base_orientation)
         self.gravity = description.gravity
         self.cable_names = description.cable_names
-        self.cable_offsets = description.cable_offsets
+        self.cable_offsets = np.ascontiguousarray(description.cable_offsets, dtype=float)
         self.cable_length_limits = description.cable_length_limits
         self.guides = description.guides
+        self.sections = description.sections
+        self.cable_model = description.cable_model
+        self.model_code = DISTRIBUTED if self.cable_model == 'distributed' else POINT_MOMENT
         self.solver = description.solver
         self.c = rod.bending_stiffness
         self.d = rod.shear_stiffness
@@ -71,54 +115,173 @@ class Robot:
         self.params = pack_params(self.c, self.d, self.body_force, self.base_position,
                                   self.base_rotation)
         self.s_grid, self.guide_nodes = _grid(rod.length, self.guides, self.solver.steps)
-        self.free_moment_basis = _free_moment_basis(self.cable_offsets)
-        self.straight_cable_lengths = self.cable_lengths(
-            self._shape(np.zeros(3), np.zeros(3), _straight_states(self)))
+        self._layout()
+        self.straight_cable_lengths = self.cable_lengths(self._straight_shape())
+
+    def _layout(self):
+        """Index tables the kernel reads: disks, cable ends, moment bases, state layout."""
+        n_sections, n_cables = max(len(self.sections), 1), len(self.cable_names)
+        self.section_end_node = np.full(n_sections, -1, dtype=np.int64)
+        self.cable_end_node = np.zeros(n_cables, dtype=np.int64)
+        self.cable_last_guide = np.zeros(n_cables, dtype=np.int64)
+        self.cable_section = np.zeros(n_cables, dtype=np.int64)
+        self.section_bases = np.zeros((n_sections, 3, 2))
+        self.section_ranks = np.zeros(n_sections, dtype=np.int64)
+        self.section_state_index = np.full(n_sections, -1, dtype=np.int64)
+        width = max([len(s.cable_indices) for s in self.sections] + [1])
+        self.section_cables = np.full((n_sections, width), -1, dtype=np.int64)
+        self.section_cable_count = np.zeros(n_sections, dtype=np.int64)
+        column = 3
+        for k, section in enumerate(self.sections):
+            node = int(np.argmin(np.abs(self.s_grid - section.end)))
+            self.section_end_node[k] = node
+            guide = int(np.nonzero(self.guide_nodes == node)[0][0])
+            cables = list(section.cable_indices)
+            self.section_cables[k, :len(cables)] = cables
+            self.section_cable_count[k] = len(cables)
+            self.cable_end_node[cables] = node
+            self.cable_last_guide[cables] = guide
+            self.cable_section[cables] = k
+            basis = _moment_basis(self.cable_offsets[cables])
+            rank = basis.shape[1]
+            self.section_bases[k, :, :rank] = basis
+            self.section_ranks[k] = rank
+            self.section_state_index[k] = column if rank else -1
+            column += rank
+        self.state_size = column
+        self.observable_bending = column - 3
 
     def with_solver(self, **settings):
         """Copy of this robot with some solver settings replaced (e.g. ``steps=200``)."""
         solver = dataclasses.replace(self.solver, **settings)
         return Robot(dataclasses.replace(self.description, solver=solver))
 
-    # -- initial-value problem -------------------------------------------------------------
-    def integrate(self, tip_forces, base_bendings, params=None):
-        """Batch IVP: (B, 3) tip forces and (B, 3) u(0) -> (B, N, 18) states (kernel layout)."""
+    # -- state and loads ---------------------------------------------------------------------
+    def passive_state(self, u0=(0.0, 0.0, 0.0)):
+        """Solver state with base bending ``u0`` and no cable load."""
+        x = np.zeros(self.state_size)
+        x[:3] = u0
+        return x
+
+    def loads(self, state, fixed_tensions=None):
+        """Section point moments (S, 3; local, N m) and cable tensions (n_cables, N) of a state."""
+        fixed = self._fixed(fixed_tensions)
+        moments = np.zeros((len(self.section_ranks), 3))
+        tensions = np.zeros(len(self.cable_names))
+        loads_from_state(np.asarray(state, dtype=float), fixed, self.model_code,
+                         self.section_bases, self.section_ranks, self.c[0], self.section_cables,
+                         self.section_cable_count, self.cable_offsets, moments, tensions)
+        return moments, tensions
+
+    def _fixed(self, fixed_tensions):
+        if fixed_tensions is None:
+            return np.zeros(len(self.cable_names))
+        return np.asarray(fixed_tensions, dtype=float)
+
+    def integrate_state(self, state, tip_force, fixed_tensions=None, params=None):
+        """(N, 21) kernel states of one solver state under a tip force F (N, global)."""
+        moments, tensions = self.loads(state, fixed_tensions)
         return integrate_batch(self.s_grid, self.params if params is None else params,
-                               tip_forces, base_bendings)
+                               self.model_code, np.asarray(tip_force, dtype=float)[None],
+                               np.asarray(state[:3], dtype=float)[None], moments[None],
+                               tensions[None], self.cable_offsets, self.cable_end_node,
+                               self.section_end_node)[0]
 
-    def _shape(self, u0, tip_force, states):
-        return Shape(self.s_grid, states, u0, tip_force, self.c, self.d)
+    def probe(self, state, n_free, tip_force, tip_moment, fixed_tensions=None, params=None):
+        """Tip, tip axis, cable lengths, tip balance and their Jacobian (:func:`kernel.probe`).
 
+        Unchecked fast path for the solvers: arguments must be float arrays.
+        """
+        return probe(self.s_grid, self.params if params is None else params, self.model_code,
+                     tip_force, tip_moment, state, n_free, self.bending_step(),
+                     self._fixed(fixed_tensions), self.section_state_index, self.section_bases,
+                     self.section_ranks, self.section_cables, self.cable_offsets,
+                     self.guide_nodes, self.cable_last_guide, self.cable_end_node,
+                     self.section_end_node)
+
+    def make_shape(self, state, tip_force, states, fixed_tensions=None):
+        """Wrap kernel states in a :class:`Shape` that remembers its solver state."""
+        return Shape(self.s_grid, states, np.array(state[:3]), tip_force, self.c, self.d,
+                     state=np.array(state, dtype=float), fixed_tensions=self._fixed(
+                         fixed_tensions).copy())
+
+    # -- initial- and boundary-value problems -------------------------------------------------
     def solve_ivp(self, u0, tip_force=(0.0, 0.0, 0.0)):
-        """Shape for a base bending u(0) (1/m, local frame) and a tip force F (N, global).
+        """Shape for a base bending u(0) (1/m, local) and a tip force F (N, global), no cables.
 
         Integrates eqs. 1, 2, 8, 9 from the base with v(0) from eq. 10: no iteration, which is
         what makes the paper's approach real-time.
         """
         u0 = as_vector(u0, 3, 'u0')
         tip_force = as_vector(tip_force, 3, 'tip_force')
-        states = self.integrate(tip_force[None, :], u0[None, :])
-        return self._shape(u0, tip_force, states[0])
+        state = self.passive_state(u0)
+        return self.make_shape(state, tip_force, self.integrate_state(state, tip_force))
 
     def solve_bvp(self, tip_force=(0.0, 0.0, 0.0), tip_moment=(0.0, 0.0, 0.0), u0_guess=None):
-        """Shape under a tip force F (N) and tip moment (N m), both global: shoots on u(0).
+        """Shape of the rod with slack cables under a tip force F (N) and moment (N m), global.
 
-        See :func:`continuum_statics.core.bvp.solve_bvp`; raises :class:`bvp.ConvergenceError`.
+        See :func:`continuum_statics.core.bvp.solve_loaded`; raises ``ConvergenceError``.
         """
         tip_force = as_vector(tip_force, 3, 'tip_force')
         tip_moment = as_vector(tip_moment, 3, 'tip_moment')
-        if u0_guess is not None:
-            u0_guess = as_vector(u0_guess, 3, 'u0_guess')
-        u0 = bvp.solve_bvp(self, tip_force, tip_moment, u0_guess)
-        return self.solve_ivp(u0, tip_force)
+        start = None if u0_guess is None else self.passive_state(as_vector(u0_guess, 3, 'u0'))
+        state = bvp.solve_loaded(self, self.passive_state(), None, tip_force, tip_moment, start)
+        return self.make_shape(state, tip_force, self.integrate_state(state, tip_force))
+
+    def solve_tensions(self, tensions, tip_force=(0.0, 0.0, 0.0), tip_moment=(0.0, 0.0, 0.0),
+                       warm_start=None):
+        """Forward statics: the shape under cable tensions (N, >= 0) and a tip load (global).
+
+        A boundary-value problem on u(0) with the robot's cable model; ``warm_start`` is a
+        previous result (shape, estimate or solution). Raises ``ConvergenceError``.
+        """
+        tensions = as_vector(tensions, len(self.cable_names), 'tensions')
+        if np.any(tensions < 0.0):
+            raise ValueError('tensions must be >= 0 N (cables only pull), got %s'
+                             % np.round(tensions, 6).tolist())
+        tip_force = as_vector(tip_force, 3, 'tip_force')
+        tip_moment = as_vector(tip_moment, 3, 'tip_moment')
+        start = _warm_state(self, warm_start)
+        if start is not None:
+            start = self.passive_state(start[:3])
+        state = bvp.solve_loaded(self, self.passive_state(), tensions, tip_force, tip_moment,
+                                 start)
+        return self.make_shape(state, tip_force, self.integrate_state(state, tip_force, tensions),
+                               tensions)
+
+    def equilibrium_between(self, start, goal, fraction, tip_force=(0.0, 0.0, 0.0),
+                            tip_moment=(0.0, 0.0, 0.0), warm_start=None):
+        """Solve the equilibrium a fraction (0..1) of the way from one result's loads to another's.
+
+        The section moments and fixed tensions are interpolated linearly and the base state is
+        solved, so every intermediate is a shape of the robot (what a controller should command
+        while it moves). Returns :class:`Equilibrium`; never raises for a failed solve (then
+        ``converged`` is False and the best state is returned).
+        """
+        fraction = float(fraction)
+        if not 0.0 <= fraction <= 1.0:
+            raise ValueError('fraction must be in [0, 1], got %r' % fraction)
+        a, b = _warm_state(self, start), _warm_state(self, goal)
+        if a is None or b is None:
+            raise ValueError('start and goal must be results of this robot (with a state)')
+        fa, fb = _warm_tensions(self, start), _warm_tensions(self, goal)
+        loads = (1.0 - fraction) * a + fraction * b
+        fixed = (1.0 - fraction) * fa + fraction * fb
+        tip_force = as_vector(tip_force, 3, 'tip_force')
+        tip_moment = as_vector(tip_moment, 3, 'tip_moment')
+        guess = _warm_state(self, warm_start)
+        loads[:3] = loads[:3] if guess is None else guess[:3]
+        state, converged = bvp.solve_fixed_loads(self, loads, fixed, tip_force, tip_moment)
+        states = self.integrate_state(state, tip_force, fixed)
+        shape = self.make_shape(state, tip_force, states, fixed)
+        return Equilibrium(shape, self.cable_lengths(shape), converged)
 
     # -- cables ----------------------------------------------------------------------------
     def cable_lengths(self, shape):
         """Cable lengths (n_cables,) in m of a shape, order ``cable_names`` (eq. 11, errata)."""
-        positions = np.ascontiguousarray(shape.positions)[None]
-        rotations = np.ascontiguousarray(shape.rotations)[None]
-        return cable_lengths_batch(positions, rotations, self.guide_nodes,
-                                   self.cable_offsets)[0]
+        states = np.ascontiguousarray(shape.states)[None]
+        return cable_lengths_batch(states, self.guide_nodes, self.cable_offsets,
+                                   self.cable_last_guide)[0]
 
     # -- Jacobians -------------------------------------------------------------------------
     def force_step(self):
@@ -126,66 +289,76 @@ class Robot:
         return 1e-7 * self.c[0] / self.length ** 2
 
     def bending_step(self):
-        """Finite-difference step for u(0) (1/m): 1e-7 rad over the rod length."""
+        """Finite-difference step for u(0) and section moments (1/m): 1e-7 rad over L."""
         return 1e-7 / self.length
 
     def jacobian(self, u0, tip_force=(0.0, 0.0, 0.0)):
-        """6x6 tip Jacobian: rows [linear (m); angular (rad)], columns [F (N); u(0) (1/m)].
+        """6x6 tip Jacobian with slack cables: rows [linear (m); angle (rad)], cols [F (N); u(0)].
 
         Forward differences as in the paper (section V.B), all seven IVPs in one kernel call;
         the angular rows are vee(dR R^T) (the paper's omega-hat = R-dot R^T), global frame.
         """
-        return tip_jacobian(self.s_grid, self.params, as_vector(tip_force, 3, 'tip_force'),
-                            as_vector(u0, 3, 'u0'), self.force_step(), self.bending_step())
+        n_sections = len(self.section_ranks)
+        return tip_jacobian(self.s_grid, self.params, self.model_code,
+                            as_vector(tip_force, 3, 'tip_force'), as_vector(u0, 3, 'u0'),
+                            np.zeros((n_sections, 3)), np.zeros(len(self.cable_names)),
+                            self.cable_offsets, self.cable_end_node, self.section_end_node,
+                            self.force_step(), self.bending_step())
 
     def cable_jacobian(self, u0, tip_force=(0.0, 0.0, 0.0)):
-        """d(cable lengths)/d u(0), (n_cables, 3) in m per 1/m; one batched kernel call."""
-        _, jac, _ = self.probe(as_vector(u0, 3, 'u0'), as_vector(tip_force, 3, 'tip_force'),
-                               np.zeros(3))
-        return jac[3:3 + len(self.cable_names)]
-
-    def probe(self, u0, tip_force, tip_moment):
-        """Tip, cable lengths and free tip moments with their u(0) Jacobian (kernel.probe).
-
-        Unchecked fast path for the solvers: arguments must be float (3,) arrays.
-        """
-        return probe(self.s_grid, self.params, tip_force, tip_moment, u0, self.bending_step(),
-                     self.guide_nodes, self.cable_offsets, self.free_moment_basis)
+        """d(cable lengths)/d u(0) with slack cables, (n_cables, 3) in m per 1/m."""
+        state = self.passive_state(as_vector(u0, 3, 'u0'))
+        _, jac, _ = self.probe(state, 3, as_vector(tip_force, 3, 'tip_force'), np.zeros(3))
+        return jac[6:6 + len(self.cable_names)]
 
     # -- inverse problems ------------------------------------------------------------------
-    def estimate_shape(self, cable_lengths, tip_force=(0.0, 0.0, 0.0), u0_guess=None,
-                       tip_moment=(0.0, 0.0, 0.0)):
-        """Shape from measured cable lengths (m) and a tip load (N, N m); see :mod:`estimation`."""
-        return estimation.estimate_shape(self, cable_lengths, tip_force, u0_guess, tip_moment)
+    def estimate_shape(self, cable_lengths, tip_force=(0.0, 0.0, 0.0),
+                       tip_moment=(0.0, 0.0, 0.0), tensions=None, warm_start=None,
+                       u0_guess=None):
+        """Shape from measured cable lengths (m) and a tip load (N, N m); :mod:`estimation`."""
+        return estimation.estimate_shape(self, cable_lengths, tip_force, tip_moment, tensions,
+                                         _warm_or_guess(self, warm_start, u0_guess))
 
-    def solve_tip_goal(self, goal_position, tip_force=(0.0, 0.0, 0.0), u0_guess=None,
-                       tolerance=None, tip_moment=(0.0, 0.0, 0.0)):
-        """u(0) and cable lengths that put the tip at a goal (m); see :mod:`tip_goal`."""
-        return tip_goal.solve_tip_goal(self, goal_position, tip_force, u0_guess, tolerance,
+    def solve_tip_goal(self, goal_position, tip_force=(0.0, 0.0, 0.0), tolerance=None,
+                       goal_direction=None, warm_start=None, tip_moment=(0.0, 0.0, 0.0),
+                       u0_guess=None):
+        """Cable lengths that put the tip at a goal (m), inside their limits; :mod:`tip_goal`."""
+        return tip_goal.solve_tip_goal(self, goal_position, tip_force, tolerance,
+                                       goal_direction, _warm_or_guess(self, warm_start, u0_guess),
                                        tip_moment)
 
-
-def _free_moment_basis(offsets):
-    """Orthonormal basis (3, k) of tip moments (local frame) that no cable can apply.
-
-    A cable ending at a hole l (local) pulls back along the backbone, so the moment it applies is
-    parallel to e3 x l: never about the axis, and only in the plane its hole spans. These
-    components of the tip moment are zero at equilibrium; they fix the twist and, with fewer
-    than two independent hole directions, the bending the cables cannot observe.
-    """
-    arms = np.cross([0.0, 0.0, 1.0], np.reshape(offsets, (-1, 3)))
-    if arms.shape[0] == 0:
-        return np.eye(3)
-    _, sing, vt = np.linalg.svd(arms)
-    rank = int(np.sum(sing > 1e-9 * max(sing[0], 1e-300)))
-    return vt[rank:].T.copy()
+    def _straight_shape(self):
+        """Return the straight, unloaded rod (for the reference cable lengths)."""
+        s = self.s_grid
+        states = np.zeros((len(s), 21))
+        states[:, 0:3] = self.base_position + s[:, None] * self.base_rotation[:, 2]
+        states[:, 3:12] = self.base_rotation.ravel()
+        state = self.passive_state()
+        return self.make_shape(state, np.zeros(3), states)
 
 
-def _straight_states(robot):
-    """Kernel states of the straight, unloaded rod (for the reference cable lengths)."""
-    s = robot.s_grid
-    states = np.zeros((len(s), 18))
-    axis = robot.base_rotation[:, 2]
-    states[:, 0:3] = robot.base_position + s[:, None] * axis
-    states[:, 3:12] = robot.base_rotation.ravel()
-    return states
+def _warm_state(robot, result):
+    """Solver state of a previous result (shape, estimate, solution, equilibrium) or None."""
+    if result is None:
+        return None
+    shape = getattr(result, 'shape', result)
+    state = getattr(shape, 'state', None)
+    if state is None or len(state) != robot.state_size or not np.all(np.isfinite(state)):
+        return None
+    return np.array(state, dtype=float)
+
+
+def _warm_tensions(robot, result):
+    shape = getattr(result, 'shape', result)
+    fixed = getattr(shape, 'fixed_tensions', None)
+    if fixed is None or len(fixed) != len(robot.cable_names):
+        return np.zeros(len(robot.cable_names))
+    return np.array(fixed, dtype=float)
+
+
+def _warm_or_guess(robot, warm_start, u0_guess):
+    """Start state from ``warm_start`` (a previous result) or the older ``u0_guess``."""
+    state = _warm_state(robot, warm_start)
+    if state is None and u0_guess is not None:
+        state = robot.passive_state(as_vector(u0_guess, 3, 'u0_guess'))
+    return state

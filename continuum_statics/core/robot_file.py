@@ -80,8 +80,33 @@ class SolverSettings:
 
 
 @dataclass(frozen=True)
+class Section:
+    """One section: guide disks (arc lengths, m; the last is its end disk) and its cables.
+
+    A cable of this section runs from the base disk (s = 0) through every guide disk of this and
+    all earlier sections and ends at :attr:`end`.
+    """
+
+    name: str
+    guides: np.ndarray
+    cable_indices: tuple
+
+    @property
+    def end(self):
+        """Arc length of the end disk (m)."""
+        return float(self.guides[-1])
+
+
+CABLE_MODELS = ('point_moment', 'distributed')
+
+
+@dataclass(frozen=True)
 class RobotDescription:
-    """Validated content of a robot file (arrays are read-only)."""
+    """Validated content of a robot file (arrays are read-only).
+
+    ``cable_names``, ``cable_offsets`` and ``cable_length_limits`` list every cable, section by
+    section; ``guides`` is every guide disk base to tip; ``warnings`` names implausible fields.
+    """
 
     name: str
     rod: Rod
@@ -94,12 +119,17 @@ class RobotDescription:
     cable_length_limits: np.ndarray
     guides: np.ndarray
     solver: SolverSettings
+    sections: tuple = ()
+    cable_model: str = 'point_moment'
+    warnings: tuple = ()
 
 
 _ROD_KEYS = {'length', 'diameter', 'youngs_modulus', 'poisson_ratio', 'shear_modulus', 'density'}
 _BASE_KEYS = {'frame_id', 'position', 'orientation'}
 _CABLE_KEYS = {'name', 'offset', 'length_limits'}
-_TOP_KEYS = {'name', 'description', 'rod', 'base', 'gravity', 'cables', 'guides', 'solver'}
+_SECTION_KEYS = {'name', 'guides', 'cables'}
+_TOP_KEYS = {'name', 'description', 'rod', 'base', 'gravity', 'cables', 'guides', 'solver',
+             'sections', 'cable_model'}
 
 
 def _frozen(array):
@@ -189,26 +219,32 @@ def _parse_base(data):
     return frame_id, position, orientation / norm
 
 
-def _parse_guides(data, length):
+def _parse_guides(data, length, prefix='', start=0.0):
     guides = data.get('guides') or []
     if not isinstance(guides, (list, tuple)):
-        raise ValueError('guides must be a list of arc lengths in m, got %r' % (guides,))
-    guides = np.array([_number(g, 'guides[%d]' % i) for i, g in enumerate(guides)])
+        raise ValueError('%sguides must be a list of arc lengths in m, got %r' % (prefix, guides))
+    guides = np.array([_number(g, '%sguides[%d]' % (prefix, i)) for i, g in enumerate(guides)])
     for i, g in enumerate(guides):
         if not 0.0 <= g <= length:
-            raise ValueError('guides[%d] = %g is outside [0, rod.length = %g]' % (i, g, length))
+            raise ValueError('%sguides[%d] = %g is outside [0, rod.length = %g]'
+                             % (prefix, i, g, length))
     if np.any(np.diff(guides) <= 0.0):
-        raise ValueError('guides must be strictly increasing, got %s' % guides.tolist())
+        raise ValueError('%sguides must be strictly increasing, got %s'
+                         % (prefix, guides.tolist()))
+    if len(guides) and guides[0] <= start and start > 0.0:
+        raise ValueError('%sguides must start after the previous section ends at s = %g m, got '
+                         '%g (sections go base to tip)' % (prefix, start, guides[0]))
     return guides
 
 
-def _parse_cables(data, guides):
+def _parse_cables(data, guides, prefix='', names=None):
     cables = data.get('cables') or []
     if not isinstance(cables, (list, tuple)):
-        raise ValueError('cables must be a list of {name, offset}, got %r' % (cables,))
-    names, offsets, limits = [], [], []
+        raise ValueError('%scables must be a list of {name, offset}, got %r' % (prefix, cables))
+    names = [] if names is None else names
+    offsets, limits = [], []
     for i, cable in enumerate(cables):
-        field = 'cables[%d]' % i
+        field = '%scables[%d]' % (prefix, i)
         cable = _mapping(cable, field, _CABLE_KEYS)
         name = _section(cable, 'name', field + '.name')
         if not isinstance(name, str) or not name:
@@ -229,9 +265,59 @@ def _parse_cables(data, guides):
         names.append(name)
         offsets.append(offset)
         limits.append(lim)
-    if names and not np.any(guides > 0.0):
-        raise ValueError('cables need at least one guide at s > 0 (guides is empty)')
-    return tuple(names), np.reshape(offsets, (-1, 3)), np.reshape(limits, (-1, 2))
+    if offsets and not np.any(guides > 0.0):
+        raise ValueError('%scables need at least one guide at s > 0 (guides is empty)' % prefix)
+    return np.reshape(offsets, (-1, 3)), np.reshape(limits, (-1, 2))
+
+
+def _parse_sections(data, length):
+    """Sections from ``sections:`` or from today's top-level ``cables:`` + ``guides:``."""
+    if 'sections' not in data:
+        guides = _parse_guides(data, length)
+        names = []
+        offsets, limits = _parse_cables(data, guides, names=names)
+        section = Section('section_0', _frozen(guides), tuple(range(len(names))))
+        return (section,) if len(guides) or names else (), names, offsets, limits
+    if 'cables' in data or 'guides' in data:
+        raise ValueError('give either sections or top-level cables/guides, not both')
+    raw = data['sections']
+    if not isinstance(raw, (list, tuple)) or not raw:
+        raise ValueError('sections must be a non-empty list of {name, guides, cables}')
+    sections, names, offsets, limits, end = [], [], [], [], 0.0
+    for k, item in enumerate(raw):
+        prefix = 'sections[%d].' % k
+        item = _mapping(item, 'sections[%d]' % k, _SECTION_KEYS)
+        name = item.get('name', 'section_%d' % k)
+        if not isinstance(name, str) or not name:
+            raise ValueError('%sname must be a non-empty string, got %r' % (prefix, name))
+        if name in [section.name for section in sections]:
+            raise ValueError('%sname: duplicate section name %r' % (prefix, name))
+        guides = _parse_guides(item, length, prefix, end)
+        if not len(guides) or guides[-1] <= 0.0:
+            raise ValueError('%sguides must list at least one guide disk at s > 0 (its end disk)'
+                             % prefix)
+        first = len(names)
+        section_offsets, section_limits = _parse_cables(item, guides, prefix, names)
+        sections.append(Section(name, _frozen(guides), tuple(range(first, len(names)))))
+        offsets.append(section_offsets)
+        limits.append(section_limits)
+        end = guides[-1]
+    return (tuple(sections), names, np.concatenate(offsets), np.concatenate(limits))
+
+
+def _plausibility(rod, offsets, sections):
+    """Warnings for values a real robot would not have (the model still runs)."""
+    warnings = []
+    if rod.diameter > 0.1 * rod.length:
+        warnings.append('rod.diameter %g m is over a tenth of rod.length %g m: not a slender rod'
+                        % (rod.diameter, rod.length))
+    for section in sections:
+        for j in section.cable_indices:
+            radius = float(np.hypot(*offsets[j, :2]))
+            if not rod.diameter / 2.0 <= radius <= 0.25 * rod.length:
+                warnings.append('cable %d offset radius %g m is outside [rod radius %g m, '
+                                'rod.length / 4]' % (j, radius, rod.diameter / 2.0))
+    return tuple(warnings)
 
 
 def _parse_solver(data):
@@ -260,14 +346,19 @@ def parse_robot_description(data, source='robot file'):
     rod = _parse_rod(data)
     frame_id, position, orientation = _parse_base(data)
     gravity = _vector(_section(data, 'gravity', 'gravity'), 3, 'gravity')
-    guides = _parse_guides(data, rod.length)
-    names, offsets, limits = _parse_cables(data, guides)
+    sections, names, offsets, limits = _parse_sections(data, rod.length)
+    model = data.get('cable_model', 'point_moment')
+    if model not in CABLE_MODELS:
+        raise ValueError('cable_model must be one of %s, got %r'
+                         % (', '.join(CABLE_MODELS), model))
+    guides = np.concatenate([section.guides for section in sections]) if sections else []
     return RobotDescription(
         name=str(data.get('name', 'continuum_robot')), rod=rod, base_frame_id=frame_id,
         base_position=_frozen(position), base_orientation=_frozen(orientation),
-        gravity=_frozen(gravity), cable_names=names, cable_offsets=_frozen(offsets),
+        gravity=_frozen(gravity), cable_names=tuple(names), cable_offsets=_frozen(offsets),
         cable_length_limits=_frozen(limits), guides=_frozen(guides),
-        solver=_parse_solver(data))
+        solver=_parse_solver(data), sections=sections, cable_model=model,
+        warnings=_plausibility(rod, offsets, sections))
 
 
 def read_robot_description(path):

@@ -20,14 +20,18 @@ class Shape:
     :ivar tip_force: (3,) tip force F, global frame (N)
     :ivar c: (3,) bending/torsional stiffness diagonal C (N m^2)
     :ivar d: (3,) shear/axial stiffness diagonal D (N)
+    :ivar state: solver state (see :mod:`continuum_statics.core.robot`), or None
+    :ivar fixed_tensions: (n_cables,) tensions given to the solver (N), or None
     """
 
-    __slots__ = ('s', 'states', 'u0', 'tip_force', 'c', 'd')
+    __slots__ = ('s', 'states', 'u0', 'tip_force', 'c', 'd', 'state', 'fixed_tensions')
 
-    def __init__(self, s, states, u0, tip_force, c, d):
+    def __init__(self, s, states, u0, tip_force, c, d, state=None, fixed_tensions=None):
         states.setflags(write=False)
         self.s, self.states, self.u0, self.tip_force, self.c, self.d = (
             s, states, u0, tip_force, c, d)
+        # the solver state this shape was integrated from (warm starts, interpolation)
+        self.state, self.fixed_tensions = state, fixed_tensions
 
     @property
     def positions(self):
@@ -72,7 +76,7 @@ class Shape:
 
     @property
     def tip_moment(self):
-        """Moment the tip load applies, m(L), global frame (N m)."""
+        """The rod's internal moment at the tip, m(L) = R C u (global, N m)."""
         return self.tip_rotation @ (self.c * self.states[-1, 15:18])
 
     def sample(self, count):

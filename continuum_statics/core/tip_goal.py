@@ -1,11 +1,20 @@
-"""Tip-goal solving: goal position -> u(0) -> cable lengths (paper sec. V.B, end-point control).
+"""Tip goals: goal position (and direction) -> solver state -> cable lengths (paper sec. V.B).
 
-Damped least squares on the tip position with the same physical constraint as the estimator:
-the tip moment has no component the cables cannot apply (no twist about the backbone). A single
-section then has two bending degrees of freedom and its reachable tips form a surface; a goal off
-it converges to the nearest reachable tip and reports the remaining distance as ``error``. Cable
-length limits are honoured with an active set: a cable that would leave its range is held at the
-limit as one more equality constraint, and the solve continues with the freedom that is left.
+The unknowns are the solver state (u(0) and the section moments), always subject to the tip moment
+balance, so every answer is an equilibrium of the robot. Two cases:
+
+- as many bending freedoms as goal equations or fewer (one section; or a position and a direction
+  with two sections): damped least squares on the goal; a goal off the reachable set converges to
+  the nearest reachable tip and reports the remaining distance as ``error``;
+- more freedoms (2+ sections for a position): the goal becomes an equality constraint and, among
+  the solutions, the one whose section moments change least from the warm start is chosen (from a
+  cold start: the smallest section moments, i.e. the least cable load). Should the goal be out of
+  reach, the least-squares case takes over.
+
+Cable length limits are kept with an active set (a cable leaving its range is held at the limit as
+one more constraint). Whatever happens, the answer's lengths are inside the limits: if the solve
+ends outside them, the answer is the equilibrium furthest along the way from the start to it that
+stays inside, reported as not reached.
 """
 from dataclasses import dataclass
 
@@ -16,17 +25,20 @@ from continuum_statics.core.inputs import as_vector
 from continuum_statics.core.least_squares import constrained_gauss_newton
 from continuum_statics.core.shape import Shape
 
+#: Slack on the length limits (m) for round-off.
+LIMIT_SLACK = 1e-9
+
 
 @dataclass(frozen=True, eq=False)
 class TipGoalSolution:
     """Result of :func:`solve_tip_goal`.
 
-    :ivar shape: backbone at the solution
+    :ivar shape: backbone at the solution (its ``state`` warm-starts the next solve)
     :ivar u0: base bending (1/m)
-    :ivar cable_lengths: cable lengths to command (m), ``robot.cable_names`` order
-    :ivar converged: the tip is within the tolerance of the goal
+    :ivar cable_lengths: cable lengths to command (m), ``robot.cable_names`` order, in limits
+    :ivar converged: the tip is within the tolerance of the goal (and of the direction)
     :ivar error: distance from the reached tip to the goal (m)
-    :ivar iterations: Gauss-Newton iterations used, over all active-set rounds
+    :ivar iterations: Gauss-Newton iterations used, over all rounds
     :ivar limited_cables: names of cables held at a length limit
     :ivar message: why the goal was not reached, empty when it was
     """
@@ -40,15 +52,21 @@ class TipGoalSolution:
     limited_cables: tuple
     message: str
 
+    @property
+    def state(self):
+        """Solver state x of the solution."""
+        return self.shape.state
 
-def solve_tip_goal(robot, goal_position, tip_force=(0.0, 0.0, 0.0), u0_guess=None,
-                   tolerance=None, tip_moment=(0.0, 0.0, 0.0)):
-    """Find u(0) and cable lengths that put the tip at ``goal_position`` (m, global frame).
 
-    ``tip_force`` (N) and ``tip_moment`` (N m) are the external tip load, base frame.
+def solve_tip_goal(robot, goal_position, tip_force=(0.0, 0.0, 0.0), tolerance=None,
+                   goal_direction=None, start=None, tip_moment=(0.0, 0.0, 0.0)):
+    """Find the equilibrium whose tip is at ``goal_position`` (m, base frame), lengths in limits.
 
-    :param u0_guess: start (1/m); default the passive equilibrium's small-deflection solution
-    :param tolerance: position tolerance (m); default ``robot.solver.goal_tolerance``
+    :param tip_force: external tip force (N); ``tip_moment`` external tip moment (N m)
+    :param tolerance: position tolerance (m); default ``robot.solver.goal_tolerance``; the
+        direction tolerance is tolerance / L (rad)
+    :param goal_direction: unit vector (base frame) for the tip's local z axis, or None
+    :param start: solver state to start from (the current estimate); default passive
     """
     goal = as_vector(goal_position, 3, 'goal_position')
     tip_force = as_vector(tip_force, 3, 'tip_force')
@@ -56,54 +74,156 @@ def solve_tip_goal(robot, goal_position, tip_force=(0.0, 0.0, 0.0), u0_guess=Non
     tolerance = robot.solver.goal_tolerance if tolerance is None else float(tolerance)
     if not np.isfinite(tolerance) or tolerance <= 0.0:
         raise ValueError('tolerance must be a finite number > 0 m, got %r' % tolerance)
-    if u0_guess is None:
-        u0_guess = bvp.linear_guess(robot, tip_force, tip_moment)
-    x = as_vector(u0_guess, 3, 'u0_guess')
-    limits = robot.cable_length_limits
-    n_cables = len(robot.cable_names)
-    cables = slice(3, 3 + n_cables)
-    free = slice(3 + n_cables, None)
-    # a cable held at a limit is one more constraint, scaled from m of cable to N m of tip
-    # moment (E I / L^2 per m) so that all constraint rows are of one size
-    held_scale = robot.c[0] / robot.length ** 2
-    held, held_at = [], []
-    iterations = 0
+    direction = None
+    if goal_direction is not None:
+        direction = as_vector(goal_direction, 3, 'goal_direction')
+        norm = np.linalg.norm(direction)
+        if norm < 1e-9:
+            raise ValueError('goal_direction must be a non-zero vector')
+        direction = direction / norm
+    if start is None:
+        start = robot.passive_state(bvp.linear_guess(robot, tip_force, tip_moment))
+    problem = _Problem(robot, goal, direction, tip_force, tip_moment, tolerance, start)
+    if not len(robot.cable_names):
+        return problem.answer(start, 0, 'robot has no cables: nothing can move the tip')
+    x, iterations = start, 0
+    if robot.observable_bending > problem.goal_rows:
+        x, iterations, reached = problem.solve(start, redundant=True)
+        if not reached:  # out of reach: nearest reachable point instead
+            x, more, _ = problem.solve(x, redundant=False)
+            iterations += more
+    else:
+        x, iterations, _ = problem.solve(start, redundant=False)
+    return problem.answer(x, iterations, '')
 
-    def evaluate(x):
-        values, jac, states = robot.probe(x, tip_force, tip_moment)
-        rows = [3 + i for i in held]
-        con = np.concatenate([values[free], (values[rows] - held_at) * held_scale])
-        con_jac = np.vstack([jac[free], jac[rows] * held_scale])
-        return values[0:3] - goal, jac[0:3], con, con_jac, (states, values[cables])
 
-    while True:
-        result = constrained_gauss_newton(
-            evaluate, x, robot.solver.max_iterations, 0.01 * tolerance,
-            constraint_weight=robot.length ** 2 / robot.c[0])
-        iterations += result.iterations
-        x = result.x
-        states, lengths = result.evaluation
-        violated = [i for i in range(n_cables) if i not in held and not (
-            limits[i, 0] - 1e-9 <= lengths[i] <= limits[i, 1] + 1e-9)]
-        if not violated:
-            break
-        for i in violated:
-            held.append(i)
-            held_at.append(float(np.clip(lengths[i], limits[i, 0], limits[i, 1])))
+class _Problem:
+    """One tip-goal solve: the rows of the goal, the held cables and the final answer."""
 
-    error = float(np.linalg.norm(result.residual))
-    converged = error <= tolerance
-    limited = tuple(robot.cable_names[i] for i in sorted(held))
-    message = ''
-    if not converged:
-        message = 'goal not reached: tip %.3g m from goal (tolerance %.3g m)' % (error, tolerance)
-        if limited:
-            message += '; cable(s) at length limit: ' + ', '.join(limited)
-        elif result.stationary:
-            message += '; nearest reachable tip (goal off the reachable surface)'
-        else:
-            message += '; not converged in %d iterations' % iterations
-    shape = robot._shape(x, tip_force, states)
-    return TipGoalSolution(shape=shape, u0=x, cable_lengths=lengths.copy(), converged=converged,
-                           error=error, iterations=iterations, limited_cables=limited,
-                           message=message)
+    def __init__(self, robot, goal, direction, tip_force, tip_moment, tolerance, start):
+        self.robot, self.goal, self.direction = robot, goal, direction
+        self.tip_force, self.tip_moment, self.tolerance = tip_force, tip_moment, tolerance
+        self.start = np.array(start, dtype=float)
+        self.goal_rows = 3 if direction is None else 5
+        n = len(robot.cable_names)
+        self.cables = slice(6, 6 + n)
+        self.balance = slice(6 + n, 9 + n)
+        self.limits = robot.cable_length_limits
+        radius = np.max(np.hypot(robot.cable_offsets[:, 0], robot.cable_offsets[:, 1]),
+                            initial=1e-3)
+        self.held_scale = 1.0 / radius  # m of cable -> rad of bending, like the balance rows
+        self.held, self.held_at = [], []
+
+    def _goal(self, values, jac):
+        """Goal residual (m) and its Jacobian: tip position, and the tip axis times L."""
+        res, rows = values[0:3] - self.goal, jac[0:3]
+        if self.direction is not None:
+            length = self.robot.length
+            res = np.concatenate([res, (values[3:6] - self.direction) * length])
+            rows = np.vstack([rows, jac[3:6] * length])
+        return res, rows
+
+    def solve(self, x, redundant):
+        """Active-set rounds of the constrained solve; (state, iterations, goal reached)."""
+        robot = self.robot
+        length = robot.length
+        reference = self.start
+        iterations = 0
+        while True:
+            rows = [6 + i for i in self.held]
+            held_at = np.array(self.held_at)
+
+            def evaluate(x, rows=rows, held_at=held_at):
+                values, jac, states = robot.probe(x, robot.state_size, self.tip_force,
+                                                  self.tip_moment)
+                goal_res, goal_jac = self._goal(values, jac)
+                held_res = (values[rows] - held_at) * self.held_scale
+                held_jac = jac[rows] * self.held_scale
+                if redundant:  # least change of the section moments, the goal a constraint
+                    res = (x[3:] - reference[3:]) * length ** 2
+                    res_jac = np.hstack([np.zeros((len(res), 3)),
+                                         np.eye(len(res)) * length ** 2])
+                    con = np.concatenate([values[self.balance], goal_res / length, held_res])
+                    con_jac = np.vstack([jac[self.balance], goal_jac / length, held_jac])
+                else:
+                    res, res_jac = goal_res, goal_jac
+                    con = np.concatenate([values[self.balance], held_res])
+                    con_jac = np.vstack([jac[self.balance], held_jac])
+                return res, res_jac, con, con_jac, values
+
+            result = constrained_gauss_newton(evaluate, x, robot.solver.max_iterations,
+                                              0.01 * self.tolerance, constraint_weight=length)
+            iterations += result.iterations
+            x = result.x
+            lengths = result.evaluation[self.cables]
+            violated = [i for i in range(len(lengths)) if i not in self.held and not (
+                self.limits[i, 0] - LIMIT_SLACK <= lengths[i] <= self.limits[i, 1] + LIMIT_SLACK)]
+            if not violated:
+                break
+            for i in violated:
+                self.held.append(i)
+                self.held_at.append(float(np.clip(lengths[i], *self.limits[i])))
+        values = result.evaluation
+        reached = (np.linalg.norm(values[0:3] - self.goal) <= self.tolerance
+                   and np.linalg.norm(values[self.balance]) <= 1e-6)
+        return x, iterations, reached
+
+    def answer(self, x, iterations, message):
+        """Build the solution record for state ``x``, pulled back inside the length limits."""
+        robot = self.robot
+        states = robot.integrate_state(x, self.tip_force)
+        shape = robot.make_shape(x, self.tip_force, states)
+        lengths = robot.cable_lengths(shape)
+        notes = [message] if message else []
+        if not _inside(lengths, self.limits):
+            shape, lengths = self._inside_limits(shape)
+            notes.append('the solution leaves the cable length limits; stopped at the last '
+                         'equilibrium inside them')
+        error = float(np.linalg.norm(shape.tip_position - self.goal))
+        converged = error <= self.tolerance and not notes
+        if self.direction is not None:
+            angle = float(np.arccos(np.clip(shape.tip_rotation[:, 2] @ self.direction, -1, 1)))
+            converged = converged and angle <= self.tolerance / robot.length
+            if angle > self.tolerance / robot.length:
+                notes.append('tip direction %.3g rad from the goal direction' % angle)
+        limited = tuple(robot.cable_names[i] for i in sorted(self.held))
+        if not converged:
+            text = 'goal not reached: tip %.3g m from goal (tolerance %.3g m)' % (
+                error, self.tolerance)
+            if limited:
+                text += '; cable(s) at length limit: ' + ', '.join(limited)
+            elif not notes:
+                text += '; nearest reachable tip (goal outside the reachable set)'
+            notes.insert(0, text)
+        return TipGoalSolution(shape=shape, u0=shape.u0, cable_lengths=lengths,
+                               converged=converged, error=error, iterations=iterations,
+                               limited_cables=limited, message='; '.join(notes))
+
+    def _inside_limits(self, target):
+        """Furthest equilibrium inside the limits on the way from the start to ``target``."""
+        robot = self.robot
+        start = robot.make_shape(self.start, self.tip_force,
+                                 robot.integrate_state(self.start, self.tip_force))
+        if not _inside(robot.cable_lengths(start), self.limits):
+            start = robot.make_shape(robot.passive_state(), self.tip_force,
+                                     robot.integrate_state(robot.passive_state(),
+                                                           self.tip_force))
+        best = robot.equilibrium_between(start, target, 0.0, self.tip_force, self.tip_moment)
+        low, high = 0.0, 1.0
+        for _ in range(30):
+            middle = 0.5 * (low + high)
+            trial = robot.equilibrium_between(start, target, middle, self.tip_force,
+                                              self.tip_moment, warm_start=best)
+            if trial.converged and _inside(trial.cable_lengths, self.limits):
+                low, best = middle, trial
+            else:
+                high = middle
+            if high - low < 1e-4:
+                break
+        lengths = np.clip(best.cable_lengths, self.limits[:, 0], self.limits[:, 1])
+        return best.shape, lengths
+
+
+def _inside(lengths, limits):
+    return bool(np.all(lengths >= limits[:, 0] - LIMIT_SLACK)
+                and np.all(lengths <= limits[:, 1] + LIMIT_SLACK))
