@@ -9,6 +9,8 @@ setup(
     name=package_name,
     version='0.1.0',
     packages=find_packages(exclude=['test']),
+    # The minimal CiA 402 EDS of the canopen backend (drivers/cia402_minimal.eds).
+    package_data={'continuum_statics.drivers': ['*.eds']},
     data_files=[
         ('share/ament_index/resource_index/packages', ['resource/' + package_name]),
         ('share/' + package_name, ['package.xml']),
