@@ -105,10 +105,12 @@ def _read(reader, count):
     next_target = 0
     tip_from_backbone = not roles['tip_pose']
     last_goal = None
+    last_backbone = None  # (t, connection, raw) of the newest backbone: the final snapshot
     for connection, stamp, raw in (reader.messages(connections=wanted) if wanted else ()):
         role = role_of[connection.id]
         t = (stamp - reader.start_time) * 1e-9
         if role == 'backbone':
+            last_backbone = (t, connection, raw)
             take = next_target < len(targets) and stamp >= targets[next_target]
             if not (take or tip_from_backbone):
                 continue
@@ -148,6 +150,12 @@ def _read(reader, count):
                     if len(goal) == 3 and goal != last_goal:
                         rec.goals.append((t, *goal))
                         last_goal = goal
+    if last_backbone is not None and len(rec.snapshots) < count and (
+            not rec.snapshots or rec.snapshots[-1][0] < last_backbone[0]):
+        t, connection, raw = last_backbone
+        msg = reader.deserialize(raw, connection.msgtype)
+        if msg.poses:
+            rec.snapshots.append((t, np.array([_point(p.pose.position) for p in msg.poses])))
     return rec
 
 
@@ -290,6 +298,8 @@ def _figure_solver(rec, output):
     fig, (ax1, ax2) = plt.subplots(2, 1, figsize=(9.0, 6.0), sharex=True)
     ax1.plot(data[:, 0], data[:, 1], marker='.', label='median')
     ax1.plot(data[:, 0], data[:, 2], marker='.', label='max')
+    if np.all(data[:, 1:3] > 0.0):
+        ax1.set_yscale('log')
     ax1.set_ylabel('solve time [ms]')
     ax1.set_title('Statics solver (from /diagnostics)')
     ax1.grid(True, alpha=0.3)
