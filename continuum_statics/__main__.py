@@ -35,6 +35,10 @@ def main(argv=None):
             from continuum_statics.tools.bench import main as run
     elif command == 'bringup':
         from continuum_statics.nodes.bringup import main as run
+    elif command in NODES:  # one node alone, like `ros2 run continuum_statics <node>`
+        import importlib
+        node_main = importlib.import_module('continuum_statics.nodes.%s_node' % command).main
+        return node_main([command] + rest)
     elif command == 'demo':
         from continuum_statics.tools.demo import main as run
     elif command == 'record':
