@@ -48,7 +48,7 @@ from continuum_statics.nodes.node_params import (
 )
 from continuum_statics.nodes.ros_conversions import cable_index, joint_positions, joint_state
 
-#: Commands and goals: reliable, depth 10 (ARCHITECTURE.md, ROS interfaces).
+#: Commands and goals: reliable, depth 10 (docs/architecture.md, ROS interfaces).
 COMMAND_QOS = QoSProfile(depth=10, reliability=ReliabilityPolicy.RELIABLE)
 THROTTLE_S = 2.0
 #: First reconnection delay after a lost port or bus, s (doubles up to reconnect_max_interval).
