@@ -1,6 +1,6 @@
 # The two commands of README.md: `make demo` (main job) and `make test` (whole suite).
 # Both create .venv on first use and reuse it afterwards.
-.PHONY: venv venv-jazzy demo test test-jazzy bench bench-nodes lint clean
+.PHONY: venv venv-jazzy demo test test-jazzy bench bench-nodes bench-drivers lint clean
 
 venv:
 	@scripts/setup_venv.sh
@@ -23,6 +23,11 @@ bench: venv
 
 bench-nodes: venv
 	scripts/ros_env.sh --private .venv/bin/python -m continuum_statics bench --nodes
+
+# Dynamixel backend against the Protocol 2.0 emulator on a simulated 1 Mbps wire: sync write +
+# sync read cycle and the highest cable_driver publish_rate, for 4 and 9 servos.
+bench-drivers: venv
+	scripts/ros_env.sh --private .venv/bin/python -m continuum_statics.tools.driver_bench
 
 lint: venv
 	.venv/bin/ruff check .
