@@ -334,8 +334,8 @@ def write_robot_file(output, document, values, robot, summary):
     header = [
         'Calibrated by `python -m continuum_statics calibrate` on %s UTC'
         % datetime.datetime.now(datetime.timezone.utc).strftime('%Y-%m-%d %H:%M'),
-        'from %s (%s), fitted from %d measured tip positions in %s:'
-        % (summary['robot'], robot.name, summary['rows'], summary['data']),
+        'from %s (%s),' % (summary['robot'], robot.name),
+        'fitted to %d measured tip positions in %s:' % (summary['rows'], summary['data']),
         fitted + '.',
         'Model: %s. Tip error mean %.3f -> %.3f mm, max %.3f -> %.3f mm.' % (
             summary['model'], before['mean_mm'], after['mean_mm'], before['max_mm'],
