@@ -1,0 +1,36 @@
+"""The repository points only to documents and images it contains."""
+import re
+import subprocess
+
+from conftest import REPO
+
+
+def tracked_text_files():
+    names = subprocess.run(['git', 'ls-files'], cwd=REPO, capture_output=True, text=True,
+                           check=True).stdout.split()
+    for name in names:
+        path = REPO / name
+        if path.suffix in ('.py', '.md', '.yaml', '.xml', '.txt', '.rviz', '.sh', '.csv') \
+                and path.is_file():
+            yield path
+
+
+def test_no_reference_to_a_design_document_outside_the_repository():
+    offenders = [str(p.relative_to(REPO)) for p in tracked_text_files()
+                 if 'ARCHITECTURE.md' in p.read_text(errors='replace')
+                 and p.name != 'test_tools_docs.py']
+    assert not offenders, 'ARCHITECTURE.md is not in the repository; use docs/: %s' % offenders
+
+
+def test_docs_references_and_readme_links_exist():
+    missing = []
+    for path in tracked_text_files():
+        text = path.read_text(errors='replace')
+        for target in set(re.findall(r'\bdocs/[\w./-]+\.(?:md|png)', text)):
+            if not (REPO / target).is_file():
+                missing.append('%s -> %s' % (path.relative_to(REPO), target))
+    readme = (REPO / 'README.md').read_text()
+    for target in re.findall(r'\]\(([^)#:]+)(?:#[^)]*)?\)', readme):
+        if not (REPO / target).exists():
+            missing.append('README.md -> %s' % target)
+    assert not missing, missing
