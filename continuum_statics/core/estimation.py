@@ -32,6 +32,7 @@ class ShapeEstimate:
     :ivar iterations: Gauss-Newton (or shooting) iterations used
     :ivar observable_bending: bending directions the cables observe (2 per section at most)
     :ivar message: what limited the estimate, empty when nothing did
+    :ivar jacobians: the solver's Jacobians at the estimate, reused by the next warm start
     """
 
     shape: Shape
@@ -41,6 +42,7 @@ class ShapeEstimate:
     iterations: int
     observable_bending: int
     message: str
+    jacobians: tuple = None
 
     @property
     def state(self):
@@ -49,12 +51,13 @@ class ShapeEstimate:
 
 
 def estimate_shape(robot, cable_lengths, tip_force=(0.0, 0.0, 0.0), tip_moment=(0.0, 0.0, 0.0),
-                   tensions=None, start=None):
+                   tensions=None, start=None, jacobians=None):
     """Estimate the shape from measured cable lengths (m, ``robot.cable_names`` order).
 
     ``tip_force`` (N) and ``tip_moment`` (N m) are the external tip load in the base frame.
     ``tensions`` (N, >= 0) when measured; ``start`` a solver state (the previous estimate when
-    tracking; default the small-deflection passive solution).
+    tracking; default the small-deflection passive solution) and ``jacobians`` the previous
+    estimate's, to be reused (one model run per iteration instead of 1 + len(state)).
     """
     n_cables = len(robot.cable_names)
     measured = as_vector(cable_lengths, n_cables, 'cable_lengths')
@@ -88,27 +91,31 @@ def estimate_shape(robot, cable_lengths, tip_force=(0.0, 0.0, 0.0), tip_moment=(
     balance = slice(6 + n_cables, 9 + n_cables)
     size = robot.state_size
 
-    def evaluate(x):
-        values, jac, states = robot.probe(x, size, tip_force, tip_moment)
+    def evaluate(x, with_jacobians):
+        values, jac, states = robot.probe(x, size if with_jacobians else 0, tip_force,
+                                          tip_moment)
+        if not with_jacobians:
+            return values[cables] - measured, None, values[balance], None, states
         return values[cables] - measured, jac[cables], values[balance], jac[balance], states
 
     result = constrained_gauss_newton(
         evaluate, start, robot.solver.max_iterations, robot.solver.estimate_tolerance,
-        constraint_weight=robot.length)
+        constraint_weight=robot.length, jacobians=jacobians)
     residual = _rms(result.residual)
     if not result.stationary:
         notes.insert(0, 'not converged in %d iterations' % result.iterations)
     if residual > BEST_FIT_NOTE:
         notes.insert(0, 'best fit: the lengths fit no shape to RMS %.3g m' % residual)
     shape = robot.make_shape(result.x, tip_force, result.evaluation)
-    return _result(shape, result.stationary, residual, result.iterations, observable, notes)
+    return _result(shape, result.stationary, residual, result.iterations, observable, notes,
+                   result.jacobians)
 
 
 def _rms(values):
     return float(np.sqrt(np.mean(values ** 2))) if len(values) else 0.0
 
 
-def _result(shape, converged, residual, iterations, observable, notes):
+def _result(shape, converged, residual, iterations, observable, notes, jacobians=None):
     return ShapeEstimate(shape=shape, u0=shape.u0, converged=bool(converged), residual=residual,
                          iterations=iterations, observable_bending=observable,
-                         message='; '.join(notes))
+                         message='; '.join(notes), jacobians=jacobians)

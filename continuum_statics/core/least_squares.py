@@ -21,6 +21,7 @@ class LeastSquaresResult:
     iterations: int
     stationary: bool
     evaluation: object
+    jacobians: tuple = None
 
 
 @numba.njit(cache=True)
@@ -54,19 +55,27 @@ def _step(res, jac, con, con_jac, damping):
     return step, jac @ step
 
 
-def constrained_gauss_newton(evaluate, x0, max_iterations, step_tolerance, constraint_weight):
+def constrained_gauss_newton(evaluate, x0, max_iterations, step_tolerance, constraint_weight,
+                             jacobians=None):
     """Solve min |r(x)|^2 s.t. c(x) = 0 from ``x0``.
 
-    :param evaluate: x -> (r, dr/dx, c, dc/dx, evaluation), all numpy arrays except the last,
-        which is handed back with the result (e.g. the solved states)
+    :param evaluate: (x, with_jacobians) -> (r, dr/dx, c, dc/dx, evaluation), numpy arrays but
+        the last, which is handed back with the result (e.g. the solved states); the Jacobians
+        may be None when ``with_jacobians`` is False (one model run instead of 1 + len(x))
     :param step_tolerance: stop when the predicted change of r and the constraint correction
         (weighted) are both below this (units of r)
     :param constraint_weight: converts constraint units to residual units in the merit function
+    :param jacobians: (dr/dx, dc/dx) from a solve near ``x0`` (a tracking estimator's previous
+        cycle): they are reused and corrected by Broyden updates instead of recomputed, and
+        recomputed only when a step fails
     """
     x = np.array(x0, dtype=float)
-    res, jac, con, con_jac, evaluation = evaluate(x)
+    quasi = jacobians is not None
+    res, jac, con, con_jac, evaluation = evaluate(x, not quasi)
+    if quasi:
+        jac, con_jac = (np.array(j, dtype=float) for j in jacobians)
     if not all(np.all(np.isfinite(a)) for a in (res, jac, con, con_jac)):
-        raise ValueError('the rod model is not finite at the start u(0) = %s 1/m: is the tip '
+        raise ValueError('the rod model is not finite at the start state %s (1/m): is the tip '
                          'load far beyond what the rod can carry?' % np.round(x, 4).tolist())
     damping = 1e-6
 
@@ -78,24 +87,29 @@ def constrained_gauss_newton(evaluate, x0, max_iterations, step_tolerance, const
     def merit(r, c):
         return float(r @ r + penalty * (c @ c))
 
+    def result(iteration, stationary):
+        return LeastSquaresResult(x, res, con, iteration, bool(stationary), evaluation,
+                                  (jac, con_jac))
+
     current = merit(res, con)
     for iteration in range(1, max_iterations + 1):
         step, predicted = _step(res, jac, con, con_jac, damping)
         small = (predicted @ predicted <= step_tolerance ** 2
                  and constraint_weight ** 2 * (con @ con) <= step_tolerance ** 2)
         if small or not np.all(np.isfinite(step)):
-            return LeastSquaresResult(x, res, con, iteration, bool(small), evaluation)
+            return result(iteration, small)
         for _ in range(12):
             trial = x + step
-            t_res, t_jac, t_con, t_con_jac, t_eval = evaluate(trial)
+            t_res, t_jac, t_con, t_con_jac, t_eval = evaluate(trial, not quasi)
             t_merit = merit(t_res, t_con)
             if not (np.isfinite(t_merit) and t_merit < current) and len(t_con):
                 # second-order correction: the step left the curved constraint surface; pull the
                 # trial back onto it before judging it (avoids the Maratos effect's tiny steps)
-                correction, _ = _step(np.zeros(0), np.zeros((0, len(x))), t_con, t_con_jac, 0.0)
+                correction, _ = _step(np.zeros(0), np.zeros((0, len(x))), t_con,
+                                      con_jac if quasi else t_con_jac, 0.0)
                 if np.all(np.isfinite(correction)):
                     c_trial = trial + correction
-                    c_eval = evaluate(c_trial)
+                    c_eval = evaluate(c_trial, not quasi)
                     c_merit = merit(c_eval[0], c_eval[2])
                     if np.isfinite(c_merit) and c_merit < current:
                         trial, (t_res, t_jac, t_con, t_con_jac, t_eval) = c_trial, c_eval
@@ -103,10 +117,20 @@ def constrained_gauss_newton(evaluate, x0, max_iterations, step_tolerance, const
             if np.isfinite(t_merit) and t_merit < current:
                 damping = max(damping / 4.0, 1e-9)
                 break
-            damping *= 8.0
+            if quasi:  # the reused Jacobians misled the step: recompute them here, once
+                quasi = False
+                res, jac, con, con_jac, evaluation = evaluate(x, True)
+            else:
+                damping *= 8.0
             step, predicted = _step(res, jac, con, con_jac, damping)
         else:
-            return LeastSquaresResult(x, res, con, iteration, False, evaluation)
+            return result(iteration, False)
+        if quasi:  # Broyden: the secant condition J dx = df for both row blocks
+            dx = trial - x
+            scale = 1.0 / (dx @ dx)
+            jac = jac + np.outer(t_res - res - jac @ dx, dx) * scale
+            con_jac = con_jac + np.outer(t_con - con - con_jac @ dx, dx) * scale
+            t_jac, t_con_jac = jac, con_jac
         x, res, jac, con, con_jac, evaluation = trial, t_res, t_jac, t_con, t_con_jac, t_eval
         current = t_merit
-    return LeastSquaresResult(x, res, con, max_iterations, False, evaluation)
+    return result(max_iterations, False)

@@ -316,8 +316,12 @@ class Robot:
                        tip_moment=(0.0, 0.0, 0.0), tensions=None, warm_start=None,
                        u0_guess=None):
         """Shape from measured cable lengths (m) and a tip load (N, N m); :mod:`estimation`."""
+        jacobians = getattr(warm_start, 'jacobians', None)
+        if jacobians is not None and jacobians[0].shape != (len(self.cable_names),
+                                                            self.state_size):
+            jacobians = None
         return estimation.estimate_shape(self, cable_lengths, tip_force, tip_moment, tensions,
-                                         _warm_or_guess(self, warm_start, u0_guess))
+                                         _warm_or_guess(self, warm_start, u0_guess), jacobians)
 
     def solve_tip_goal(self, goal_position, tip_force=(0.0, 0.0, 0.0), tolerance=None,
                        goal_direction=None, warm_start=None, tip_moment=(0.0, 0.0, 0.0),
