@@ -175,3 +175,40 @@ def test_plot_writes_every_figure_of_a_recording(recording, tmp_path):
                                atol=1e-6)
     assert len(recording_data.snapshots) >= 3
     assert set(recording_data.commanded) == set(ROBOT.cable_names)
+
+
+def test_duration_namespace_filter_and_topic_list(harness, tmp_path):
+    """Only the namespace (or the listed topics) is recorded, for --duration seconds."""
+    from continuum_statics.tools.record import record
+
+    node = harness.client()
+    inside = node.create_publisher(PoseStamped, 'tip_goal_pose', RELIABLE)
+    outside = node.create_publisher(PoseStamped, '/elsewhere/tip_goal_pose', RELIABLE)
+    stop = threading.Event()
+
+    def publish():
+        while not stop.is_set():
+            inside.publish(PoseStamped())
+            outside.publish(PoseStamped())
+            time.sleep(0.01)
+
+    publisher = threading.Thread(target=publish, daemon=True)
+    publisher.start()
+    try:
+        namespace = harness.namespace.strip('/')
+        start = time.monotonic()
+        counts, elapsed = record(tmp_path / 'all', duration=2.0, namespace=namespace,
+                                 log=lambda text: None)
+        assert time.monotonic() - start >= 2.0 and elapsed >= 2.0
+        listed, _ = record(tmp_path / 'listed', duration=2.0, namespace=namespace,
+                           topics=['/elsewhere/tip_goal_pose'], log=lambda text: None)
+    finally:
+        stop.set()
+        publisher.join()
+    # /diagnostics is in the default set too (another test's node may still be publishing it).
+    assert set(counts) - {'/diagnostics'} == {'/%s/tip_goal_pose' % namespace}
+    assert counts['/%s/tip_goal_pose' % namespace] > 10
+    assert set(listed) == {'/elsewhere/tip_goal_pose'}
+    assert read_counts(tmp_path / 'all') == {t: n for t, n in counts.items() if n}
+    with pytest.raises(ValueError, match='exists already'):
+        record(tmp_path / 'all', duration=0.1, namespace=namespace)
