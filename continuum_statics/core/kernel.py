@@ -78,17 +78,33 @@ def _so3_exp(w0, w1, w2, out):
 
 
 @numba.njit(cache=True, inline='always')
-def _se3_translation(rho, w, out):
-    """Out (3) = V(w) rho, the translation of exp((rho, w)) with V = I + b hat(w) + c hat(w)^2."""
+def _se3_exp(rho, w, rot, out):
+    """exp((rho, w)) on SE(3): rot (9, row-major) = exp(hat(w)) and out (3) = V(w) rho.
+
+    V = I + b hat(w) + c hat(w)^2 with b = (1 - cos t) / t^2, c = (t - sin t) / t^3, t = |w|.
+    """
     t2 = w[0] * w[0] + w[1] * w[1] + w[2] * w[2]
     if t2 < 1e-6:
+        a = 1.0 - t2 / 6.0 * (1.0 - t2 / 20.0)
         b = 0.5 - t2 / 24.0 * (1.0 - t2 / 30.0)
         c = 1.0 / 6.0 - t2 / 120.0 * (1.0 - t2 / 42.0)
     else:
         t = math.sqrt(t2)
+        sin_t = math.sin(t)
+        a = sin_t / t
         half = math.sin(0.5 * t) / t
         b = 2.0 * half * half
-        c = (t - math.sin(t)) / (t2 * t)
+        c = (t - sin_t) / (t2 * t)
+    w0, w1, w2 = w[0], w[1], w[2]
+    rot[0] = 1.0 - b * (w1 * w1 + w2 * w2)
+    rot[1] = -a * w2 + b * w0 * w1
+    rot[2] = a * w1 + b * w0 * w2
+    rot[3] = a * w2 + b * w0 * w1
+    rot[4] = 1.0 - b * (w0 * w0 + w2 * w2)
+    rot[5] = -a * w0 + b * w1 * w2
+    rot[6] = -a * w1 + b * w0 * w2
+    rot[7] = a * w0 + b * w1 * w2
+    rot[8] = 1.0 - b * (w0 * w0 + w1 * w1)
     x0 = w[1] * rho[2] - w[2] * rho[1]  # w x rho
     x1 = w[2] * rho[0] - w[0] * rho[2]
     x2 = w[0] * rho[1] - w[1] * rho[0]
@@ -371,8 +387,7 @@ def integrate_batch(s_grid, params, model, tip_forces, base_bendings, disk_momen
             for i in range(3):
                 moment[i] += (km[0, i] + 2.0 * (km[1, i] + km[2, i]) + km[3, i]) / 6.0
             # (r, R) <- (r, R) exp(theta)
-            _se3_translation(theta[0:3], theta[3:6], trans)
-            _so3_exp(theta[3], theta[4], theta[5], expo)
+            _se3_exp(theta[0:3], theta[3:6], expo, trans)
             prev = states[b, node - 1]
             y = states[b, node]
             for i in range(3):
@@ -529,20 +544,9 @@ def loads_from_state(x, fixed_tensions, model, bases, ranks, bending_stiffness, 
 
 
 @numba.njit(cache=True)
-def _counts(section_cables):
-    """Count the valid (>= 0) entries in each row of the padded section cable table."""
-    counts = np.zeros(section_cables.shape[0], dtype=np.int64)
-    for k in range(section_cables.shape[0]):
-        for j in range(section_cables.shape[1]):
-            if section_cables[k, j] >= 0:
-                counts[k] += 1
-    return counts
-
-
-@numba.njit(cache=True)
 def probe(s_grid, params, model, tip_force, tip_moment, x, n_free, step, fixed_tensions, layout_i,
-          bases, ranks, section_cables, offsets, guide_nodes, cable_last_guide, cable_end_node,
-          section_end_node):
+          bases, ranks, section_cables, counts, offsets, guide_nodes, cable_last_guide,
+          cable_end_node, section_end_node):
     """Model outputs at a solver state and their forward-difference Jacobian.
 
     Integrates ``x`` and ``x + step e_k`` for the first ``n_free`` components in one batch
@@ -565,17 +569,17 @@ def probe(s_grid, params, model, tip_force, tip_moment, x, n_free, step, fixed_t
             if section_end_node[k] == n_nodes - 1 and layout_i[k] >= 0:
                 for c in range(ranks[k]):
                     exact[layout_i[k] + c] = True
-    columns = [-1]
+    columns = np.full(n_free + 1, -1, dtype=np.int64)
+    n_batch = 1
     for col in range(n_free):
         if not exact[col]:
-            columns.append(col)
-    n_batch = len(columns)
+            columns[n_batch] = col
+            n_batch += 1
     forces = np.empty((n_batch, 3))
     bendings = np.empty((n_batch, 3))
     moments = np.empty((n_batch, n_sections, 3))
     tensions = np.empty((n_batch, n_cables))
     trial = np.empty(n_x)
-    counts = _counts(section_cables)
     for b in range(n_batch):
         for i in range(n_x):
             trial[i] = x[i]

@@ -105,15 +105,20 @@ def constrained_gauss_newton(evaluate, x0, max_iterations, step_tolerance, const
             if not (np.isfinite(t_merit) and t_merit < current) and len(t_con):
                 # second-order correction: the step left the curved constraint surface; pull the
                 # trial back onto it before judging it (avoids the Maratos effect's tiny steps)
-                correction, _ = _step(np.zeros(0), np.zeros((0, len(x))), t_con,
-                                      con_jac if quasi else t_con_jac, 0.0)
-                if np.all(np.isfinite(correction)):
-                    c_trial = trial + correction
+                # (with reused Jacobians the correction is a chord iteration: up to 3 rounds)
+                c_trial, c_con = trial, t_con
+                for _ in range(3 if quasi else 1):
+                    correction, _ = _step(np.zeros(0), np.zeros((0, len(x))), c_con,
+                                          con_jac if quasi else t_con_jac, 0.0)
+                    if not np.all(np.isfinite(correction)):
+                        break
+                    c_trial = c_trial + correction
                     c_eval = evaluate(c_trial, not quasi)
-                    c_merit = merit(c_eval[0], c_eval[2])
+                    c_merit, c_con = merit(c_eval[0], c_eval[2]), c_eval[2]
                     if np.isfinite(c_merit) and c_merit < current:
                         trial, (t_res, t_jac, t_con, t_con_jac, t_eval) = c_trial, c_eval
                         t_merit = c_merit
+                        break
             if np.isfinite(t_merit) and t_merit < current:
                 damping = max(damping / 4.0, 1e-9)
                 break

@@ -195,9 +195,9 @@ class Robot:
         return probe(self.s_grid, self.params if params is None else params, self.model_code,
                      tip_force, tip_moment, state, n_free, self.bending_step(),
                      self._fixed(fixed_tensions), self.section_state_index, self.section_bases,
-                     self.section_ranks, self.section_cables, self.cable_offsets,
-                     self.guide_nodes, self.cable_last_guide, self.cable_end_node,
-                     self.section_end_node)
+                     self.section_ranks, self.section_cables, self.section_cable_count,
+                     self.cable_offsets, self.guide_nodes, self.cable_last_guide,
+                     self.cable_end_node, self.section_end_node)
 
     def make_shape(self, state, tip_force, states, fixed_tensions=None):
         """Wrap kernel states in a :class:`Shape` that remembers its solver state."""

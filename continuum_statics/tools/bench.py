@@ -1,6 +1,9 @@
 """``python -m continuum_statics bench``: timing and accuracy figures of the numeric core.
 
-Prints, for the paper's rod and the tendon robot: median and p90 time of a shape solve (IVP),
+Prints, for the 2- and 3-section robots: the IVP under cable tensions, a plain SciPy
+``solve_ivp`` of the same equations (RK45 at the paper's tolerances and at 1e-8), a cold tension
+solve, a warm estimate after a 1 mm cable change and a cold tip goal. For the paper's rod and the
+tendon robot: median and p90 time of a shape solve (IVP),
 the 6x6 Jacobian, a warm-started shape estimate after a 1 mm cable change and a cold tip-goal
 solve 5 cm away; the tip error against a converged reference; a plain SciPy ``solve_ivp``
 baseline (RK45, rtol 1e-3, atol 1e-6, the paper's setting) on the same problem in the same run;
@@ -79,6 +82,110 @@ def scipy_tip(robot, u0, tip_force):
     return sol.y[0:3, -1]
 
 
+def scipy_sections_tip(robot, state, fixed, tip_force, rtol=1e-3, atol=1e-6):
+    """Tip of the kernel's equations (module docstring of ``core.kernel``) with SciPy RK45.
+
+    The same model in plain NumPy: state (r, R, M), strains from M and N = F + f (L - s) by
+    Newton's method for the distributed model, point moments at the end disks, piecewise
+    between disks (where the set of cables changes).
+    """
+    moments, tensions = robot.loads(state, fixed)
+    c, d, f, length = robot.c, robot.d, robot.body_force, robot.length
+    offsets, e3 = robot.cable_offsets, np.array([0.0, 0.0, 1.0])
+    distributed = robot.cable_model == 'distributed'
+
+    def strains(rot, moment, s, active):
+        force = tip_force + f * (length - s)
+        ml, nl = rot.T @ moment, rot.T @ force
+        u, w = ml / c, nl / d
+        if not distributed or not np.any(tensions[active]):
+            return u, w
+        t, arms = tensions[active], offsets[active]
+        for _ in range(8):
+            q = w + e3 + np.cross(u, arms)
+            norm = np.linalg.norm(q, axis=1)
+            tau = q / norm[:, None]
+            cross = np.cross(arms, tau)
+            jac = np.diag(c).astype(float)
+            for tj, lj, aj, nj in zip(t, arms, np.cross(tau, arms), norm):
+                jac += tj / nj * ((lj @ lj) * np.eye(3) - np.outer(lj, lj) - np.outer(aj, aj))
+            u = u + np.linalg.solve(jac, ml - c * u - t @ cross)
+            w = (nl - t @ tau) / d
+        return u, w
+
+    def rhs(s, y, active):
+        rot, moment = y[3:12].reshape(3, 3), y[12:15]
+        u, w = strains(rot, moment, s, active)
+        hat = np.array([[0.0, -u[2], u[1]], [u[2], 0.0, -u[0]], [-u[1], u[0], 0.0]])
+        dr = rot @ (w + e3)
+        return np.concatenate([dr, (rot @ hat).ravel(), -np.cross(dr, tip_force + f * (
+            length - s))])
+
+    first = robot.integrate_state(state, tip_force, fixed)[0]  # r(0), R(0), M(0) as the kernel
+    y = np.concatenate([first[0:12], first[18:21]])
+    ends = sorted({robot.s_grid[n] for n in robot.section_end_node if n >= 0} | {length})
+    start = 0.0
+    for end in ends:
+        node = int(np.argmin(np.abs(robot.s_grid - end)))
+        active = robot.cable_end_node >= node
+        y = scipy_solve_ivp(rhs, (start, end), y, method='RK45', rtol=rtol, atol=atol,
+                            args=(active,)).y[:, -1]
+        if not distributed:
+            for k in np.nonzero(robot.section_end_node == node)[0]:
+                y[12:15] -= y[3:12].reshape(3, 3) @ moments[k]
+        start = end
+    return y[0:3]
+
+
+def bench_sections(path, repeat):
+    """Print the timing table of a multi-section robot file."""
+    robot = load_robot(path)
+    print('\n%s (%s): %d sections, %s model, %d RK4 steps, %d nodes, %d cables'
+          % (robot.name, Path(path).name, len(robot.sections), robot.cable_model,
+             robot.solver.steps, len(robot.s_grid), len(robot.cable_names)))
+    rng = np.random.default_rng(1)
+    force = np.array([0.0, 0.0, -0.2])
+    tensions = rng.uniform(0.0, 6.0, len(robot.cable_names))
+    shape = robot.solve_tensions(tensions, force)
+    state, fixed = shape.state, shape.fixed_tensions
+    ivp = _row('shape solve (IVP, tensions)', timings(
+        lambda: robot.integrate_state(state, force, fixed), repeat))
+    baseline = timings(lambda: scipy_sections_tip(robot, state, fixed, force),
+                       max(5, repeat // 200), warmup=1)
+    scipy_median = _row('SciPy solve_ivp RK45 (1e-3, 1e-6)', baseline)
+    reference = robot.with_solver(steps=4096).solve_tensions(tensions, force).tip_position
+    tight = scipy_sections_tip(robot, state, fixed, force, 1e-10, 1e-12)
+    print('  speed-up over SciPy: %.0fx; tip vs converged (4096 steps): ours %.1e m, SciPy '
+          '%.1e m (at 1e-10: %.1e m)' % (
+              scipy_median / ivp, np.linalg.norm(shape.tip_position - reference),
+              np.linalg.norm(scipy_sections_tip(robot, state, fixed, force) - reference),
+              np.linalg.norm(tight - reference)))
+    _row('tension solve (cold)', timings(lambda: robot.solve_tensions(tensions, force),
+                                         max(20, repeat // 20), warmup=3))
+    # warm estimate: lengths of a nearby equilibrium whose largest change is 1 mm
+    lengths = robot.cable_lengths(shape)
+    previous = robot.estimate_shape(lengths, force)
+    direction = rng.uniform(0.0, 1.0, len(tensions))
+    for scale in (1.0, 0.5, 2.0, 0.25, 4.0):
+        nearby = robot.solve_tensions(tensions + scale * direction, force)
+        change = np.max(np.abs(robot.cable_lengths(nearby) - lengths))
+        direction *= 1e-3 / change
+    changed = robot.cable_lengths(robot.solve_tensions(tensions + direction, force))
+    est = robot.estimate_shape(changed, force, warm_start=previous)
+    _row('shape estimate (warm, 1 mm change)', timings(
+        lambda: robot.estimate_shape(changed, force, warm_start=previous), repeat))
+    print('  estimate: %d iterations, residual %.1e m, max cable change %.2f mm'
+          % (est.iterations, est.residual, 1e3 * np.max(np.abs(changed - lengths))))
+    goal = robot.solve_tensions(rng.uniform(0.0, 6.0, len(tensions)), force).tip_position
+    sol = robot.solve_tip_goal(goal, force)
+    _row('tip-goal solve (cold, %.0f mm from straight)' % (
+        1e3 * np.linalg.norm(goal - robot.solve_bvp(force).tip_position)),
+        timings(lambda: robot.solve_tip_goal(goal, force), max(10, repeat // 100),
+                warmup=2))
+    print('  tip goal: converged %s, error %.1e m, %d iterations'
+          % (sol.converged, sol.error, sol.iterations))
+
+
 def bench_robot(path, repeat):
     """Print the timing table of one robot file."""
     robot = load_robot(path)
@@ -112,17 +219,17 @@ def bench_robot(path, repeat):
         du[:2] = np.linalg.lstsq(bending_jac, np.eye(len(lengths))[0], rcond=None)[0]
         du *= 1e-3 / np.max(np.abs(robot.cable_jacobian(u0, force) @ du))
         changed = robot.cable_lengths(robot.solve_ivp(u0 + du, force))
-        est = robot.estimate_shape(changed, force, u0_guess=previous.u0)
+        est = robot.estimate_shape(changed, force, warm_start=previous)
         _row('shape estimate (warm, 1 mm change)', timings(
-            lambda: robot.estimate_shape(changed, force, u0_guess=previous.u0), repeat))
+            lambda: robot.estimate_shape(changed, force, warm_start=previous), repeat))
         print('  estimate: %d iterations, residual %.1e m, max cable change %.2f mm'
               % (est.iterations, est.residual, 1e3 * np.max(np.abs(changed - lengths))))
         # a reachable goal about 5 cm from the current tip
         goal = robot.solve_ivp(u0 + [0.0, 1.3, 0.0], force).tip_position
         start_tip = shape.tip_position
-        sol = robot.solve_tip_goal(goal, force, u0_guess=u0)
+        sol = robot.solve_tip_goal(goal, force, warm_start=previous)
         _row('tip-goal solve (cold, goal %.0f mm away)' % (1e3 * np.linalg.norm(goal - start_tip)),
-             timings(lambda: robot.solve_tip_goal(goal, force, u0_guess=u0),
+             timings(lambda: robot.solve_tip_goal(goal, force, warm_start=previous),
                      max(20, repeat // 20), warmup=3), unit=1e-6)
         print('  tip goal: converged %s, error %.1e m, %d iterations'
               % (sol.converged, sol.error, sol.iterations))
@@ -172,6 +279,8 @@ def main(argv=None):
     print('continuum_statics core benchmark, one core, %d calls per figure' % args.repeat)
     for name in ('jones2009_nitinol_rod.yaml', 'tendon_robot.yaml'):
         bench_robot(_config(name), args.repeat)
+    for name in ('two_section_robot.yaml', 'three_section_robot.yaml'):
+        bench_sections(_config(name), args.repeat)
     if not args.no_startup:
         bench_startup()
     return 0
