@@ -44,6 +44,8 @@ ADDR_PRESENT_CURRENT, PRESENT_LENGTH = 126, 10  # current (2), velocity (4), pos
 OPERATING_MODES = {'extended_position': 4, 'current_based_position': 5}
 VELOCITY_UNIT_RPM = 0.229
 ALERT = 0x80
+#: Longest blocking serial read inside the SDK's receive loop, s (see ``start``).
+READ_BLOCK_S = 0.001
 #: Hardware Error Status bits (e-Manual, X series).
 HARDWARE_ERRORS = {0x01: 'input voltage', 0x04: 'overheating', 0x08: 'motor encoder',
                    0x10: 'electrical shock', 0x20: 'overload'}
@@ -130,6 +132,7 @@ class DynamixelCableBackend(CableBackend):
         self._models = {}
         self._warning = ''
         self.cycles = 0
+        self.retries = 0  # sync reads repeated after one missing status packet
 
     # -- connection ---------------------------------------------------------------------------
     def _label(self, j):
@@ -162,6 +165,10 @@ class DynamixelCableBackend(CableBackend):
         except self._port_errors as error:
             raise ConnectionLost('port %s cannot be opened: %s' % (self.port_name, error)) \
                 from None
+        # The SDK polls a non-blocking port while it waits for a status packet (a busy loop that
+        # takes a whole core); a short blocking read returns as soon as the bytes are there.
+        if getattr(port, 'ser', None) is not None:
+            port.ser.timeout = READ_BLOCK_S
         self._port = port
         try:
             missing = []
@@ -231,7 +238,26 @@ class DynamixelCableBackend(CableBackend):
 
     # -- cycle ----------------------------------------------------------------------------
     def _sync_read(self, address, length):
-        """Sync read ``length`` bytes at ``address`` from every servo; (data list, alert list)."""
+        """Sync read ``length`` bytes at ``address`` from every servo; (data list, alert list).
+
+        One missing status packet is retried once (a lost byte, a late USB frame); a servo that
+        misses twice in a row stopped answering.
+        """
+        try:
+            return self._sync_read_once(address, length)
+        except _Missing as missing:
+            self.retries += 1
+            try:
+                self._port.clearPort()
+                return self._sync_read_once(address, length)
+            except _Missing:
+                raise ConnectionLost(str(missing)) from None
+            except ConnectionLost:
+                raise
+            except self._port_errors as error:
+                raise self._lost('lost', error) from None
+
+    def _sync_read_once(self, address, length):
         port, packet = self._port, self._packet
         if port is None:
             raise ConnectionLost('port %s is not open' % self.port_name)
@@ -244,12 +270,12 @@ class DynamixelCableBackend(CableBackend):
                 values, result, error = packet.readRx(port, servo_id, length)
                 if result != sdk.COMM_SUCCESS:
                     port.is_using = False
-                    raise ConnectionLost('port %s: %s stopped answering (%s)' % (
+                    raise _Missing('port %s: %s stopped answering (%s)' % (
                         self.port_name, self._label(j), packet.getTxRxResult(result)))
                 data.append(bytes(values))
                 alerts.append(bool(error & ALERT))
             return data, alerts
-        except ConnectionLost:
+        except (ConnectionLost, _Missing):
             raise
         except self._port_errors as error:
             raise self._lost('lost', error) from None
@@ -304,7 +330,7 @@ class DynamixelCableBackend(CableBackend):
     def status(self):
         """ERROR naming each servo in hardware error (and its bits) or refusing torque."""
         values = {'port': self.port_name, 'connected': self._port is not None,
-                  'ids': ','.join(str(i) for i in self.ids)}
+                  'ids': ','.join(str(i) for i in self.ids), 'read_retries': self.retries}
         problems = []
         for j in range(len(self.ids)):
             if self._hardware_errors[j]:
@@ -379,6 +405,10 @@ class DynamixelCableBackend(CableBackend):
                 except self._port_errors:
                     break
         self._drop_port()
+
+
+class _Missing(Exception):
+    """A status packet did not come (retried once before the servo counts as lost)."""
 
 
 def _signed32(value):

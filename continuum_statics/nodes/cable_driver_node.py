@@ -448,9 +448,9 @@ class CableDriverNode(Node):
 
     def destroy_node(self):
         """Stop publishing, hold and release the actuators, then destroy the node."""
-        if self._loop is not None:
+        if getattr(self, '_loop', None) is not None:  # None or unset: __init__ failed early
             self._loop.stop()
-        if self.backend is not None:
+        if getattr(self, 'backend', None) is not None:
             with self._lock:
                 try:
                     if self._connected:

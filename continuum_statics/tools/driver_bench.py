@@ -73,21 +73,35 @@ def backend_for(servos, link):
 
 
 def cycle_times(servos, cycles, return_delay_us, workdir):
-    """Durations (s) of ``cycles`` command+read cycles."""
+    """Durations (s) of ``cycles`` command+read cycles, retried sync reads, lost cycles."""
+    from continuum_statics.drivers import ConnectionLost
+
     link = Path(workdir) / ('tty_%d_%d' % (servos, return_delay_us))
     emulator = start_emulator(range(1, servos + 1), link, return_delay_us)
     try:
         backend = backend_for(servos, link)
         durations = []
         targets = np.full(servos, 0.30)
+        lost = 0
         for k in range(cycles):
             targets[:] = 0.30 + 0.01 * np.sin(0.01 * k)
             started = time.perf_counter()
-            backend.command(targets, time.monotonic())
-            backend.read(time.monotonic())
+            try:
+                backend.command(targets, time.monotonic())
+                backend.read(time.monotonic())
+            except ConnectionLost:  # a status packet missed twice (a stalled machine)
+                lost += 1
+                for _ in range(10):
+                    try:
+                        backend.start(time.monotonic())
+                        break
+                    except ConnectionLost:
+                        time.sleep(0.1)
+                continue
             durations.append(time.perf_counter() - started)
+        retries = backend.retries
         backend.close()
-        return np.array(durations)
+        return np.array(durations), retries, lost
     finally:
         stop_emulator(emulator)
 
@@ -141,8 +155,9 @@ def _robot_file(servos):
         for i in range(servos))
     guides = ', '.join('%.2f' % (0.03 * k) for k in range(1, 11))
     return ('name: bench_%d_cables\nrod: {length: 0.30, diameter: 1.4e-3, youngs_modulus: '
-            '54.0e9, poisson_ratio: 0.3, density: 6450.0}\nguides: [%s]\ncables:\n%s\n'
-            % (servos, guides, cables))
+            '54.0e9, poisson_ratio: 0.3, density: 6450.0}\nbase: {frame_id: base_link, '
+            'position: [0, 0, 0], orientation: [0, 0, 0, 1]}\ngravity: [0, 0, -9.81]\n'
+            'guides: [%s]\ncables:\n%s\n' % (servos, guides, cables))
 
 
 def main(argv=None):
@@ -159,14 +174,15 @@ def main(argv=None):
     with tempfile.TemporaryDirectory() as workdir:
         print('sync write (Goal Position) + sync read (current, velocity, position), '
               'simulated 1 Mbps wire, emulator in another process')
-        print('%7s %11s %10s %10s %10s %10s' % ('servos', 'delay us', 'wire ms', 'median ms',
-                                                 'p99 ms', 'max ms'))
+        print('%7s %9s %8s %10s %8s %8s %8s %5s' % (
+            'servos', 'delay us', 'wire ms', 'median ms', 'p99 ms', 'max ms', 'retries', 'lost'))
         for servos in args.servos:
             for delay in (0, 500):
-                times = cycle_times(servos, args.cycles, delay, workdir) * 1e3
-                print('%7d %11d %10.2f %10.2f %10.2f %10.2f' % (
+                times, retries, lost = cycle_times(servos, args.cycles, delay, workdir)
+                times = times * 1e3
+                print('%7d %9d %8.2f %10.2f %8.2f %8.2f %8d %5d' % (
                     servos, delay, wire_time(servos, delay) * 1e3, np.median(times),
-                    np.percentile(times, 99), times.max()))
+                    np.percentile(times, 99), times.max(), retries, lost))
         if args.no_node:
             return 0
         print('\ncable_driver publish_rate sweep (Return Delay Time 0; holds = >= 95 %)')
