@@ -11,6 +11,10 @@ import numba
 import numpy as np
 
 
+#: Iterations on reused (Broyden-updated) Jacobians before they are recomputed.
+QUASI_ITERATIONS = 3
+
+
 @dataclass
 class LeastSquaresResult:
     """Outcome of :func:`constrained_gauss_newton`; ``evaluation`` is the model at ``x``."""
@@ -93,6 +97,9 @@ def constrained_gauss_newton(evaluate, x0, max_iterations, step_tolerance, const
 
     current = merit(res, con)
     for iteration in range(1, max_iterations + 1):
+        if quasi and iteration > QUASI_ITERATIONS:  # slow: the secants drifted; start afresh
+            quasi = False
+            res, jac, con, con_jac, evaluation = evaluate(x, True)
         step, predicted = _step(res, jac, con, con_jac, damping)
         small = (predicted @ predicted <= step_tolerance ** 2
                  and constraint_weight ** 2 * (con @ con) <= step_tolerance ** 2)
