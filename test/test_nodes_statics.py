@@ -102,7 +102,8 @@ BAD_MEASUREMENTS = [
     (['cable_0', 'cable_1', 'cable_2', 'cable_3'], [0.3, 0.0, 0.3, -0.3], 'for cable_1, cable_3'),
     # all four 5 mm too long: the rod would have to stretch, no shape explains it
     (['cable_0', 'cable_1', 'cable_2', 'cable_3'], [0.305] * 4, 'fit no shape: RMS residual 0.00'),
-    (['cable_0', 'cable_1', 'cable_2', 'cable_3'], [1000.0] * 4, 'residual 1e+03'),
+    (['cable_0', 'cable_1', 'cable_2', 'cable_3'], [1000.0] * 4, "outside the robot file's"),
+    (['cable_0', 'cable_1', 'cable_2', 'cable_3'], [0.3, 0.3, 0.3, 0.26], 'cable_3 0.2600 m not'),
     (['cable_0', 'cable_1', 'cable_2', 'cable_9'], [0.3] * 4, 'unknown cable name'),
     (['cable_0', 'cable_1', 'cable_2', 'cable_3'], [0.3] * 3, '4 names but 3 positions'),
     (['cable_0', 'cable_1', 'cable_2'], [0.3] * 3, 'missing cable'),
@@ -182,3 +183,109 @@ def test_parameters_are_validated_over_the_parameter_service(harness):
     backbone = rig.feed(ROBOT.cable_lengths(BENT))
     assert len(backbone.poses) == 7
     np.testing.assert_allclose(pose_xyz(backbone.poses[-1].pose), BENT.tip_position, atol=1e-6)
+
+
+def raw_joint_state(sec, nanosec, names, lengths):
+    """Serialize a JointState by hand (little-endian CDR), with any stamp: bytes."""
+    import struct
+    data = bytearray(b'\x00\x01\x00\x00') + struct.pack('<iII', sec, nanosec, 1) + b'\x00'
+
+    def align(size):
+        data.extend(b'\x00' * (-(len(data) - 4) % size))
+
+    align(4)
+    data += struct.pack('<I', len(names))
+    for name in names:
+        align(4)
+        encoded = name.encode() + b'\x00'
+        data += struct.pack('<I', len(encoded)) + encoded
+    align(4)
+    data += struct.pack('<I', len(lengths))
+    align(8)
+    data += struct.pack('<%dd' % len(lengths), *lengths)
+    return bytes(data + b'\x00' * 8)  # empty velocity and effort
+
+
+def test_empty_malformed_and_badly_stamped_payloads_are_counted(harness):
+    rig = Rig(harness)
+    good = rig.feed(ROBOT.cable_lengths(BENT))
+    lengths = [float(v) for v in ROBOT.cable_lengths(BENT)]
+    cases = [(b'', 'empty payload'),
+             (b'\x00\x01\x00\x00' + b'\xff' * 40, 'malformed JointState'),
+             (b'\x00\x09\x00\x03', 'malformed JointState (4 bytes'),
+             (raw_joint_state(7, 1_000_000_000, NAMES, lengths), 'nanosec 1000000000')]
+    for count, (payload, reason) in enumerate(cases, 1):
+        publish_until(rig.states, payload,
+                      lambda: reason in rig.values().get('last_rejection', ''), 5.0, reason)
+        assert int(rig.values()['rejected_cable_states']) >= count
+    assert int(rig.values()['empty_payloads_total']) >= 1
+    assert rig.backbone.last.header.stamp == good.header.stamp
+    # The hand-made encoding itself is fine with a valid stamp.
+    data = raw_joint_state(8, 5, NAMES, lengths)
+    publish_until(rig.states, data, lambda: rig.backbone.last.header.stamp.sec == 8, 5.0,
+                  'the backbone of a hand-serialized measurement')
+
+
+def test_lengths_that_are_not_exactly_a_shape_give_a_best_fit_with_a_warning(harness):
+    rig = Rig(harness)
+    rig.feed(ROBOT.cable_lengths(BENT))
+    # +-0.3 mm on opposite cables: the two bending freedoms cannot explain it (slack, stretch)
+    lengths = np.asarray(ROBOT.cable_lengths(BENT)) + np.array([3e-4, 3e-4, 3e-4, -3e-4])
+    backbone = rig.feed(lengths)
+    tip = pose_xyz(backbone.poses[-1].pose)
+    assert np.linalg.norm(tip - BENT.tip_position) < 5e-3, 'the best fit is near the shape'
+    wait_until(lambda: 'best fit' in rig.values().get('estimate_message', ''), 5.0,
+               'the best-fit message')
+    values = rig.values()
+    assert values['converged'] == 'False'
+    assert 1e-4 < float(values['residual_m']) < 2e-3
+    found = diagnostic_values(rig.diagnostics, '/statics')
+    wait_until(lambda: diagnostic_values(rig.diagnostics, '/statics')[1].level == b'\x01', 5.0,
+               'WARN on diagnostics')
+    found = diagnostic_values(rig.diagnostics, '/statics')
+    assert 'best fits' in found[1].message and 'residual' in found[1].message
+    # Told the encoders are that noisy, the node takes it as normal.
+    harness.nodes[0].set_parameters([Parameter('length_noise_std', value=2e-4)])
+    rig.feed(lengths - 1e-6)
+    wait_until(lambda: diagnostic_values(rig.diagnostics, '/statics')[1].level == b'\x00', 5.0,
+               'OK once the noise level explains the residual')
+    assert rig.values()['converged'] == 'True'
+
+
+def test_tip_wrench_limits_come_from_the_rod_and_reject_implausible_loads(harness):
+    rig = Rig(harness)
+    rig.feed(ROBOT.straight_cable_lengths)
+    force_scale = ROBOT.c[0] / ROBOT.length ** 2
+    wait_until(lambda: 'max_tip_force_n' in rig.values(), 5.0, 'the limits on diagnostics')
+    assert float(rig.values()['max_tip_force_n']) == pytest.approx(10.0 * force_scale, rel=1e-5)
+    for force, torque, reason in [(1e155, 0.0, 'force 1e+155 N is too large'),
+                                  (20.0 * force_scale, 0.0, 'too large (max_tip_force'),
+                                  (0.0, 1e300, 'torque 1e+300 N m is too large')]:
+        msg = WrenchStamped()
+        msg.header.frame_id = 'base_link'
+        msg.wrench.force.x, msg.wrench.torque.y = force, torque
+        publish_until(rig.wrench, msg, lambda: reason in rig.values().get('last_rejection', ''),
+                      5.0, reason)
+    assert rig.values()['tip_force_n'] == '0 0 0'
+
+
+def test_a_robot_without_cables_is_a_passive_rod_under_gravity_and_tip_load(harness):
+    rod_file = REPO / 'config' / 'jones2009_nitinol_rod.yaml'
+    rod = load_robot(rod_file)
+    rig = Rig(harness, robot_file=str(rod_file))
+    wait_until(lambda: rig.backbone.last is not None, 10.0, 'the passive backbone')
+    sagging = rod.solve_bvp()
+    np.testing.assert_allclose(pose_xyz(rig.backbone.last.poses[-1].pose), sagging.tip_position,
+                               atol=1e-6)
+    assert not rig.node.subscriptions or all(
+        s.topic_name.split('/')[-1] != 'cable_states' for s in rig.node.subscriptions)
+    load = WrenchStamped()
+    load.header.frame_id = rod.base_frame_id
+    load.header.stamp = Time(sec=42, nanosec=0)
+    load.wrench.force.z = -0.196  # the paper's 20 g tip mass
+    publish_until(rig.wrench, load, lambda: rig.backbone.last.header.stamp.sec == 42, 10.0,
+                  'the backbone under the tip load')
+    np.testing.assert_allclose(pose_xyz(rig.backbone.last.poses[-1].pose),
+                               rod.solve_bvp(tip_force=(0.0, 0.0, -0.196)).tip_position,
+                               atol=1e-6)
+    wait_until(lambda: 'passive rod' in rig.values().get('status', ''), 5.0, 'the status')

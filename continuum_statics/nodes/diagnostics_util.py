@@ -98,3 +98,22 @@ class Problems:
         values = {'rejected_%s' % kind: count for kind, count in sorted(self.counts.items())}
         values['last_rejection'] = self.last_reason or 'none'
         return values
+
+
+class ValueWindow:
+    """Values collected since the last report (e.g. residuals, m): count, median and max."""
+
+    def __init__(self, capacity=5000):
+        self._samples = deque(maxlen=capacity)
+
+    def add(self, value):
+        """Record one value."""
+        self._samples.append(value)
+
+    def report(self):
+        """Return (count, median, max) and start a new window; (0, nan, nan) when empty."""
+        samples = np.fromiter(self._samples, dtype=float)
+        self._samples.clear()
+        if samples.size == 0:
+            return 0, math.nan, math.nan
+        return samples.size, float(np.median(samples)), float(samples.max())

@@ -171,3 +171,27 @@ def load_robot_file(path):
     """Load the robot description named by a ``robot_file`` parameter (ValueError when bad)."""
     from continuum_statics import load_robot
     return load_robot(resolve_config_path(path))
+
+
+def tip_wrench_limit_specs():
+    """Return the ``max_tip_force`` / ``max_tip_torque`` parameters (0: derived from the rod)."""
+    return [
+        ParamSpec('max_tip_force', 0.0, 'largest plausible tip_wrench force, N; larger ones are '
+                  'rejected as a bad tip_wrench (0: 10 E I / L^2 of the rod, a load that bends '
+                  'it far beyond 90 degrees)', 0.0, 1e9),
+        ParamSpec('max_tip_torque', 0.0, 'largest plausible tip_wrench torque, N m (0: '
+                  '2 pi E I / L of the rod, a moment that curls it into a full circle)',
+                  0.0, 1e9),
+    ]
+
+
+def tip_wrench_limits(robot, params):
+    """Return (force N, torque N m) limits: the parameters, or the rod's defaults where 0.
+
+    E I / L^2 is the rod's natural force scale (a tip force of that size bends a cantilever
+    by about 30 degrees) and E I / L its moment scale (that moment bends it by one radian).
+    """
+    bending_stiffness, length = float(robot.c[0]), float(robot.length)
+    force = params['max_tip_force'] or 10.0 * bending_stiffness / length ** 2
+    torque = params['max_tip_torque'] or 2.0 * math.pi * bending_stiffness / length
+    return force, torque

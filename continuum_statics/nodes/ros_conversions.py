@@ -113,10 +113,15 @@ def check_frame(frame_id, base_frame_id, what):
                          % (what, frame_id, base_frame_id))
 
 
-def tip_load(msg, base_frame_id):
+def tip_load(msg, base_frame_id, max_force=math.inf, max_torque=math.inf):
     """Return a WrenchStamped in the base frame as a finite (6,) array: force (N), torque (N m).
 
-    :raises ValueError: on another frame or a non-finite component (force or torque)
+    Each component is checked for finiteness first, then the magnitudes with ``math.hypot``
+    (which cannot overflow), so a 1e155 N force is "too large", never "not finite".
+
+    :param max_force: largest plausible force magnitude, N
+    :param max_torque: largest plausible torque magnitude, N m
+    :raises ValueError: on another frame, a non-finite component or an implausible magnitude
     """
     check_frame(msg.header.frame_id, base_frame_id, 'tip_wrench')
     force, torque = msg.wrench.force, msg.wrench.torque
@@ -124,7 +129,22 @@ def tip_load(msg, base_frame_id):
     if not all(math.isfinite(v) for v in values):
         raise ValueError('tip_wrench has a non-finite component: force (%g, %g, %g), '
                          'torque (%g, %g, %g)' % values)
+    force_norm, torque_norm = math.hypot(*values[:3]), math.hypot(*values[3:])
+    if force_norm > max_force:
+        raise ValueError('tip_wrench force %.3g N is too large (max_tip_force %.3g N)'
+                         % (force_norm, max_force))
+    if torque_norm > max_torque:
+        raise ValueError('tip_wrench torque %.3g N m is too large (max_tip_torque %.3g N m)'
+                         % (torque_norm, max_torque))
     return np.array(values)
+
+
+def float32_value(value):
+    """Return the decimal a float32 field was set from (0.3, not 0.30000001192092896).
+
+    Uses the shortest decimal that rounds to the same float32 (numpy's float32 repr).
+    """
+    return float(str(np.float32(value)))
 
 
 def goal_position(pose_stamped, base_frame_id):
@@ -370,22 +390,27 @@ class _CdrTemplate:
 
 
 class JointStateView:
-    """The parts of a serialized sensor_msgs/JointState the statics hot path needs.
+    """A serialized sensor_msgs/JointState, read without building a Python message.
 
     Parsing the CDR bytes directly skips building a Python message (~40 us at 1 kHz). ``names``
-    are decoded only when ``name_bytes`` (the serialized name list) differs from the previous
-    message's, which for a driver's stream is never.
+    and ``frame_id`` are decoded on first use, and only when ``name_bytes`` (the serialized name
+    list, a cache key) differs from the previous message's, which for a driver's stream is never.
+    Strings read as rclpy reads them: up to the first NUL, UTF-8 with replacement characters.
 
-    :ivar sec: header stamp seconds; ``nanosec`` likewise
-    :ivar name_bytes: the serialized ``name`` sequence (a cache key)
-    :ivar position: float array of ``position`` (no copy)
+    :ivar sec: header stamp seconds; ``nanosec`` likewise (always < 1e9)
+    :ivar name_bytes: the serialized ``name`` sequence (bytes, little-endian CDR) or, for a message
+        rclpy decoded, a tuple: never a prefix of other bytes, so never a cache hit for them
+    :ivar position: float array of ``position`` (no copy); ``velocity``, ``effort`` likewise
     """
 
-    __slots__ = ('sec', 'nanosec', 'name_bytes', 'position', '_names')
+    __slots__ = ('sec', 'nanosec', 'name_bytes', 'position', 'velocity', 'effort', '_names',
+                 '_frame')
 
-    def __init__(self, sec, nanosec, name_bytes, position, names=None):
+    def __init__(self, sec, nanosec, name_bytes, position, velocity, effort, names=None,
+                 frame=None):
         self.sec, self.nanosec = sec, nanosec
         self.name_bytes, self.position, self._names = name_bytes, position, names
+        self.velocity, self.effort, self._frame = velocity, effort, frame
 
     @property
     def names(self):
@@ -394,14 +419,30 @@ class JointStateView:
             self._names = _decode_string_sequence(self.name_bytes)
         return self._names
 
+    @property
+    def frame_id(self):
+        """The header's ``frame_id``."""
+        if isinstance(self._frame, bytes):
+            self._frame = _cdr_text(self._frame)
+        return self._frame
+
 
 _U32 = struct.Struct('<I')
 _STAMP = struct.Struct('<iI')
+#: Encapsulation header of plain little-endian CDR (XCDR1), what the ROS 2 middlewares send.
+CDR_LE = b'\x00\x01'
+#: Smallest serialized JointState: encapsulation, stamp, empty frame_id, four empty sequences.
+MIN_JOINT_STATE_BYTES = 32
 
 
 def _aligned(offset, size):
     """Align a buffer offset (the CDR origin is byte 4, after the encapsulation header)."""
     return offset + (-(offset - 4) % size)
+
+
+def _cdr_text(raw):
+    """Decode CDR string bytes as rclpy does: up to the first NUL, UTF-8 with 'replace'."""
+    return raw.split(b'\x00', 1)[0].decode('utf-8', 'replace')
 
 
 def _decode_string_sequence(data):
@@ -410,50 +451,94 @@ def _decode_string_sequence(data):
     for _ in range(count):
         offset += -offset % 4  # name_bytes starts 4-aligned relative to the CDR origin
         length, = _U32.unpack_from(data, offset)
-        if length == 0 or offset + 4 + length > len(data):
-            raise ValueError('malformed JointState name')
-        names.append(data[offset + 4:offset + 3 + length].decode('utf-8'))
+        names.append(_cdr_text(data[offset + 4:offset + 4 + length]))
         offset += 4 + length
     return names
+
+
+def _string_end(data, offset):
+    """End of the CDR string at ``offset`` (4-aligned); ValueError when it runs past the end."""
+    length, = _U32.unpack_from(data, offset)
+    end = offset + 4 + length
+    if end > len(data):
+        raise ValueError('a string runs past the end')
+    return end
+
+
+def _float64_sequence(data, offset, what):
+    """Return (array, end) of the float64 sequence whose length is at 4-aligned ``offset``."""
+    count, = _U32.unpack_from(data, offset)
+    offset += 4
+    if not count:
+        return np.empty(0), offset
+    offset = _aligned(offset, 8)
+    if count > (len(data) - offset) // 8:
+        raise ValueError('%s runs past the end' % what)
+    return np.frombuffer(data, dtype='<f8', count=count, offset=offset), offset + 8 * count
+
+
+def check_stamp(sec, nanosec):
+    """Raise ValueError unless ``nanosec`` < 1e9 (a builtin_interfaces/Time invariant)."""
+    if not 0 <= nanosec < 1_000_000_000:
+        raise ValueError('stamp nanosec %d is not below 1e9' % nanosec)
 
 
 def parse_joint_state(data, previous_name_bytes=None):
     """Return a :class:`JointStateView` of serialized JointState ``data``.
 
-    :param previous_name_bytes: ``name_bytes`` of the last message: when the new message starts
-        its name list with the same bytes they are reused, and nothing is decoded
-    :raises ValueError: on malformed data
+    Accepts exactly what rclpy's deserializer accepts, with the same content (the fuzz tests
+    check that against rclpy), except stamps with ``nanosec`` >= 1e9, which are rejected.
+
+    :param previous_name_bytes: ``name_bytes`` of the last message: when the new little-endian
+        message starts its name list with the same bytes they are reused, and nothing is decoded
+    :raises ValueError: on an empty payload, malformed data or an invalid stamp
     """
-    if data[:2] != b'\x00\x01':  # not little-endian plain CDR: let rclpy read it
-        from rclpy.serialization import deserialize_message
-        try:
-            msg = deserialize_message(data, JointState)
-        except Exception as error:  # rclpy raises RMWError (a RuntimeError) on bad bytes
-            raise ValueError('malformed JointState (%s)' % error) from None
-        names = list(msg.name)
-        return JointStateView(msg.header.stamp.sec, msg.header.stamp.nanosec,
-                              '\x00'.join(names).encode('utf-8') + b'\x01',
-                              np.asarray(msg.position, dtype=float), names)
+    if len(data) == 0:
+        raise ValueError('empty payload')
+    if len(data) < MIN_JOINT_STATE_BYTES:
+        # Never handed to rclpy: Fast CDR reads out of bounds (segfault) on a bare 4-byte
+        # encapsulation header whose options announce padding.
+        raise ValueError('malformed JointState (%d bytes, at least %d needed)'
+                         % (len(data), MIN_JOINT_STATE_BYTES))
+    if data[:2] != CDR_LE or len(data) < 4 or data[3] & 3:
+        # big endian, another encapsulation, or padding announced in the options (rare, and
+        # Fast CDR's reading of it is its own): let rclpy read it
+        return _parse_with_rclpy(data)
     try:
         sec, nanosec = _STAMP.unpack_from(data, 4)
-        frame_length, = _U32.unpack_from(data, 12)
-        start = _aligned(16 + frame_length, 4)
-        if previous_name_bytes is not None and data.startswith(previous_name_bytes, start):
+        frame_start = 16
+        start = _aligned(_string_end(data, 12), 4)
+        if isinstance(previous_name_bytes, bytes) and data.startswith(previous_name_bytes,
+                                                                      start):
             end = start + len(previous_name_bytes)
         else:
             count, = _U32.unpack_from(data, start)
+            if count > (len(data) - start - 4) // 4:  # every string takes 4 bytes or more
+                raise ValueError('%d names cannot fit' % count)
             end = start + 4
             for _ in range(count):
-                end = _aligned(end, 4)
-                length, = _U32.unpack_from(data, end)
-                end += 4 + length
-            if end > len(data):
-                raise ValueError('name list runs past the end')
-        name_bytes = data[start:end]
-        offset = _aligned(end, 4)
-        count, = _U32.unpack_from(data, offset)
-        offset = _aligned(offset + 4, 8) if count else offset + 4
-        position = np.frombuffer(data, dtype='<f8', count=count, offset=offset)
+                end = _string_end(data, _aligned(end, 4))
+        position, offset = _float64_sequence(data, _aligned(end, 4), 'position')
+        velocity, offset = _float64_sequence(data, _aligned(offset, 4), 'velocity')
+        effort, offset = _float64_sequence(data, _aligned(offset, 4), 'effort')
     except (struct.error, ValueError) as error:
         raise ValueError('malformed JointState (%s)' % error) from None
-    return JointStateView(sec, nanosec, name_bytes, position)
+    check_stamp(sec, nanosec)
+    frame_end = 16 + _U32.unpack_from(data, 12)[0]
+    return JointStateView(sec, nanosec, data[start:end], position, velocity, effort,
+                          frame=data[frame_start:frame_end])
+
+
+def _parse_with_rclpy(data):
+    from rclpy.serialization import deserialize_message
+    try:
+        msg = deserialize_message(bytes(data), JointState)
+    except Exception as error:  # rclpy raises RMWError (a RuntimeError) on bad bytes
+        raise ValueError('malformed JointState (%s)' % str(error).splitlines()[0][:120]) from None
+    stamp = msg.header.stamp
+    check_stamp(stamp.sec, stamp.nanosec)
+    names = list(msg.name)
+    return JointStateView(stamp.sec, stamp.nanosec, ('rclpy',) + tuple(names),
+                          np.asarray(msg.position, dtype=float),
+                          np.asarray(msg.velocity, dtype=float),
+                          np.asarray(msg.effort, dtype=float), names, msg.header.frame_id)

@@ -20,9 +20,22 @@ Backbone and tip pose are published as serialized bytes filled from a template
 (:class:`~continuum_statics.nodes.ros_conversions.PoseSequenceEncoder`): converting a Path
 object costs rclpy ~0.2 ms, which matters at 1 kHz.
 
-Bad input (unknown, repeated or missing names, size mismatch, NaN, a tip wrench in another frame)
-is dropped with a throttled warning and counted on diagnostics; the last good state stays
-published and nothing non-finite is ever published.
+Two residual thresholds (RMS difference between the measured cable lengths and those of the
+best-fitting shape, m). Up to ``warn_residual`` the lengths are a shape of the robot. Above it the
+best fit is still published, with WARN and the residual on diagnostics: real encoders are noisy,
+cables stretch and go slack, so measured lengths are rarely exactly a shape. Only above
+``max_residual`` (no shape anywhere near: wrong robot file, broken cable, unhomed encoder), or
+with lengths outside the robot file's limits by more than ``length_limit_margin``, is the input
+dropped. ``length_noise_std`` (the encoders' noise, m) raises the thresholds to at least 3x
+(warn) and 10x (drop) the noise, so noise alone never warns or drops.
+
+A robot file without cables is a passive rod: its shape under gravity and ``tip_wrench`` is
+published at start-up and whenever the tip load changes (``cable_states`` is not subscribed).
+
+Bad input (unknown, repeated or missing names, size mismatch, NaN, an empty or malformed payload,
+a stamp with nanosec >= 1e9, a tip wrench in another frame or beyond ``max_tip_force`` /
+``max_tip_torque``) is dropped with a throttled warning and counted on diagnostics; the last good
+state stays published and nothing non-finite is ever published.
 """
 import math
 import sys
@@ -49,6 +62,8 @@ from continuum_statics.nodes.node_params import (
     diagnostics_rate_spec,
     load_robot_file,
     robot_file_spec,
+    tip_wrench_limit_specs,
+    tip_wrench_limits,
 )
 from continuum_statics.nodes.ros_conversions import (
     BackboneMarkers,
@@ -83,8 +98,18 @@ class StaticsNode(Node):
             ParamSpec('marker_rate', 30.0, 'backbone_markers rate, Hz (0: off)', 0.0, 200.0),
             ParamSpec('tip_wrench_timeout', 1.0, 'a tip_wrench estimate older than this is '
                       'replaced by zero, s (0: never expires)', 0.0, 3600.0),
-            ParamSpec('max_residual', 1e-4, 'an estimate whose cable-length residual (RMS) is '
-                      'above this is rejected and the last good shape kept, m', 0.0, 1.0),
+            ParamSpec('warn_residual', 1e-4, 'above this cable-length residual (RMS) the '
+                      'lengths are not exactly a shape: the best fit is published with WARN on '
+                      'diagnostics, m', 0.0, 1.0),
+            ParamSpec('max_residual', 2e-3, 'above this residual no shape is near the measured '
+                      'lengths: the input is dropped and the last good shape kept, m', 0.0, 1.0),
+            ParamSpec('length_noise_std', 0.0, 'standard deviation of the measured cable lengths '
+                      '(encoder noise), m: the thresholds are at least 3x (warn) and 10x (drop) '
+                      'this', 0.0, 0.1),
+            ParamSpec('length_limit_margin', 1e-3, 'lengths further than this outside the robot '
+                      "file's length limits are dropped, m", 0.0, 1.0),
+            ParamSpec('use_measured_tensions', True, 'estimate with cable_states.effort as cable '
+                      'tensions (N) when every one is present, finite and >= 0'),
             ParamSpec('tube_diameter', 0.006, 'diameter of the rod drawn in RViz, m', 1e-4, 0.2),
             ParamSpec('dedicated_intake_thread', True, 'serve cable_states from a thread of its '
                       'own instead of the executor (~0.3 ms less per message)', read_only=True),
@@ -93,10 +118,13 @@ class StaticsNode(Node):
                       read_only=True),
             ParamSpec('max_input_lag', 0.005, 'when the oldest queued cable_states was received '
                       'longer ago than this, skip to the newest, s', 0.0, 1.0, read_only=True),
-        ]
+        ] + tip_wrench_limit_specs()
         self._params = ParameterTable(self, specs)
         self.robot = load_robot_file(self._params['robot_file'])
         self.cable_names = tuple(self.robot.cable_names)
+        self._passive = not self.cable_names
+        limits = np.asarray(self.robot.cable_length_limits, dtype=float).reshape(-1, 2)
+        self._low, self._high = limits[:, 0].copy(), limits[:, 1].copy()
         self.base_frame_id = self.robot.base_frame_id
         self._disk_diameter = 2.0 * float(np.max(np.linalg.norm(
             np.asarray(self.robot.cable_offsets, dtype=float).reshape(-1, 3), axis=1),
@@ -106,7 +134,8 @@ class StaticsNode(Node):
         self._name_bytes = None
         self._index = None
         self._lengths = np.empty(len(self.cable_names))
-        self._u0 = None
+        self._tensions = np.empty(len(self.cable_names))
+        self._warm = None  # the last estimate: warm start of the next
         self._shape = None
         self._shape_is_new = False
         self._tip_load = np.zeros(6)
@@ -125,7 +154,11 @@ class StaticsNode(Node):
         self._markers = BackboneMarkers(self.get_name(), self._params['tube_diameter'],
                                         self._disk_diameter)
         self._last = {'residual': math.nan, 'iterations': 0, 'converged': False,
-                      'message': 'waiting for cable_states', 'time': None}
+                      'message': 'waiting for cable_states', 'time': None, 'tensions': False}
+        self._residuals = diag.ValueWindow()
+        self._best_fits = 0  # published with a residual above the warn threshold
+        self._empty_payloads = 0
+        self._limit_rejections = 0
         self._solve_times = diag.TimingWindow()
         self._cycle_times = diag.TimingWindow()
         self._input_rate = diag.RateMeter()
@@ -142,19 +175,26 @@ class StaticsNode(Node):
                                reliability=ReliabilityPolicy.BEST_EFFORT,
                                durability=DurabilityPolicy.VOLATILE)
         self._intake = make_intake(self, self._params['dedicated_intake_thread'])
-        self._input = self._intake.add(JointState, 'cable_states', self._on_cable_states,
-                                       input_qos, raw=True, max_lag=self._params['max_input_lag'],
-                                       fallback_qos=LATEST_SENSOR_QOS)
-        self._intake.start()
+        self._input = None
+        if not self._passive:  # a passive rod has nothing to measure
+            self._input = self._intake.add(
+                JointState, 'cable_states', self._on_cable_states, input_qos, raw=True,
+                max_lag=self._params['max_input_lag'], fallback_qos=LATEST_SENSOR_QOS)
+            self._intake.start()
         self.create_subscription(WrenchStamped, 'tip_wrench', self._on_tip_wrench,
                                  LATEST_SENSOR_QOS)
+        self._passive_load = None
+        if self._passive:
+            self._last['message'] = 'passive rod (no cables): shape from gravity and tip_wrench'
+            self._solve_passive(None)
         self._marker_timer = None
         self._set_marker_timer(self._params['marker_rate'])
         self.create_timer(1.0 / self._params['diagnostics_rate'], self._publish_diagnostics)
         self._params.on_change = self._on_parameter_change
-        self.get_logger().info('statics: robot %r, %d cables, frame %r, %d path samples' % (
+        self.get_logger().info('statics: robot %r, %d cables, frame %r, %d path samples%s' % (
             self.robot.name, len(self.cable_names), self.base_frame_id,
-            self._params['path_samples']))
+            self._params['path_samples'],
+            ' (passive rod: shape from gravity and tip_wrench)' if self._passive else ''))
 
     # -- parameters ------------------------------------------------------------------------
     def _on_parameter_change(self, name, value):
@@ -175,8 +215,9 @@ class StaticsNode(Node):
                                   throttle_duration_sec=THROTTLE_S)
 
     def _on_tip_wrench(self, msg):
+        force_limit, torque_limit = tip_wrench_limits(self.robot, self._params)
         try:
-            load = tip_load(msg, self.base_frame_id)
+            load = tip_load(msg, self.base_frame_id, force_limit, torque_limit)
         except ValueError as error:
             self._reject('tip_wrench', error)
             return
@@ -185,6 +226,8 @@ class StaticsNode(Node):
         if self._wrench_expired:
             self._wrench_expired = False
             self.get_logger().info('tip_wrench received again')
+        if self._passive:
+            self._solve_passive(msg.header.stamp)
 
     def _current_tip_load(self, now):
         timeout = self._params['tip_wrench_timeout']
@@ -197,11 +240,23 @@ class StaticsNode(Node):
                 'tip_wrench estimate is older than %.3g s: using zero tip load' % timeout)
         return self._tip_load
 
+    def _thresholds(self):
+        """Return (warn residual, drop residual, limit margin), m, with the noise floor."""
+        params = self._params
+        noise = params['length_noise_std']
+        warn = max(params['warn_residual'], 3.0 * noise)
+        return (warn, max(params['max_residual'], warn, 10.0 * noise),
+                max(params['length_limit_margin'], 5.0 * noise))
+
     def _on_cable_states(self, data):
         """Solve one serialized JointState (raw subscription: parsed without a message object)."""
         start = time.perf_counter()
         self._input_rate.tick()
+        warn, drop, margin = self._thresholds()
+        n_cables = len(self.cable_names)
         try:
+            if not data:
+                self._empty_payloads += 1
             view = parse_joint_state(data, self._name_bytes)
             if view.name_bytes != self._name_bytes:
                 index = cable_index(view.names, self.cable_names)
@@ -210,6 +265,10 @@ class StaticsNode(Node):
             if positions.shape[0] != self._index.shape[0]:
                 raise ValueError('JointState has %d names but %d positions'
                                  % (self._index.shape[0], positions.shape[0]))
+            for what, values in (('velocity', view.velocity), ('effort', view.effort)):
+                if values.shape[0] not in (0, n_cables):
+                    raise ValueError('JointState has %d names but %d %s values'
+                                     % (n_cables, values.shape[0], what))
             if not (positions > 0.0).all():  # also false for NaN
                 raise ValueError('cable length not a positive finite number for %s' % ', '.join(
                     self.cable_names[self._index[i]]
@@ -217,36 +276,97 @@ class StaticsNode(Node):
         except ValueError as error:
             self._reject('cable_states', error)
             return
-        self._lengths[self._index] = positions
+        lengths = self._lengths
+        lengths[self._index] = positions
+        outside = np.flatnonzero((lengths < self._low - margin) | (lengths > self._high + margin))
+        if outside.size:
+            self._limit_rejections += 1
+            self._reject('cable_states', "lengths outside the robot file's length limits (margin "
+                         '%.3g m): %s' % (margin, ', '.join(
+                             '%s %.4f m not in [%.4f, %.4f]' % (
+                                 self.cable_names[i], lengths[i], self._low[i], self._high[i])
+                             for i in outside[:4])))
+            return
+        tensions = None
+        if view.effort.shape[0] and self._params['use_measured_tensions']:
+            self._tensions[self._index] = view.effort
+            if (self._tensions >= 0.0).all() and np.isfinite(self._tensions).all():
+                tensions = self._tensions
         load = self._current_tip_load(time.monotonic())
         try:
-            estimate = self.robot.estimate_shape(self._lengths, load[:3], u0_guess=self._u0,
-                                                 tip_moment=load[3:])
+            estimate = self._estimate(lengths, load, tensions)
         except ValueError as error:
             self._reject('cable_states', error)
             return
         solved = time.perf_counter()
         self._solve_times.add(solved - start)
-        self._last.update(residual=float(estimate.residual), iterations=estimate.iterations,
-                          converged=bool(estimate.converged), message=estimate.message,
-                          time=time.monotonic())
+        residual = float(estimate.residual)
+        good_fit = residual <= warn
+        message = estimate.message
+        if not good_fit:
+            message = ('best fit: cable lengths %.3g m RMS from the nearest shape (warn above '
+                       '%.3g m)%s' % (residual, warn, '; ' + message if message else ''))
+        self._last.update(residual=residual, iterations=estimate.iterations,
+                          converged=bool(estimate.converged) and good_fit, message=message,
+                          time=time.monotonic(), tensions=tensions is not None)
+        self._residuals.add(residual)
         if not estimate.converged:
             self._not_converged += 1
-        if not estimate.residual <= self._params['max_residual']:
-            # lengths no shape of this robot explains (slack cable, wrong robot file, bad
+        if not residual <= drop:
+            # lengths no shape of this robot explains (broken cable, wrong robot file, unhomed
             # encoder): keep the last good shape rather than publish a best fit of nonsense
             self._reject('cable_states', 'cable lengths fit no shape: RMS residual %.3g m > '
                          'max_residual %.3g m%s' % (
-                             estimate.residual, self._params['max_residual'],
+                             residual, drop,
                              '' if estimate.converged else ' (%s)' % estimate.message))
             return
-        shape = estimate.shape
+        if not good_fit:
+            self._best_fits += 1
+        if self._publish_shape(estimate.shape, view.sec, view.nanosec):
+            self._warm = estimate
+            self._cycle_times.add(time.perf_counter() - start)
+
+    def _estimate(self, lengths, load, tensions):
+        """Estimate the shape; a tip load the model cannot take is dropped as a bad tip_wrench."""
+        robot = self.robot
+        try:
+            return robot.estimate_shape(lengths, tip_force=load[:3], tip_moment=load[3:],
+                                        tensions=tensions, warm_start=self._warm)
+        except ValueError as error:
+            if not load.any():
+                raise
+            self._reject('tip_wrench', 'the model has no finite shape under tip load %s (%s): '
+                         'using zero' % (np.array2string(load, precision=3), error))
+            self._tip_load = np.zeros(6)
+            return robot.estimate_shape(lengths, tensions=tensions, warm_start=None)
+
+    def _solve_passive(self, stamp):
+        """Passive rod: solve and publish the shape under gravity and the current tip load."""
+        load = self._current_tip_load(time.monotonic()).copy()
+        if self._passive_load is not None and np.array_equal(load, self._passive_load):
+            return
+        start = time.perf_counter()
+        try:
+            shape = self.robot.solve_bvp(tip_force=load[:3], tip_moment=load[3:])
+        except Exception as error:  # ConvergenceError or ValueError: keep the last shape
+            self._reject('tip_wrench', 'no equilibrium of the passive rod under %s: %s'
+                         % (np.array2string(load, precision=3), error))
+            return
+        self._solve_times.add(time.perf_counter() - start)
+        if stamp is None or (stamp.sec == 0 and stamp.nanosec == 0):
+            stamp = self.get_clock().now().to_msg()
+        if self._publish_shape(shape, stamp.sec, stamp.nanosec):
+            self._passive_load = load
+            self._last.update(residual=0.0, iterations=0, converged=True,
+                              time=time.monotonic())
+
+    def _publish_shape(self, shape, sec, nanosec):
+        """Publish backbone and tip pose of ``shape``; return False if it was not finite."""
         samples = self._params['path_samples']
         sampler = self._sampler
         if not sampler.matches(shape.s, samples):
             sampler = self._sampler = BackboneSampler(shape.s, samples)
         points, quaternions = sampler.sample(shape.positions, shape.rotations)
-        sec, nanosec = view.sec, view.nanosec
         if sec == 0 and nanosec == 0:  # unstamped measurement: stamp it on arrival
             now = self.get_clock().now().to_msg()
             sec, nanosec = now.sec, now.nanosec
@@ -257,15 +377,14 @@ class StaticsNode(Node):
             tip = self._tip_encoder.encode(sec, nanosec, points[-1], quaternions[-1])
         except ValueError as error:
             self._reject('shape', error)
-            return
+            return False
         self._backbone_pub.publish(backbone)
         self._tip_pub.publish(tip)
-        self._u0 = estimate.u0
         self._stamp = (sec, nanosec)
         self._tip_position = points[-1]
         self._shape, self._shape_is_new = shape, True
         self._output_rate.tick()
-        self._cycle_times.add(time.perf_counter() - start)
+        return True
 
     # -- outputs ---------------------------------------------------------------------------
     def _publish_markers(self):
@@ -291,21 +410,31 @@ class StaticsNode(Node):
 
     def _publish_diagnostics(self):
         now = time.monotonic()
-        self._current_tip_load(now)  # expire a stale tip load even while no measurement comes
+        if self._passive:
+            self._solve_passive(None)  # a tip load that expired: back to the unloaded shape
+        else:
+            self._current_tip_load(now)  # expire a stale tip load while no measurement comes
         last = self._last
+        warn, drop, margin = self._thresholds()
         input_rate = self._input_rate.report()
         output_rate = self._output_rate.report()
         solves, solve_median, solve_max = self._solve_times.report()
         _, cycle_median, cycle_max = self._cycle_times.report()
+        fits, residual_median, residual_max = self._residuals.report()
         level, message = diag.OK, 'estimating the shape'
-        if last['time'] is None or now - last['time'] > 1.0:
+        if self._passive:
+            message = last['message']
+        elif last['time'] is None or now - last['time'] > 1.0:
             level, message = diag.WARN, 'no cable_states for over 1 s'
+        elif residual_median > warn:
+            level, message = diag.WARN, (
+                'publishing best fits: residual median %.3g m > warn_residual %.3g m (cable '
+                'slack, stretch or encoder noise above length_noise_std?)'
+                % (residual_median, warn))
         if self._problems.recent(2.0):
             level, message = diag.WARN, 'rejected ' + self._problems.last_reason
-        if last['time'] is not None and not last['converged'] and not (
-                last['residual'] <= self._params['max_residual']):
-            level, message = diag.WARN, 'estimate did not converge: %s' % last['message']
         wrench_age = math.inf if self._wrench_time is None else now - self._wrench_time
+        force_limit, torque_limit = tip_wrench_limits(self.robot, self._params)
         values = {
             'status': message,
             'input_rate_hz': input_rate,
@@ -313,18 +442,29 @@ class StaticsNode(Node):
             'solves': solves,
             'received_total': self._input_rate.total,
             'published_total': self._output_rate.total,
-            'input_skipped_total': self._input.skipped,
-            'input_lost_total': self._input.lost,
+            'input_skipped_total': 0 if self._input is None else self._input.skipped,
+            'input_lost_total': 0 if self._input is None else self._input.lost,
+            'empty_payloads_total': self._empty_payloads,
+            'outside_limits_total': self._limit_rejections,
             'solve_time_median_ms': solve_median,
             'solve_time_max_ms': solve_max,
             'cycle_time_median_ms': cycle_median,
             'cycle_time_max_ms': cycle_max,
             'residual_m': last['residual'],
+            'residual_median_m': residual_median,
+            'residual_max_m': residual_max,
+            'warn_residual_m': warn,
+            'max_residual_m': drop,
+            'best_fits_total': self._best_fits,
             'iterations': last['iterations'],
             'converged': last['converged'],
+            'estimate_message': last['message'] or 'none',
             'not_converged_total': self._not_converged,
+            'measured_tensions_used': last['tensions'],
             'tip_force_n': ' '.join('%.4g' % f for f in self._tip_load[:3]),
             'tip_moment_nm': ' '.join('%.4g' % f for f in self._tip_load[3:]),
+            'max_tip_force_n': force_limit,
+            'max_tip_torque_nm': torque_limit,
             'tip_wrench_age_s': wrench_age,
             'tip_wrench_expired': self._wrench_expired,
         }
@@ -334,7 +474,6 @@ class StaticsNode(Node):
         self._diagnostics.publish(diag.diagnostic_array(
             self.get_clock().now().to_msg(), self.get_fully_qualified_name().lstrip('/'),
             self.robot.name, level, message, values))
-
 
     def destroy_node(self):
         """Stop the intake thread, then destroy the node."""

@@ -4,19 +4,29 @@ Goals come from the ``tip_goal`` service (nav_msgs/srv/GetPlan: ``goal.pose.posi
 frame, ``tolerance`` in m; answered after arrival or failure) and from the ``tip_goal_pose`` topic
 (geometry_msgs/PoseStamped, streaming; ``default_tolerance``). For a goal the node
 
-1. solves the tip goal with the numeric core from the current estimate (warm start),
-2. ramps ``cable_commands`` (sensor_msgs/JointState) towards the solution's cable lengths with the
-   largest cable moving at ``max_cable_speed``,
-3. watches ``tip_pose`` and, once the cables have settled, corrects the goal by the remaining tip
-   error (integral correction: ``target += goal - measured_tip``, re-solved from the current u(0))
+1. estimates the shape from the measured cable lengths and solves the tip goal from it (warm
+   start); when the measured lengths are not where the last command put them (a restarted
+   driver, a hand-made command, cables that slipped), it first moves the cables onto the
+   estimate's own lengths, back onto the model,
+2. ramps ``cable_commands`` (sensor_msgs/JointState) from that equilibrium to the goal's through
+   the model's own unknowns (``Robot.equilibrium_between``: section moments interpolated, base
+   state solved), so every command is the cable-length set of an equilibrium of the robot, never
+   a straight line in cable space (a section has two bending freedoms, its cables more); the
+   fraction steps are chosen so that no cable moves faster than ``max_cable_speed``,
+3. watches ``tip_pose`` once the cables have settled and judges the tip on the mean of the
+   samples since then (enough of them that the noise of the mean is well inside the tolerance,
+   at most ``tip_average_time``); when it is off it corrects the goal by the remaining error
+   (integral correction: ``target += goal - mean_tip``, re-solved and ramped the same way)
    until the tip is within the tolerance or ``goal_timeout`` passes.
 
 The service answers with the ``backbone`` at the final state, or an empty plan when the goal was
 rejected (non-finite numbers, a frame other than the base frame, a non-positive tolerance, an
-unreachable position, no state yet), not reached in time, or pre-empted by a newer goal; the
-reason is logged and on diagnostics. The service runs in its own reentrant callback group, so a
-waiting call never blocks the topics it is waiting for (multi-threaded executor).
+unreachable position, no state yet, a robot without cables), not reached in time, or pre-empted by
+a newer goal; the reason is logged and on diagnostics. A failed goal leaves no trace: the next one
+is accepted as soon as the state is fresh. The service runs in its own reentrant callback group,
+so a waiting call never blocks the topics it is waiting for (multi-threaded executor).
 """
+from collections import deque
 from dataclasses import dataclass, field
 import math
 import struct
@@ -43,9 +53,12 @@ from continuum_statics.nodes.node_params import (
     diagnostics_rate_spec,
     load_robot_file,
     robot_file_spec,
+    tip_wrench_limit_specs,
+    tip_wrench_limits,
 )
 from continuum_statics.nodes.ros_conversions import (
     cable_index,
+    float32_value,
     goal_position,
     joint_state,
     parse_joint_state,
@@ -59,6 +72,20 @@ THROTTLE_S = 2.0
 STATE_WAIT_S = 2.0
 #: Smallest tip_goal tolerance, m: below a micrometre the model's own accuracy decides.
 MIN_TOLERANCE = 1e-6
+#: Measured lengths further than this from the last command (m) are not where the controller put
+#: them: a goal then starts from the estimate of the measurement and moves onto it first.
+OFF_COMMAND = 2e-3
+#: Tip samples needed before the mean is judged (three identical ones: no noise).
+MIN_TIP_SAMPLES = 3
+
+
+def _towards(commanded, target, step):
+    """Move towards ``target`` along a straight line; the largest change moves ``step``."""
+    delta = target - commanded
+    largest = float(np.max(np.abs(delta)))
+    if largest <= step:
+        return target.copy()
+    return commanded + delta * (step / largest)
 
 
 @dataclass(eq=False)
@@ -105,10 +132,13 @@ class TipControllerNode(Node):
                       'replaced by zero, s (0: never expires)', 0.0, 3600.0),
             ParamSpec('max_state_age', 0.5, 'cable_states and tip_pose older than this mean a '
                       'dead driver or statics: goals are rejected or fail, s', 0.01, 60.0),
+            ParamSpec('tip_average_time', 1.0, 'longest time the tip is averaged after the '
+                      'cables settled (noisy measurements: the mean must be known well inside '
+                      'the tolerance before the goal is judged), s', 0.0, 60.0),
             ParamSpec('dedicated_intake_thread', True, 'serve tip_pose, backbone, cable_states '
                       'and tip_wrench from a thread of their own instead of the executor',
                       read_only=True),
-        ]
+        ] + tip_wrench_limit_specs()
         self._params = ParameterTable(self, specs)
         self.robot = load_robot_file(self._params['robot_file'])
         self.cable_names = tuple(self.robot.cable_names)
@@ -122,7 +152,15 @@ class TipControllerNode(Node):
         self._commanded = None
         self._target = None
         self._corrected_goal = None
-        self._u0 = None
+        self._warm = None  # the last estimate or solution: warm start of the next solve
+        self._command_state = None  # the equilibrium whose lengths were commanded last
+        self._path = None  # (start, goal solution, tip load) of the ramp in progress
+        self._fraction = 0.0
+        self._fraction_step = 0.05
+        self._tip_history = deque(maxlen=4000)  # (position, stamp ns) of recent tip poses
+        self._judged_mean = None
+        self._recover_target = None
+        self._judge_start = None
         self._corrections = 0
         self._settle_start = None
         self._settled_stamp = None
@@ -193,6 +231,7 @@ class TipControllerNode(Node):
             return
         stamp = msg.header.stamp.sec * 1_000_000_000 + msg.header.stamp.nanosec
         self._tip = (position, stamp, time.monotonic())
+        self._tip_history.append((position, stamp))
 
     def _on_backbone(self, data):
         # Only the stamp is read here (decoding every Path costs ~0.2 ms); the whole message
@@ -227,7 +266,8 @@ class TipControllerNode(Node):
 
     def _on_tip_wrench(self, msg):
         try:
-            self._tip_load = tip_load(msg, self.base_frame_id)
+            self._tip_load = tip_load(msg, self.base_frame_id,
+                                      *tip_wrench_limits(self.robot, self._params))
         except ValueError as error:
             self._reject('tip_wrench', error)
             return
@@ -254,7 +294,7 @@ class TipControllerNode(Node):
             return response
 
     def _serve_tip_goal(self, request, response):
-        tolerance = float(request.tolerance)
+        tolerance = float32_value(request.tolerance)  # GetPlan's tolerance is a float32
         try:
             if not (math.isfinite(tolerance) and MIN_TOLERANCE <= tolerance <= self.robot.length):
                 raise ValueError('tolerance must be between %g m and the rod length %g m, got %r'
@@ -293,6 +333,9 @@ class TipControllerNode(Node):
 
     def _start_goal(self, position, tolerance, source):
         """Solve the goal and make it the active one; ValueError says why it is rejected."""
+        if not self.cable_names:
+            raise ValueError('robot has no cables: %r is a passive rod, nothing to move'
+                             % self.robot.name)
         # Right after start-up the first state may still be on its way: wait a little for it.
         limit = time.monotonic() + STATE_WAIT_S
         while (self._measurement is None or self._tip is None) and not self._closing and \
@@ -307,11 +350,21 @@ class TipControllerNode(Node):
         if stale:
             raise ValueError(stale)
         load = self._current_tip_load()
-        estimate = self.robot.estimate_shape(measured, load[:3], u0_guess=self._u0,
-                                             tip_moment=load[3:])
-        solution = self.robot.solve_tip_goal(position, load[:3], u0_guess=estimate.u0,
+        with self._lock:
+            command_state, commanded = self._command_state, self._commanded
+        recover = None
+        if command_state is not None and commanded is not None and float(
+                np.max(np.abs(measured - commanded))) <= OFF_COMMAND:
+            start = command_state  # the cables are where the last command (a shape) put them
+        else:
+            start = self.robot.estimate_shape(measured, tip_force=load[:3], tip_moment=load[3:],
+                                              warm_start=self._warm)
+            recover = np.clip(self.robot.cable_lengths(start.shape), self._limits[:, 0],
+                              self._limits[:, 1])
+            commanded = measured.copy()
+        solution = self.robot.solve_tip_goal(position, tip_force=load[:3], tip_moment=load[3:],
                                              tolerance=self._model_tolerance(tolerance),
-                                             tip_moment=load[3:])
+                                             warm_start=start)
         if not solution.error <= tolerance:
             limited = ', '.join(solution.limited_cables)
             raise ValueError('unreachable goal (%.4f, %.4f, %.4f) m: the nearest reachable tip '
@@ -328,19 +381,28 @@ class TipControllerNode(Node):
             previous = self._goal
             if previous is not None:
                 self._finish_locked(previous, False, 'pre-empted by a new goal')
-            else:
-                self._commanded = measured.copy()
             self._goal = goal
-            self._target = np.clip(lengths, self._limits[:, 0], self._limits[:, 1])
+            self._commanded = commanded
+            self._command_state = start if recover is None else None
+            self._recover_target = recover
+            self._start_path_locked(start, solution, load)
             self._corrected_goal = position.copy()
-            self._u0 = solution.u0
+            self._warm = solution
             self._corrections = 0
-            self._phase = 'ramp'
+            self._phase = 'ramp' if recover is None else 'recover'
             self._last_tick = now
             self._timer.reset()
-        self.get_logger().info('tip goal (%.4f, %.4f, %.4f) m, tolerance %.2g m from %s' % (
-            *position, tolerance, source))
+        self.get_logger().info('tip goal (%.4f, %.4f, %.4f) m, tolerance %.2g m from %s%s' % (
+            *position, tolerance, source,
+            '' if recover is None else ' (cables off the last command: onto the model first)'))
         return goal
+
+    def _start_path_locked(self, start, solution, load):
+        self._path = (start, solution, load)
+        self._target = np.clip(np.asarray(solution.cable_lengths, dtype=float),
+                               self._limits[:, 0], self._limits[:, 1])
+        self._fraction = 0.0
+        self._fraction_step = min(self._fraction_step * 4.0, 0.25)
 
     def _model_tolerance(self, tolerance):
         """Solve the model well inside the goal's tolerance, so the tip lands near its centre."""
@@ -354,6 +416,7 @@ class TipControllerNode(Node):
         if goal.done.is_set():
             return
         goal.reached, goal.reason = reached, reason
+        self._judged_mean = None
         if self._goal is goal:
             self._goal, self._phase = None, 'idle'
             self._timer.cancel()
@@ -417,19 +480,29 @@ class TipControllerNode(Node):
             tip = self._tip
             error = math.inf if tip is None else float(
                 np.linalg.norm(goal.position - tip[0]))
-            goal.error = error
+            goal.error = error if self._judged_mean is None else self._judged_mean
             if now > goal.deadline:
                 self._finish_locked(goal, False, 'not reached within %.3g s (tip error %.2f mm)'
-                                    % (self._params['goal_timeout'], error * 1e3))
+                                    % (self._params['goal_timeout'], goal.error * 1e3))
                 return
             stale = self._stale_state(now)
             if stale:
                 self._finish_locked(goal, False, stale)
                 return
-            if self._phase == 'ramp':
-                self._commanded = self._ramp(self._commanded, self._target,
-                                             self._params['max_cable_speed'] * dt)
-                if np.array_equal(self._commanded, self._target):
+            budget = self._params['max_cable_speed'] * dt
+            if self._phase == 'recover':
+                # Off the model (e.g. a restarted driver): straight onto the estimate's lengths,
+                # the nearest shape, then along the model.
+                self._commanded = _towards(self._commanded, self._recover_target, budget)
+                if np.array_equal(self._commanded, self._recover_target):
+                    self._phase = 'ramp'
+            elif self._phase == 'ramp':
+                try:
+                    self._advance_locked(budget)
+                except ValueError as error:
+                    self._finish_locked(goal, False, 'ramp failed: %s' % error)
+                    return
+                if self._fraction >= 1.0:
                     self._phase, self._settle_start, self._settled_stamp = 'settle', now, None
             elif self._settled_stamp is None:
                 # Settled: every cable measured at its command (or settle_time passed, e.g. with
@@ -440,26 +513,66 @@ class TipControllerNode(Node):
                         now - self._settle_start >= self._params['settle_time'] or float(
                             np.max(np.abs(measurement[0] - self._commanded)))
                         <= self._params['settled_cable_error']):
-                    self._settled_stamp = measurement[1]
-            elif tip is not None and tip[1] >= self._settled_stamp:
-                if error <= goal.tolerance:
-                    goal.tip_stamp = tip[1]
-                    self._finish_locked(goal, True, 'tip %.2f mm from the goal after %.2f s, %d '
-                                        'correction(s)' % (error * 1e3, now - goal.started,
-                                                           self._corrections))
-                else:
-                    self._correct_locked(goal, tip[0])
+                    self._settled_stamp, self._judge_start = measurement[1], now
+            else:
+                self._judge_locked(goal, now)
             commanded = self._commanded
-        self._publish_command(commanded)
+        if commanded is not None:
+            self._publish_command(commanded)
 
-    @staticmethod
-    def _ramp(commanded, target, step):
-        """Move towards ``target`` along a straight line; the largest change moves ``step``."""
-        delta = target - commanded
-        largest = float(np.max(np.abs(delta)))
-        if largest <= step:
-            return target.copy()
-        return commanded + delta * (step / largest)
+    def _advance_locked(self, budget):
+        """Step along the equilibrium path so that no cable moves more than ``budget`` m."""
+        start, solution, load = self._path
+        step = self._fraction_step
+        for _ in range(12):
+            fraction = min(1.0, self._fraction + step)
+            if fraction >= 1.0:
+                state, lengths = solution, self._target
+            else:
+                state = self.robot.equilibrium_between(
+                    start, solution, fraction, tip_force=load[:3], tip_moment=load[3:],
+                    warm_start=self._command_state)
+                lengths = np.clip(np.asarray(state.cable_lengths, dtype=float),
+                                  self._limits[:, 0], self._limits[:, 1])
+            change = float(np.max(np.abs(lengths - self._commanded)))
+            usable = (state is solution or state.converged) and np.all(np.isfinite(lengths))
+            if usable and change <= budget * 1.05:
+                self._fraction, self._commanded, self._command_state = fraction, lengths, state
+                # lengths are smooth in the fraction: aim the next step at the budget
+                self._fraction_step = min(0.5, max(1e-6, step * (
+                    2.0 if change <= 0.0 else min(2.0, budget / change))))
+                return
+            step *= 0.5 if not usable else max(0.1, min(0.9, 0.95 * budget / change))
+        if not usable:
+            raise ValueError('no equilibrium %.3g of the way to the goal' % self._fraction)
+        # Even the smallest step moves a cable faster than allowed (the start was not exactly
+        # the model's equilibrium): close that gap at max_cable_speed, then go on.
+        self._commanded = _towards(self._commanded, lengths, budget)
+        self._fraction_step = max(step, 1e-3)
+
+    def _judge_locked(self, goal, now):
+        """Judge the mean tip since the cables settled: reached, correct, or wait for more."""
+        samples = [p for p, stamp in list(self._tip_history) if stamp >= self._settled_stamp]
+        if len(samples) < MIN_TIP_SAMPLES:
+            return
+        points = np.asarray(samples)
+        mean = points.mean(axis=0)
+        error = float(np.linalg.norm(mean - goal.position))
+        # standard error of the mean tip (noise): 0 for identical samples
+        spread = float(np.linalg.norm(points.std(axis=0))) / math.sqrt(len(points))
+        self._judged_mean = error
+        goal.error = error
+        timed_out = now - self._judge_start >= self._params['tip_average_time']
+        if error + 2.0 * spread <= goal.tolerance or (timed_out and error <= goal.tolerance):
+            goal.tip_stamp = self._tip_history[-1][1]
+            self._judged_mean = None
+            self._finish_locked(goal, True, 'tip %.2f mm from the goal (mean of %d tip poses) '
+                                'after %.2f s, %d correction(s)' % (
+                                    error * 1e3, len(points), now - goal.started,
+                                    self._corrections))
+        elif error - 2.0 * spread > goal.tolerance or timed_out:
+            self._judged_mean = None
+            self._correct_locked(goal, mean)
 
     def _correct_locked(self, goal, measured_tip):
         if self._corrections >= self._params['max_corrections']:
@@ -467,11 +580,12 @@ class TipControllerNode(Node):
                                 % (goal.error * 1e3, self._corrections))
             return
         self._corrected_goal = self._corrected_goal + (goal.position - measured_tip)
+        load = self._current_tip_load()
+        start = self._command_state
         try:
-            load = self._current_tip_load()
             solution = self.robot.solve_tip_goal(
-                self._corrected_goal, load[:3], u0_guess=self._u0,
-                tolerance=self._model_tolerance(goal.tolerance), tip_moment=load[3:])
+                self._corrected_goal, tip_force=load[:3], tip_moment=load[3:],
+                tolerance=self._model_tolerance(goal.tolerance), warm_start=start)
         except ValueError as error:
             self._finish_locked(goal, False, 'correction failed: %s' % error)
             return
@@ -480,8 +594,8 @@ class TipControllerNode(Node):
             self._finish_locked(goal, False, 'correction gave non-finite cable lengths')
             return
         self._corrections += 1
-        self._u0 = solution.u0
-        self._target = np.clip(lengths, self._limits[:, 0], self._limits[:, 1])
+        self._warm = solution
+        self._start_path_locked(start, solution, load)
         self._phase = 'ramp'
 
     def _publish_command(self, lengths):
@@ -514,6 +628,7 @@ class TipControllerNode(Node):
             values['goal_m'] = '%.5f %.5f %.5f' % tuple(goal.position)
             values['tip_error_mm'] = goal.error * 1e3
             values['corrections'] = self._corrections
+            values['ramp_fraction'] = self._fraction
         values.update(self._problems.values())
         self._diagnostics.publish(diag.diagnostic_array(
             self.get_clock().now().to_msg(), self.get_fully_qualified_name().lstrip('/'),
