@@ -170,3 +170,18 @@ def test_set_home_writes_the_home_file_and_a_new_driver_loads_it(harness, bus, t
     _, _, states, _, _ = start(harness, bus, home_file=str(home),
                                **{'dynamixel.zero_ticks': [0]})
     np.testing.assert_allclose(states.last.position, ROBOT.straight_cable_lengths, atol=1e-12)
+
+
+def test_the_example_params_file_runs(harness, bus, tmp_path):
+    tree = yaml.safe_load((REPO / 'config' / 'dynamixel_example.params.yaml').read_text())
+    parameters = {}
+    for key, value in tree['/**/cable_driver']['ros__parameters'].items():
+        if isinstance(value, dict):
+            parameters.update({'%s.%s' % (key, k): v for k, v in value.items()})
+        else:
+            parameters[key] = value
+    parameters.update({'dynamixel.port': bus.port, 'dynamixel.ids': IDS,
+                       'dynamixel.zero_ticks': [ZERO], 'home_file': str(tmp_path / 'h.yaml'),
+                       'robot_file': str(REPO / 'config' / 'tendon_robot.yaml')})
+    _, _, states, _, _ = start(harness, bus, **parameters)
+    np.testing.assert_allclose(states.last.position, ROBOT.straight_cable_lengths, atol=1e-12)
