@@ -40,9 +40,9 @@ def reachable(ux, uy):
 class Stack:
     """The three nodes plus a client with the tip_goal service and a tip_pose collector."""
 
-    def __init__(self, harness, **controller_overrides):
-        harness.add(StaticsNode, marker_rate=0.0)
-        harness.add(CableDriverNode)
+    def __init__(self, harness, statics=(), driver=(), **controller_overrides):
+        harness.add(StaticsNode, marker_rate=0.0, **dict(statics))
+        harness.add(CableDriverNode, **dict(driver))
         self.controller = harness.add(TipControllerNode, **controller_overrides)
         self.client = harness.client()
         self.tip = Collector(self.client, PoseStamped, 'tip_pose', LATCHED)
@@ -191,3 +191,77 @@ def test_invalid_parameter_sets_are_rejected_with_a_reason(harness):
         assert not result.successful, (name, value)
         assert reason.lower() in result.reason.lower(), (name, result.reason)
     assert controller.set_parameters([Parameter('control_rate', value=100.0)])[0].successful
+
+
+def test_every_command_while_moving_is_a_shape_of_the_robot(harness):
+    stack = Stack(harness)
+    commands = Collector(stack.client, JointState, 'cable_commands', RELIABLE)
+    # The two goals of issue 7: a straight line in cable space between them is no shape.
+    for goal in [(-0.0209, 0.1418, 0.2482), (0.0428, -0.1420, 0.2439)]:
+        plan = call(stack.service, stack.request(goal, 1e-3), 30.0).plan
+        assert np.linalg.norm(pose_xyz(plan.poses[-1].pose) - goal) <= 1e-3
+    assert len(commands) > 20
+    speed = stack.controller.get_parameter('max_cable_speed').value
+    previous, warm = None, None
+    for msg in list(commands.messages):
+        lengths = np.asarray(msg.position)
+        warm = ROBOT.estimate_shape(lengths, warm_start=warm)
+        assert warm.residual < 2e-6, 'command %s is not a shape (residual %.3g m)' % (
+            lengths, warm.residual)
+        stamp = msg.header.stamp.sec + msg.header.stamp.nanosec * 1e-9
+        if previous is not None and stamp > previous[1]:
+            # no cable faster than max_cable_speed (with the tick jitter of a 50 Hz timer)
+            dt = max(stamp - previous[1], 1.0 / 50.0)
+            assert np.max(np.abs(lengths - previous[0])) <= 3.0 * speed * dt + 1e-9
+        previous = (lengths, stamp)
+
+
+def test_from_cable_lengths_that_are_no_shape_the_next_goal_is_reached(harness):
+    stack = Stack(harness)
+    commands = stack.client.create_publisher(JointState, 'cable_commands', RELIABLE)
+    a = ROBOT.cable_lengths(ROBOT.solve_ivp([3.0, 0.0, 0.0]))
+    b = ROBOT.cable_lengths(ROBOT.solve_ivp([0.0, 3.0, 0.0]))
+    inconsistent = JointState(name=list(ROBOT.cable_names),
+                              position=[float(v) for v in 0.5 * (a + b) + [4e-4, 0, 4e-4, 0]])
+    assert ROBOT.estimate_shape(inconsistent.position).residual > 1e-4
+    states = Collector(stack.client, JointState, 'cable_states', qos_profile_sensor_data)
+    publish_until(commands, inconsistent, lambda: states.last is not None and np.max(np.abs(
+        np.asarray(states.last.position) - inconsistent.position)) < 1e-6, 10.0,
+        'the cables at the hand-made lengths')
+    goal = reachable(-1.0, -2.0)
+    plan = call(stack.service, stack.request(goal, 1e-3), 30.0).plan
+    assert np.linalg.norm(pose_xyz(plan.poses[-1].pose) - goal) <= 1e-3
+    wait_until(lambda: stack.values().get('moved_onto_model_total') == '1', 5.0,
+               'the move back onto the model on diagnostics')
+
+
+def test_goals_on_a_robot_without_cables_are_rejected_at_once(harness):
+    controller = harness.add(TipControllerNode,
+                             robot_file=str(REPO / 'config' / 'jones2009_nitinol_rod.yaml'))
+    client = harness.client()
+    service = client.create_client(GetPlan, 'tip_goal')
+    assert service.wait_for_service(timeout_sec=10.0)
+    started = time.monotonic()
+    response = call(service, Stack.request((0.3, 0.0, -0.05), 1e-3), 10.0)
+    assert time.monotonic() - started < 1.5, 'no wait for a state that never comes'
+    assert len(response.plan.poses) == 0
+    assert 'robot has no cables' in controller._last_outcome
+
+
+def test_a_float32_tolerance_of_the_rod_length_means_that_length(harness):
+    stack = Stack(harness)
+    goal = reachable(1.0, 1.0)
+    request = stack.request(goal, ROBOT.length)  # 0.3 arrives as 0.30000001192092896
+    plan = call(stack.service, request, 30.0).plan
+    assert len(plan.poses) == 20, stack.values().get('last_outcome')
+
+
+@pytest.mark.parametrize('noise, tolerance', [(2e-4, 1e-3), (1e-3, 5e-3)])
+def test_goals_are_reached_with_noisy_encoders(harness, noise, tolerance):
+    # Tip noise is ~15x the length noise (L / 2r); the controller judges the mean tip.
+    stack = Stack(harness, statics={'length_noise_std': noise},
+                  driver={'sim.noise_std': noise, 'sim.seed': 7})
+    for goal in [reachable(2.0, -1.0), reachable(-1.5, 0.5)]:
+        plan = call(stack.service, stack.request(goal, tolerance), 40.0).plan
+        assert len(plan.poses) == 20, stack.values().get('last_outcome')
+    wait_until(lambda: stack.values().get('goals_reached') == '2', 5.0, 'two goals reached')

@@ -175,6 +175,7 @@ class TipControllerNode(Node):
         self._wrench_time = None
         self._problems = diag.Problems()
         self._counts = {'reached': 0, 'failed': 0, 'rejected': 0, 'preempted': 0}
+        self._moved_onto_model = 0
         self._last_outcome = 'no goal yet'
         self._command_msg = JointState()
 
@@ -390,6 +391,7 @@ class TipControllerNode(Node):
             self._warm = solution
             self._corrections = 0
             self._phase = 'ramp' if recover is None else 'recover'
+            self._moved_onto_model += recover is not None
             self._last_tick = now
             self._timer.reset()
         self.get_logger().info('tip goal (%.4f, %.4f, %.4f) m, tolerance %.2g m from %s%s' % (
@@ -620,6 +622,7 @@ class TipControllerNode(Node):
             'goals_failed': self._counts['failed'],
             'goals_rejected': self._counts['rejected'],
             'goals_preempted': self._counts['preempted'],
+            'moved_onto_model_total': self._moved_onto_model,
             'last_outcome': self._last_outcome,
             'have_tip_pose': self._tip is not None,
             'have_cable_states': self._measurement is not None,
