@@ -33,6 +33,14 @@ The base state (r(0), R(0)) is given; the six unknowns are the base internal for
 (body frame, scaled), from which v(0), u(0) follow. They are found with ``scipy.optimize.root``
 on the tip conditions n(L-) = F_tip + tendon loads at L, m(L-) = tau_tip + their moments,
 integrating with ``solve_ivp`` (DOP853) piecewise between disks.
+
+Checked (test_multisection_physics.py) against: Euler-Bernoulli F L^3 / (3 E I); the
+point-moment arc of curvature t |l| / (E I); and the distributed model's arc, derived by hand:
+with one tendon, no external load, the rod-plus-tendon body beyond s is free, so
+n = -t tau and m = -(R l) x t tau; v = (0, 0, v3), u = (u1, u2, 0) give tau = R e3 and solve
+d = c = 0 above with v3 = 1 - t / (E A), u = t (e3 x l) / (E I): a circular arc of radius
+(1 - t / (E A)) E I / (t |l|) through the angle t |l| L / (E I), i.e. the point-moment arc
+scaled by 1 - t / (E A). With disk_kinks=True the rod-plus-tendons equilibrium holds at every s.
 """
 import numpy as np
 from scipy.integrate import solve_ivp
@@ -142,18 +150,21 @@ def _kinked(rod, rot, v, u, v_new, u_new, n_new, m_new, offsets, tensions, conti
     that the rod-plus-tendons wrench (n + sum t tau, m + sum (R l) x t tau) is continuous.
     """
     force_minus, moment_minus = _tendon_wrench(rot, v, u, offsets, tensions, continuing)
-    for _ in range(200):
-        force_plus, moment_plus = _tendon_wrench(rot, v_new, u_new, offsets, tensions,
-                                                 continuing)
-        n_k = n_new + force_minus - force_plus
-        m_k = m_new + moment_minus - moment_plus
-        v_next, u_next = rod.strains(rot.T @ n_k, rot.T @ m_k)
-        done = (np.max(np.abs(v_next - v_new)) < 1e-16
-                and np.max(np.abs(u_next - u_new)) * rod.length < 1e-15)
-        v_new, u_new = v_next, u_next
-        if done:
-            return v_new, u_new
-    raise RuntimeError('reference: kink at a disk did not converge')
+    scale = np.concatenate([np.full(3, rod.ei / rod.length ** 2), np.full(3, rod.ei / rod.length)])
+
+    def jump(x):
+        """Return the rod-plus-tendons wrench mismatch across the disk (scaled)."""
+        n_k, m_k = x[:3] * scale[:3], x[3:] * scale[3:]
+        force_plus, moment_plus = _tendon_wrench(rot, *rod.strains(rot.T @ n_k, rot.T @ m_k),
+                                                 offsets, tensions, continuing)
+        return np.concatenate([n_k + force_plus - n_new - force_minus,
+                               m_k + moment_plus - m_new - moment_minus]) / scale
+
+    sol = root(jump, np.concatenate([n_new, m_new]) / scale, method='hybr', tol=1e-14)
+    if np.max(np.abs(jump(sol.x))) > 1e-12:
+        raise RuntimeError('reference: kink at a disk did not converge')
+    x = sol.x * scale
+    return rod.strains(rot.T @ x[:3], rot.T @ x[3:])
 
 
 def _shoot(rod, problem, x, s_eval=None, rtol=1e-12, atol=1e-14):
