@@ -218,3 +218,14 @@ def test_a_bus_that_does_not_open_is_connection_lost():
                                   channel='x')
     with pytest.raises(ConnectionLost, match='no_such_interface:x cannot be opened'):
         backend.start(0.0)
+
+
+def test_a_node_that_stops_its_pdos_gives_no_stale_positions(bus, make):
+    backend = make()
+    poll(backend, lambda r: all(d.operational for d in bus.drives.values()), 'OPERATIONAL')
+    bus.drives[6].node.nmt.state = 'PRE-OPERATIONAL'  # heartbeats go on, PDOs stop
+    with pytest.raises(ConnectionLost, match=r'node 6 \(cable_3\) \(no TPDO for .* NMT '
+                                             r'PRE-OPERATIONAL\)'):
+        poll(backend, lambda r: False, 'the stale node', timeout=2.0)
+    backend.start(time.monotonic())  # NMT start again
+    poll(backend, lambda r: bus.drives[6].operational, 'node 6 OPERATIONAL again')

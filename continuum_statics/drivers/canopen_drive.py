@@ -344,14 +344,27 @@ class CanopenCableBackend(CableBackend):
             self._step(j, node)
 
     def read(self, now):
-        """Statusword and position from TPDO1; lengths; the handshake advances."""
+        """Statusword and position from TPDO1; lengths; the handshake advances.
+
+        :raises ConnectionLost: a node's TPDO1 is older than ``heartbeat_timeout`` (it left
+            OPERATIONAL or stopped sending): its position would be stale
+        """
         self._check()
+        wall = time.time()
+        stale = []
         for j, node in enumerate(self._nodes):
             tpdo = node.tpdo[1]
+            last = tpdo.timestamp if tpdo.timestamp is not None else self._started
+            if wall - max(last, self._started) > self.heartbeat_timeout:
+                stale.append('%s (no TPDO for %.2f s, NMT %s)' % (
+                    self._label(j), wall - last, node.nmt.state))
+                continue
             if tpdo.timestamp is not None:
                 self._statuswords[j] = tpdo[STATUSWORD].raw
                 self._positions[j] = tpdo[POSITION_ACTUAL].raw
             self._step(j, node)
+        if stale:
+            raise self._lost(', '.join(stale))
         return CableReading(lengths=self.spool.lengths(self._positions))
 
     # -- health, faults, homing -----------------------------------------------------------
