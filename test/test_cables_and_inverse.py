@@ -96,7 +96,7 @@ def test_estimation_round_trip_recovers_tip(u0):
     warm = robot.estimate_shape(lengths, force, warm_start=nearby)
     assert warm.converged
     assert np.linalg.norm(warm.shape.tip_position - truth.tip_position) < 1e-6
-    assert warm.iterations <= cold.iterations
+    assert warm.model_runs < cold.model_runs  # it reuses the nearby estimate's Jacobians
 
 
 def test_estimate_has_no_twisting_tip_moment():

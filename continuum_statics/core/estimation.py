@@ -33,6 +33,7 @@ class ShapeEstimate:
     :ivar observable_bending: bending directions the cables observe (2 per section at most)
     :ivar message: what limited the estimate, empty when nothing did
     :ivar jacobians: the solver's Jacobians at the estimate, reused by the next warm start
+    :ivar model_runs: IVPs integrated (the cost of the estimate)
     """
 
     shape: Shape
@@ -43,6 +44,7 @@ class ShapeEstimate:
     observable_bending: int
     message: str
     jacobians: tuple = None
+    model_runs: int = 0
 
     @property
     def state(self):
@@ -91,7 +93,10 @@ def estimate_shape(robot, cable_lengths, tip_force=(0.0, 0.0, 0.0), tip_moment=(
     balance = slice(6 + n_cables, 9 + n_cables)
     size = robot.state_size
 
+    runs = [0]
+
     def evaluate(x, with_jacobians):
+        runs[0] += robot.probe_runs if with_jacobians else 1
         values, jac, states = robot.probe(x, size if with_jacobians else 0, tip_force,
                                           tip_moment)
         if not with_jacobians:
@@ -108,14 +113,14 @@ def estimate_shape(robot, cable_lengths, tip_force=(0.0, 0.0, 0.0), tip_moment=(
         notes.insert(0, 'best fit: the lengths fit no shape to RMS %.3g m' % residual)
     shape = robot.make_shape(result.x, tip_force, result.evaluation)
     return _result(shape, result.stationary, residual, result.iterations, observable, notes,
-                   result.jacobians)
+                   result.jacobians, runs[0])
 
 
 def _rms(values):
     return float(np.sqrt(np.mean(values ** 2))) if len(values) else 0.0
 
 
-def _result(shape, converged, residual, iterations, observable, notes, jacobians=None):
+def _result(shape, converged, residual, iterations, observable, notes, jacobians=None, runs=0):
     return ShapeEstimate(shape=shape, u0=shape.u0, converged=bool(converged), residual=residual,
                          iterations=iterations, observable_bending=observable,
-                         message='; '.join(notes), jacobians=jacobians)
+                         message='; '.join(notes), jacobians=jacobians, model_runs=runs)

@@ -10,7 +10,6 @@ from dataclasses import dataclass
 import numba
 import numpy as np
 
-
 #: Iterations on reused (Broyden-updated) Jacobians before they are recomputed.
 QUASI_ITERATIONS = 3
 

@@ -150,6 +150,11 @@ class Robot:
             column += rank
         self.state_size = column
         self.observable_bending = column - 3
+        # IVPs in one probe with Jacobians: point moments at the tip have exact columns
+        tip = len(self.s_grid) - 1
+        exact = sum(int(r) for r, n in zip(self.section_ranks, self.section_end_node)
+                    if n == tip) if self.model_code == POINT_MOMENT else 0
+        self.probe_runs = 1 + column - exact
 
     def with_solver(self, **settings):
         """Copy of this robot with some solver settings replaced (e.g. ``steps=200``)."""

@@ -8,8 +8,8 @@ balance, so every answer is an equilibrium of the robot. Two cases:
   the nearest reachable tip and reports the remaining distance as ``error``;
 - more freedoms (2+ sections for a position): the goal becomes an equality constraint and, among
   the solutions, the one whose section moments change least from the warm start is chosen (from a
-  cold start: the smallest section moments, i.e. the least cable load). Should the goal be out of
-  reach, the least-squares case takes over.
+  cold start: the smallest section moments, i.e. the least cable load): the least-squares solve
+  reaches the goal first, then the solution slides along the goal's solution set.
 
 Cable length limits are kept with an active set (a cable leaving its range is held at the limit as
 one more constraint). Whatever happens, the answer's lengths are inside the limits: if the solve
@@ -27,6 +27,8 @@ from continuum_statics.core.shape import Shape
 
 #: Slack on the length limits (m) for round-off.
 LIMIT_SLACK = 1e-9
+#: Weight of a length-limit violation against the change of the section moments (m per m).
+LIMIT_PENALTY = 1e3
 
 
 @dataclass(frozen=True, eq=False)
@@ -86,14 +88,14 @@ def solve_tip_goal(robot, goal_position, tip_force=(0.0, 0.0, 0.0), tolerance=No
     problem = _Problem(robot, goal, direction, tip_force, tip_moment, tolerance, start)
     if not len(robot.cable_names):
         return problem.answer(start, 0, 'robot has no cables: nothing can move the tip')
-    x, iterations = start, 0
-    if robot.observable_bending > problem.goal_rows:
-        x, iterations, reached = problem.solve(start, redundant=True)
-        if not reached:  # out of reach: nearest reachable point instead
-            x, more, _ = problem.solve(x, redundant=False)
-            iterations += more
-    else:
-        x, iterations, _ = problem.solve(start, redundant=False)
+    # least squares on the goal first (robust from far away); with spare freedoms, then slide
+    # along the goal's solutions to the one closest to the start
+    x, iterations, reached = problem.solve(start, redundant=False)
+    if reached and robot.observable_bending > problem.goal_rows:
+        polished, more, still = problem.solve(x, redundant=True)
+        iterations += more
+        if still:
+            x = polished
     return problem.answer(x, iterations, '')
 
 
@@ -139,14 +141,23 @@ class _Problem:
                 goal_res, goal_jac = self._goal(values, jac)
                 held_res = (values[rows] - held_at) * self.held_scale
                 held_jac = jac[rows] * self.held_scale
+                # a steep penalty on leaving the length limits: the solve uses what freedom it
+                # has to stay inside them (the active set below is the fallback)
+                lengths = values[self.cables]
+                over = np.maximum(lengths - self.limits[:, 1], 0.0) + np.minimum(
+                    lengths - self.limits[:, 0], 0.0)
+                limit_res = LIMIT_PENALTY * over
+                limit_jac = LIMIT_PENALTY * jac[self.cables] * (over != 0.0)[:, None]
                 if redundant:  # least change of the section moments, the goal a constraint
-                    res = (x[3:] - reference[3:]) * length ** 2
-                    res_jac = np.hstack([np.zeros((len(res), 3)),
-                                         np.eye(len(res)) * length ** 2])
+                    res = np.concatenate([(x[3:] - reference[3:]) * length ** 2, limit_res])
+                    res_jac = np.vstack([
+                        np.hstack([np.zeros((len(x) - 3, 3)), np.eye(len(x) - 3) * length ** 2]),
+                        limit_jac])
                     con = np.concatenate([values[self.balance], goal_res / length, held_res])
                     con_jac = np.vstack([jac[self.balance], goal_jac / length, held_jac])
                 else:
-                    res, res_jac = goal_res, goal_jac
+                    res = np.concatenate([goal_res, limit_res])
+                    res_jac = np.vstack([goal_jac, limit_jac])
                     con = np.concatenate([values[self.balance], held_res])
                     con_jac = np.vstack([jac[self.balance], held_jac])
                 return res, res_jac, con, con_jac, values
@@ -179,6 +190,7 @@ class _Problem:
             shape, lengths = self._inside_limits(shape)
             notes.append('the solution leaves the cable length limits; stopped at the last '
                          'equilibrium inside them')
+        lengths = np.clip(lengths, self.limits[:, 0], self.limits[:, 1])  # round-off (1e-9 m)
         error = float(np.linalg.norm(shape.tip_position - self.goal))
         converged = error <= self.tolerance and not notes
         if self.direction is not None:
@@ -220,8 +232,7 @@ class _Problem:
                 high = middle
             if high - low < 1e-4:
                 break
-        lengths = np.clip(best.cable_lengths, self.limits[:, 0], self.limits[:, 1])
-        return best.shape, lengths
+        return best.shape, best.cable_lengths
 
 
 def _inside(lengths, limits):
