@@ -201,3 +201,22 @@ def test_goal_position_limit_in_the_emulator():
     servo = dxl.Servo(1)
     servo.table[dxl.ADDR_OPERATING_MODE] = 4
     assert servo.write(dxl.ADDR_GOAL_POSITION, struct.pack('<i', 2_000_000)) == dxl.ERR_LIMIT
+
+
+def test_byte_stuffing_both_ways_through_the_real_sdk(bus):
+    import dynamixel_sdk as sdk
+
+    port = sdk.PortHandler(bus.port)
+    assert port.openPort()
+    packet_handler = sdk.PacketHandler(2.0)
+    # Homing Offset -65536 then Moving Threshold 253: the bytes 00 00 FF FF FD 00 00 00 carry
+    # the header pattern FF FF FD, stuffed in the WRITE and again in the status of the READ.
+    data = [0x00, 0x00, 0xFF, 0xFF, 0xFD, 0x00, 0x00, 0x00]
+    result, error = packet_handler.writeTxRx(port, 1, dxl.ADDR_HOMING_OFFSET, 8, data)
+    assert (result, error) == (sdk.COMM_SUCCESS, 0)
+    assert bus.servos[1].get(dxl.ADDR_HOMING_OFFSET, 4) == -65536
+    read, result, error = packet_handler.readTxRx(port, 1, dxl.ADDR_HOMING_OFFSET, 8)
+    assert (result, error) == (sdk.COMM_SUCCESS, 0)
+    assert list(read) == data
+    assert b'\xff\xff\xfd\xfd' in dxl.packet(1, bytes([dxl.STATUS, 0] + data))  # stuffed
+    port.closePort()
