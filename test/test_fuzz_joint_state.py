@@ -25,7 +25,7 @@ from sensor_msgs.msg import JointState  # noqa: E402
 
 from continuum_statics.nodes.ros_conversions import parse_joint_state  # noqa: E402
 
-EXAMPLES = int(os.environ.get('FUZZ_EXAMPLES', '1000'))
+EXAMPLES = int(os.environ.get('FUZZ_EXAMPLES', '1500'))
 FUZZ = settings(max_examples=EXAMPLES, deadline=None, database=None,
                 derandomize='FUZZ_EXAMPLES' not in os.environ,
                 suppress_health_check=list(HealthCheck))
