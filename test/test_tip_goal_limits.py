@@ -5,10 +5,10 @@ limits by up to 12.6 mm, and a goal at the base from a bent state returned 0.233
 [0.27, 0.33]). A converged answer is checked independently: the commanded lengths, given to the
 estimator, must put the tip at the goal.
 """
+from conftest import REPO
 import numpy as np
 import pytest
 
-from conftest import REPO
 from continuum_statics import load_robot
 
 ROBOTS = {name: load_robot(REPO / 'config' / name) for name in
@@ -21,7 +21,7 @@ def _inside(robot, lengths):
 
 
 def _random_state(robot, rng, scale):
-    """A bent equilibrium: the forward statics of random tensions."""
+    """Return a bent equilibrium: the forward statics of random tensions."""
     return robot.solve_tensions(rng.uniform(0.0, scale, len(robot.cable_names)))
 
 
