@@ -340,6 +340,7 @@ def integrate_batch(s_grid, params, model, tip_forces, base_bendings, disk_momen
             y[12 + i] = w[i]
             y[15 + i] = u[i]
             y[18 + i] = moment[i]
+        fresh = True  # u, w hold the strain at the current node for the coming interval
         for node in range(1, n_nodes):
             s0 = s_grid[node - 1]
             h = s_grid[node] - s0
@@ -364,8 +365,9 @@ def integrate_batch(s_grid, params, model, tip_forces, base_bendings, disk_momen
                 s = s0 + stage_c[stage] * h
                 for i in range(3):
                     force[i] = tip_forces[b, i] + params[_F_BODY + i] * (length - s)
-                _strain(rot_stage, moment_stage, force, params, model, tens, offsets, active,
-                        u, w)
+                if stage > 0 or not fresh:  # stage 1 is the node's own strain, when still valid
+                    _strain(rot_stage, moment_stage, force, params, model, tens, offsets,
+                            active, u, w)
                 xi[0], xi[1], xi[2] = w[0], w[1], w[2] + 1.0
                 xi[3], xi[4], xi[5] = u[0], u[1], u[2]
                 if stage == 0:
@@ -400,6 +402,11 @@ def integrate_batch(s_grid, params, model, tip_forces, base_bendings, disk_momen
             for i in range(3):
                 force[i] = tip_forces[b, i] + params[_F_BODY + i] * (length - s_grid[node])
             _strain(rot, moment, force, params, model, tens, offsets, active, u, w)
+            # at an end disk the point moment or the set of cables changes the next strain
+            fresh = True
+            for sec in range(section_end_node.shape[0]):
+                if section_end_node[sec] == node:
+                    fresh = False
             if model == POINT_MOMENT:
                 for sec in range(section_end_node.shape[0]):
                     if section_end_node[sec] == node:
