@@ -17,6 +17,7 @@ ends outside them, the answer is the equilibrium furthest along the way from the
 stays inside, reported as not reached.
 """
 from dataclasses import dataclass
+import math
 
 import numpy as np
 
@@ -88,9 +89,20 @@ def solve_tip_goal(robot, goal_position, tip_force=(0.0, 0.0, 0.0), tolerance=No
     problem = _Problem(robot, goal, direction, tip_force, tip_moment, tolerance, start)
     if not len(robot.cable_names):
         return problem.answer(start, 0, 'robot has no cables: nothing can move the tip')
-    # least squares on the goal first (robust from far away); with spare freedoms, then slide
-    # along the goal's solutions to the one closest to the start
-    x, iterations, reached = problem.solve(start, redundant=False)
+    # least squares on the goal first (robust from far away), from the start, then (if that
+    # ends in a local minimum) from the passive rod and from the circular arc through the goal
+    passive = robot.passive_state(bvp.linear_guess(robot, tip_force, tip_moment))
+    x, iterations, reached, best = start, 0, False, math.inf
+    for x0 in (start, passive, _arc_guess(robot, goal)):
+        problem.held, problem.held_at = [], []
+        trial, more, trial_reached = problem.solve(x0, redundant=False)
+        iterations += more
+        error = problem.distance(trial)
+        if error < best:
+            x, best, reached, held = trial, error, trial_reached, (problem.held, problem.held_at)
+        if reached:
+            break
+    problem.held, problem.held_at = held
     if reached and robot.observable_bending > problem.goal_rows:
         polished, more, still = problem.solve(x, redundant=True)
         iterations += more
@@ -115,6 +127,12 @@ class _Problem:
                             initial=1e-3)
         self.held_scale = 1.0 / radius  # m of cable -> rad of bending, like the balance rows
         self.held, self.held_at = [], []
+
+    def distance(self, x):
+        """Distance (m) from the tip of state ``x`` to the goal, inf when not finite."""
+        values, _, _ = self.robot.probe(x, 0, self.tip_force, self.tip_moment)
+        error = float(np.linalg.norm(values[0:3] - self.goal))
+        return error if np.isfinite(error) else math.inf
 
     def _goal(self, values, jac):
         """Goal residual (m) and its Jacobian: tip position, and the tip axis times L."""
@@ -233,6 +251,27 @@ class _Problem:
             if high - low < 1e-4:
                 break
         return best.shape, best.cable_lengths
+
+
+def _arc_guess(robot, goal):
+    """State of the circular arc from the base, tangent to its axis, through the goal.
+
+    The whole rod bends at the curvature kappa = 2 rho / (rho^2 + z^2) of that arc (rho, z: the
+    goal's distance from and along the base axis), carried by the tip section's cables.
+    """
+    local = robot.base_rotation.T @ (goal - robot.base_position)
+    rho = float(np.hypot(local[0], local[1]))
+    x = robot.passive_state()
+    if rho < 1e-9 or not robot.sections:
+        return x
+    kappa = 2.0 * rho / (rho ** 2 + local[2] ** 2)
+    u = kappa * np.array([-local[1], local[0], 0.0]) / rho  # e3 x (direction of the goal)
+    x[:3] = u
+    k = len(robot.sections) - 1
+    first, rank = robot.section_state_index[k], robot.section_ranks[k]
+    if rank:
+        x[first:first + rank] = robot.section_bases[k, :, :rank].T @ u
+    return x
 
 
 def _inside(lengths, limits):
