@@ -65,7 +65,8 @@ def test_tip_goal_through_emulated_servos_in_other_processes(tmp_path):
         processes.append(node('cable_driver', namespace, 'backend:=dynamixel',
                               'dynamixel.port:=%s' % link, 'dynamixel.baudrate:=1000000',
                               'dynamixel.ids:=[1,2,3,4]', 'dynamixel.spool_radius:=0.01',
-                              'dynamixel.zero_ticks:=[0]', 'publish_rate:=100.0',
+                              'dynamixel.zero_ticks:=[0]', 'dynamixel.timeout_margin:=0.2',
+                              'publish_rate:=100.0',
                               'diagnostics_rate:=10.0'))
         processes.append(node('statics', namespace))
         processes.append(node('tip_controller', namespace, 'settled_cable_error:=3.0e-5'))

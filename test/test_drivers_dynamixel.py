@@ -30,7 +30,8 @@ def bus(tmp_path):
 
 def make(bus, **options):
     options = dict({'port': bus.port, 'baudrate': 1000000, 'ids': IDS, 'spool_radius': RADIUS,
-                    'directions': [1, -1, 1, -1], 'zero_ticks': [10240]}, **options)
+                    'directions': [1, -1, 1, -1], 'zero_ticks': [10240],
+                    'timeout_margin': 0.2}, **options)  # margin: a loaded test machine
     backend = DynamixelCableBackend(NAMES, LIMITS, STRAIGHT, **options)
     backend.start(0.0)
     return backend

@@ -47,7 +47,8 @@ def start(harness, bus, **overrides):
     parameters = {'backend': 'dynamixel', 'publish_rate': 100.0, 'command_timeout': 0.0,
                   'reconnect_max_interval': 0.2, 'dynamixel.port': bus.port,
                   'dynamixel.baudrate': 1000000, 'dynamixel.ids': IDS,
-                  'dynamixel.spool_radius': 0.01, 'dynamixel.zero_ticks': [ZERO]}
+                  'dynamixel.spool_radius': 0.01, 'dynamixel.zero_ticks': [ZERO],
+                  'dynamixel.timeout_margin': 0.2}  # the emulator shares this process's GIL
     parameters.update(overrides)
     driver = harness.add(CableDriverNode, **parameters)
     client = harness.client()
@@ -123,9 +124,10 @@ def test_port_lost_is_error_without_stale_states_and_publishing_resumes(harness,
                                  'the refused command')
     assert status.level == b'\x02'
     assert 'refused: actuators not connected' in values['last_rejection']
+    reconnects = int(values['reconnects'])
     bus.restore()
-    values, _ = wait_status(diagnostics, lambda v, s: s.level == b'\x00'
-                            and v.get('reconnects') == '1', 'OK after reconnection')
+    wait_status(diagnostics, lambda v, s: s.level == b'\x00'
+                and int(v.get('reconnects', 0)) > reconnects, 'OK after reconnection')
     count = len(states)
     wait_until(lambda: len(states) > count + 10, 10.0, 'cable_states again')
     np.testing.assert_allclose(states.last.position, ROBOT.straight_cable_lengths, atol=1e-12)

@@ -92,6 +92,8 @@ class DynamixelCableBackend(CableBackend):
         BackendOption('current_unit', 2.69e-3, 'A per Present Current unit (XM430: 2.69 mA)',
                       1e-6, 1.0, read_only=True),
         BackendOption('disable_torque_on_exit', True, 'torque off when the driver exits'),
+        BackendOption('timeout_margin', 0.0, 'added to the SDK status-packet timeout (wire time '
+                      '+ 34 ms), s: slow adapters, loaded computers', 0.0, 5.0, read_only=True),
     )
     defaults = {option.name: option.default for option in options_spec}
 
@@ -157,7 +159,8 @@ class DynamixelCableBackend(CableBackend):
         :raises ConnectionLost: the port does not open or a servo does not answer (named)
         """
         self._drop_port()
-        port = sdk.PortHandler(self.port_name)  # a new handler: a vanished one stays 'in use'
+        # A new handler each time: a vanished one stays 'in use'.
+        port = _PortHandler(self.port_name, float(self.options['timeout_margin']))
         try:
             if not port.openPort() or not port.setBaudRate(self.baudrate):
                 raise ConnectionLost('port %s: cannot open at %d bit/s'
@@ -405,6 +408,23 @@ class DynamixelCableBackend(CableBackend):
                 except self._port_errors:
                     break
         self._drop_port()
+
+
+class _PortHandler(sdk.PortHandler if sdk is not None else object):
+    """The SDK's PortHandler with ``margin`` s more on every status-packet timeout."""
+
+    def __init__(self, port_name, margin):
+        super().__init__(port_name)
+        self.margin_ms = 1000.0 * margin
+
+    def setPacketTimeout(self, packet_length):  # noqa: N802 (the SDK's name)
+        """Set the SDK's timeout for ``packet_length`` bytes, plus the margin."""
+        super().setPacketTimeout(packet_length)
+        self.packet_timeout += self.margin_ms
+
+    def setPacketTimeoutMillis(self, msec):  # noqa: N802 (the SDK's name)
+        """Set a timeout of ``msec`` ms plus the margin."""
+        super().setPacketTimeoutMillis(msec + self.margin_ms)
 
 
 class _Missing(Exception):
