@@ -90,3 +90,36 @@ def test_shear_modulus_may_be_given_directly():
     rod = {k: v for k, v in ROD.items() if k != 'poisson_ratio'}
     robot = make_robot(rod={**rod, 'shear_modulus': 25e9})
     assert robot.c[2] == pytest.approx(25e9 * robot.rod.polar_moment)
+
+
+def test_implausible_values_are_warned_by_field():
+
+    data = description(cables=[{'name': 'a', 'offset': [0.5, 0.0, 0.0]}], guides=[0.39])
+    data['rod']['diameter'] = 0.05
+    warnings = parse_robot_description(data).warnings
+    assert any(w.startswith('rod.diameter') for w in warnings)
+    assert any(w.startswith('cables[0].offset') for w in warnings)
+    assert parse_robot_description(description()).warnings == ()
+
+
+def test_sections_validation_names_the_field():
+
+    section = {'name': 'a', 'guides': [0.1, 0.2],
+               'cables': [{'name': 'c', 'offset': [0.01, 0.0, 0.0]}]}
+    cases = [
+        ({'sections': [section, dict(section, name='b', guides=[0.15, 0.3])]},
+         r'sections\[1\]\.guides must start after'),
+        ({'sections': [section, dict(section, name='b', guides=[0.25, 0.3])]},
+         r'sections\[1\]\.cables\[0\]\.name: duplicate cable name'),
+        ({'sections': [section, dict(section, name='a', guides=[0.25])]},
+         r'sections\[1\]\.name: duplicate section name'),
+        ({'sections': [dict(section, guides=[])]}, r'sections\[0\]\.guides must list'),
+        ({'sections': [section], 'cables': []}, 'either sections or top-level'),
+        ({'sections': [section], 'cable_model': 'magic'}, 'cable_model must be one of'),
+    ]
+    for changes, message in cases:
+        data = description()
+        del data['cables'], data['guides']
+        data.update(changes)
+        with pytest.raises(ValueError, match=message):
+            parse_robot_description(data)

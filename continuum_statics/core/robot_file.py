@@ -311,12 +311,16 @@ def _plausibility(rod, offsets, sections):
     if rod.diameter > 0.1 * rod.length:
         warnings.append('rod.diameter %g m is over a tenth of rod.length %g m: not a slender rod'
                         % (rod.diameter, rod.length))
-    for section in sections:
-        for j in section.cable_indices:
+    nested = len(sections) > 1 or (sections and sections[0].name != 'section_0')
+    for k, section in enumerate(sections):
+        for i, j in enumerate(section.cable_indices):
+            field = ('sections[%d].cables[%d].offset' % (k, i) if nested
+                     else 'cables[%d].offset' % j)
             radius = float(np.hypot(*offsets[j, :2]))
             if not rod.diameter / 2.0 <= radius <= 0.25 * rod.length:
-                warnings.append('cable %d offset radius %g m is outside [rod radius %g m, '
-                                'rod.length / 4]' % (j, radius, rod.diameter / 2.0))
+                warnings.append('%s: hole radius %g m is outside [rod radius %g m, rod.length '
+                                '/ 4 = %g m]' % (field, radius, rod.diameter / 2.0,
+                                                 0.25 * rod.length))
     return tuple(warnings)
 
 
