@@ -1,6 +1,6 @@
 # The two commands of README.md: `make demo` (main job) and `make test` (whole suite).
 # Both create .venv on first use and reuse it afterwards.
-.PHONY: venv venv-jazzy demo test test-jazzy bench bench-nodes bench-drivers lint clean
+.PHONY: venv venv-jazzy demo test test-jazzy bench bench-nodes bench-drivers lint clean fuzz soak
 
 venv:
 	@scripts/setup_venv.sh
@@ -28,6 +28,17 @@ bench-nodes: venv
 # sync read cycle and the highest cable_driver publish_rate, for 4 and 9 servos.
 bench-drivers: venv
 	scripts/ros_env.sh --private .venv/bin/python -m continuum_statics.tools.driver_bench
+
+# Differential fuzzing of the raw CDR JointState parser against rclpy, FUZZ_EXAMPLES cases per
+# test (random each run; `make test` runs 1500 per test, derandomized).
+fuzz: venv
+	FUZZ_EXAMPLES=$${FUZZ_EXAMPLES:-50000} scripts/ros_env.sh --private .venv/bin/python -m pytest \
+	    -q -p no:cacheprovider test/test_fuzz_joint_state.py
+
+# Not in CI: bringup at 1 kHz with a random reachable goal every 2 s for 10 minutes; prints goals
+# reached/answered, RSS at start and end, warnings. Options: make soak SOAK_ARGS='--minutes 3'.
+soak: venv
+	scripts/ros_env.sh --private .venv/bin/python -m continuum_statics.tools.soak $(SOAK_ARGS)
 
 lint: venv
 	.venv/bin/ruff check .

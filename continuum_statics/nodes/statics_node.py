@@ -108,6 +108,10 @@ class StaticsNode(Node):
                       'this', 0.0, 0.1),
             ParamSpec('length_limit_margin', 1e-3, 'lengths further than this outside the robot '
                       "file's length limits are dropped, m", 0.0, 1.0),
+            ParamSpec('max_iterations', 3, 'Gauss-Newton iterations per measurement (0: the '
+                      "robot file's solver.max_iterations): a fit that needs more goes on from "
+                      'this estimate with the next measurement; one that is still far off is '
+                      'finished at once', 0, 1000),
             ParamSpec('use_measured_tensions', True, 'estimate with cable_states.effort as cable '
                       'tensions (N) when every one is present, finite and >= 0'),
             ParamSpec('tube_diameter', 0.006, 'diameter of the rod drawn in RViz, m', 1e-4, 0.2),
@@ -123,6 +127,7 @@ class StaticsNode(Node):
         self.robot = load_robot_file(self._params['robot_file'])
         self.cable_names = tuple(self.robot.cable_names)
         self._passive = not self.cable_names
+        self._tracking = self._tracking_robot(self._params['max_iterations'])
         limits = np.asarray(self.robot.cable_length_limits, dtype=float).reshape(-1, 2)
         self._low, self._high = limits[:, 0].copy(), limits[:, 1].copy()
         self.base_frame_id = self.robot.base_frame_id
@@ -157,6 +162,7 @@ class StaticsNode(Node):
                       'message': 'waiting for cable_states', 'time': None, 'tensions': False}
         self._residuals = diag.ValueWindow()
         self._best_fits = 0  # published with a residual above the warn threshold
+        self._capped = 0  # estimates that hit max_iterations (refined with the next one)
         self._empty_payloads = 0
         self._limit_rejections = 0
         self._solve_times = diag.TimingWindow()
@@ -200,6 +206,14 @@ class StaticsNode(Node):
     def _on_parameter_change(self, name, value):
         if name == 'marker_rate':
             self._set_marker_timer(value)
+        elif name == 'max_iterations':
+            self._tracking = self._tracking_robot(value)
+
+    def _tracking_robot(self, max_iterations):
+        """Return the robot with the per-measurement iteration cap (itself for 0)."""
+        if not max_iterations or max_iterations >= self.robot.solver.max_iterations:
+            return self.robot
+        return self.robot.with_solver(max_iterations=int(max_iterations))
 
     def _set_marker_timer(self, rate):
         if self._marker_timer is not None:
@@ -294,7 +308,12 @@ class StaticsNode(Node):
                 tensions = self._tensions
         load = self._current_tip_load(time.monotonic())
         try:
-            estimate = self._estimate(lengths, load, tensions)
+            estimate = self._estimate(self._tracking, lengths, load, tensions, self._warm)
+            capped = not estimate.converged and self._tracking is not self.robot
+            if capped and not estimate.residual <= drop:
+                # far from the last shape (a jump, a restart): finish the fit now
+                estimate = self._estimate(self.robot, lengths, load, tensions, estimate)
+                capped = False
         except ValueError as error:
             self._reject('cable_states', error)
             return
@@ -303,14 +322,20 @@ class StaticsNode(Node):
         residual = float(estimate.residual)
         good_fit = residual <= warn
         message = estimate.message
+        if capped:
+            self._capped += 1
+            message = 'refined with the next measurement (max_iterations %d)' % (
+                self._params['max_iterations'])
         if not good_fit:
             message = ('best fit: cable lengths %.3g m RMS from the nearest shape (warn above '
                        '%.3g m)%s' % (residual, warn, '; ' + message if message else ''))
+        # converged: stationary, or (iteration cap) being refined from one measurement to the
+        # next, and in both cases the lengths are a shape within warn_residual
         self._last.update(residual=residual, iterations=estimate.iterations,
-                          converged=bool(estimate.converged) and good_fit, message=message,
-                          time=time.monotonic(), tensions=tensions is not None)
+                          converged=(bool(estimate.converged) or capped) and good_fit,
+                          message=message, time=time.monotonic(), tensions=tensions is not None)
         self._residuals.add(residual)
-        if not estimate.converged:
+        if not (estimate.converged or capped):
             self._not_converged += 1
         if not residual <= drop:
             # lengths no shape of this robot explains (broken cable, wrong robot file, unhomed
@@ -326,12 +351,11 @@ class StaticsNode(Node):
             self._warm = estimate
             self._cycle_times.add(time.perf_counter() - start)
 
-    def _estimate(self, lengths, load, tensions):
+    def _estimate(self, robot, lengths, load, tensions, warm):
         """Estimate the shape; a tip load the model cannot take is dropped as a bad tip_wrench."""
-        robot = self.robot
         try:
             return robot.estimate_shape(lengths, tip_force=load[:3], tip_moment=load[3:],
-                                        tensions=tensions, warm_start=self._warm)
+                                        tensions=tensions, warm_start=warm)
         except ValueError as error:
             if not load.any():
                 raise
@@ -460,6 +484,7 @@ class StaticsNode(Node):
             'converged': last['converged'],
             'estimate_message': last['message'] or 'none',
             'not_converged_total': self._not_converged,
+            'iteration_capped_total': self._capped,
             'measured_tensions_used': last['tensions'],
             'tip_force_n': ' '.join('%.4g' % f for f in self._tip_load[:3]),
             'tip_moment_nm': ' '.join('%.4g' % f for f in self._tip_load[3:]),
