@@ -264,3 +264,37 @@ def test_intake_counts_lost_and_stale_messages():
     assert entry.stale({'received_timestamp': now - 50_000_000})
     assert not entry.stale({'received_timestamp': now})
     assert not IntakeEntry(None, None).stale({'received_timestamp': 1})
+
+
+def test_each_cable_is_drawn_to_its_end_disk_and_the_tube_coloured_by_section():
+    from continuum_statics.nodes.marker_geometry import section_layout, section_of
+    from continuum_statics.nodes.ros_conversions import SECTION_COLORS
+
+    robot = load_robot(REPO / 'config' / 'two_section_robot.yaml')
+    cable_ends, section_ends = section_layout(robot)
+    np.testing.assert_allclose(cable_ends, [0.15] * 3 + [0.30] * 3)
+    np.testing.assert_allclose(section_ends, [0.15, 0.30])
+    shape = robot.solve_tensions([0.5, 0.0, 0.0, 0.0, 0.3, 0.0])
+    guides, rotations, cables = guide_and_cable_points(
+        shape.s, shape.positions, shape.rotations, robot.guides, robot.cable_offsets,
+        cable_ends)
+    assert [len(c) for c in cables] == [7] * 3 + [13] * 3  # base exit + 6 or 12 guides
+    # the proximal cables end in the hole of the proximal end disk
+    end_disk = list(robot.guides).index(0.15)
+    hole = guides[end_disk] + rotations[end_disk] @ robot.cable_offsets[0]
+    np.testing.assert_allclose(cables[0][-1], hole, atol=1e-12)
+    s = np.linspace(0.0, 0.3, 7)
+    np.testing.assert_array_equal(section_of(s, section_ends), [0, 0, 0, 0, 1, 1, 1])
+    _, positions, quaternions = shape.sample(7)
+    markers = BackboneMarkers('robot').update(
+        Header(frame_id='base_link'), positions, quaternions, guides,
+        rotation_to_quaternion(rotations), cables, section_of(s, section_ends),
+        section_of(cable_ends, section_ends))
+    tube = markers.markers[0]
+    assert [(c.r, c.g, c.b) for c in tube.colors] == [
+        tuple(np.float32(SECTION_COLORS[k][:3])) for k in [0, 0, 0, 0, 1, 1, 1]]
+    cable_markers = [m for m in markers.markers if m.ns.endswith('cables')]
+    assert cable_markers[0].color != cable_markers[3].color
+    assert len(cable_markers[0].points) == 7 and len(cable_markers[3].points) == 13
+    passive = load_robot(REPO / 'config' / 'jones2009_nitinol_rod.yaml')
+    assert section_layout(passive)[0].shape == (0,)

@@ -23,6 +23,7 @@ from nav_msgs.srv import GetPlan  # noqa: E402
 from rclpy.parameter import Parameter  # noqa: E402
 from rclpy.qos import qos_profile_sensor_data  # noqa: E402
 from sensor_msgs.msg import JointState  # noqa: E402
+from visualization_msgs.msg import MarkerArray  # noqa: E402
 
 from continuum_statics import load_robot  # noqa: E402
 from continuum_statics.nodes.cable_driver_node import CableDriverNode  # noqa: E402
@@ -265,3 +266,27 @@ def test_goals_are_reached_with_noisy_encoders(harness, noise, tolerance):
         plan = call(stack.service, stack.request(goal, tolerance), 40.0).plan
         assert len(plan.poses) == 20, stack.values().get('last_outcome')
     wait_until(lambda: stack.values().get('goals_reached') == '2', 5.0, 'two goals reached')
+
+
+def test_a_two_section_robot_reaches_a_goal_with_commands_that_are_shapes(harness):
+    robot_file = str(REPO / 'config' / 'two_section_robot.yaml')
+    robot = load_robot(robot_file)
+    stack = Stack(harness, statics={'robot_file': robot_file},
+                  driver={'robot_file': robot_file}, robot_file=robot_file)
+    commands = Collector(stack.client, JointState, 'cable_commands', RELIABLE)
+    markers = Collector(stack.client, MarkerArray, 'backbone_markers', LATCHED)
+    harness.nodes[0].set_parameters([Parameter('marker_rate', value=20.0)])
+    shape = robot.solve_tensions([0.0, 0.6, 0.0, 0.0, 0.0, 0.4])
+    assert np.all(np.abs(robot.cable_lengths(shape) - robot.straight_cable_lengths) < 0.02)
+    goal = shape.tip_position
+    plan = call(stack.service, stack.request(goal, 1e-3), 40.0).plan
+    assert len(plan.poses) == 20, stack.values().get('last_outcome')
+    assert np.linalg.norm(pose_xyz(plan.poses[-1].pose) - goal) <= 1e-3
+    warm = None
+    for msg in list(commands.messages)[::5]:
+        assert list(msg.name) == list(robot.cable_names)
+        warm = robot.estimate_shape(np.asarray(msg.position), warm_start=warm)
+        assert warm.residual < 2e-6
+    wait_until(lambda: len(markers) > 0, 5.0, 'markers')
+    cables = [m for m in markers.last.markers if m.ns.endswith('cables')]
+    assert sorted(len(m.points) for m in cables) == [7, 7, 7, 13, 13, 13]

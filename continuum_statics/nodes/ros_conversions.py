@@ -229,6 +229,11 @@ def _set_points(marker, array):
         point.x, point.y, point.z = x, y, z
 
 
+#: Tube colour of each section, base to tip (RGBA), repeated beyond the fourth.
+SECTION_COLORS = ((0.85, 0.55, 0.15, 1.0), (0.2, 0.6, 0.85, 1.0), (0.45, 0.75, 0.3, 1.0),
+                  (0.75, 0.35, 0.7, 1.0))
+
+
 class BackboneMarkers:
     """RViz markers of a backbone (tube, guide disks, cables, tip arrow), updated in place.
 
@@ -263,7 +268,7 @@ class BackboneMarkers:
         return marker
 
     def update(self, header, positions, quaternions, guide_positions, guide_quaternions,
-               cable_points):
+               cable_points, point_sections=None, cable_sections=None):
         """Return the MarkerArray for one backbone.
 
         :param header: frame and stamp of every marker
@@ -271,14 +276,18 @@ class BackboneMarkers:
         :param quaternions: (n, 4) backbone orientations [x, y, z, w]
         :param guide_positions: (n_guides, 3) guide-disk centres, m
         :param guide_quaternions: (n_guides, 4) guide-disk orientations (normal = local z)
-        :param cable_points: (n_cables, k, 3) points of each cable, base exit -> last guide, m
+        :param cable_points: per cable a (k, 3) array of points, base exit -> its end disk, m
+        :param point_sections: (n,) section index of each backbone point: the tube is coloured
+            by section (None: one colour)
+        :param cable_sections: (n_cables,) section index of each cable, for its colour
         :raises ValueError: on a non-finite input (nothing is changed then)
         """
         arrays = [np.asarray(a, dtype=float) for a in (
-            positions, quaternions, guide_positions, guide_quaternions, cable_points)]
-        if not all(np.all(np.isfinite(a)) for a in arrays):
+            positions, quaternions, guide_positions, guide_quaternions)]
+        cable_points = [np.asarray(points, dtype=float) for points in cable_points]
+        if not all(np.all(np.isfinite(a)) for a in arrays + cable_points):
             raise ValueError('refusing to publish markers with non-finite points')
-        positions, quaternions, guide_positions, guide_quaternions, cable_points = arrays
+        positions, quaternions, guide_positions, guide_quaternions = arrays
         while len(self._disks) < len(guide_positions):
             disk = self._marker('guides', len(self._disks), Marker.CYLINDER,
                                 (0.6, 0.6, 0.65, 0.8))
@@ -293,12 +302,20 @@ class BackboneMarkers:
         del self._cables[len(cable_points):]
         self._tube.scale.x = self.tube_diameter
         _set_points(self._tube, positions)
+        if point_sections is not None and len(point_sections) == len(positions):
+            self._tube.colors = [_color(SECTION_COLORS[k % len(SECTION_COLORS)])
+                                 for k in point_sections]
+        else:
+            self._tube.colors = []
         set_pose(self._tip.pose, positions[-1].tolist(), quaternions[-1].tolist())
         for disk, position, quaternion in zip(self._disks, guide_positions.tolist(),
                                               guide_quaternions.tolist()):
             set_pose(disk.pose, position, quaternion)
-        for cable, points in zip(self._cables, cable_points):
+        for index, (cable, points) in enumerate(zip(self._cables, cable_points)):
             cable.scale.x = self.tube_diameter * 0.25
+            if cable_sections is not None:
+                rgba = SECTION_COLORS[int(cable_sections[index]) % len(SECTION_COLORS)]
+                cable.color = _color((0.6 * rgba[0], 0.6 * rgba[1], 0.6 * rgba[2], 1.0))
             _set_points(cable, points)
         markers = [self._tube] + self._disks + self._cables + [self._tip]
         for marker in markers:

@@ -55,7 +55,11 @@ from continuum_statics.core.backbone_sampling import BackboneSampler
 from continuum_statics.core.rotations import rotation_to_quaternion
 from continuum_statics.nodes import diagnostics_util as diag
 from continuum_statics.nodes.dedicated_intake import make_intake
-from continuum_statics.nodes.marker_geometry import guide_and_cable_points
+from continuum_statics.nodes.marker_geometry import (
+    guide_and_cable_points,
+    section_layout,
+    section_of,
+)
 from continuum_statics.nodes.node_params import (
     ParameterTable,
     ParamSpec,
@@ -158,6 +162,9 @@ class StaticsNode(Node):
         rotation_to_quaternion(straight.rotations[:1])
         self._markers = BackboneMarkers(self.get_name(), self._params['tube_diameter'],
                                         self._disk_diameter)
+        # Multi-section robots: each cable drawn to its own end disk, the tube by section.
+        self._cable_ends, self._section_ends = section_layout(self.robot)
+        self._cable_sections = section_of(self._cable_ends, self._section_ends)
         self._last = {'residual': math.nan, 'iterations': 0, 'converged': False,
                       'message': 'waiting for cable_states', 'time': None, 'tensions': False}
         self._residuals = diag.ValueWindow()
@@ -419,14 +426,15 @@ class StaticsNode(Node):
         try:
             guide_points, guide_rotations, cable_points = guide_and_cable_points(
                 shape.s, shape.positions, shape.rotations, self.robot.guides,
-                self.robot.cable_offsets)
+                self.robot.cable_offsets, self._cable_ends)
             positions, quaternions = sampler.sample(shape.positions, shape.rotations)
             self._markers.tube_diameter = self._params['tube_diameter']
             markers = self._markers.update(
                 Header(frame_id=self.base_frame_id,
                        stamp=Time(sec=self._stamp[0], nanosec=self._stamp[1])),
                 positions, quaternions,
-                guide_points, rotation_to_quaternion(guide_rotations), cable_points)
+                guide_points, rotation_to_quaternion(guide_rotations), cable_points,
+                section_of(sampler.s, self._section_ends), self._cable_sections)
         except ValueError as error:
             self._reject('markers', error)
             return
