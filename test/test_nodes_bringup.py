@@ -123,3 +123,48 @@ def test_bringup_reports_a_bad_parameter_instead_of_a_traceback():
 def test_wait_until_fails_with_the_reason():
     with pytest.raises(AssertionError, match='waiting for nothing'):
         wait_until(lambda: False, 0.05, 'nothing')
+
+
+def test_bringup_with_a_passive_rod_publishes_its_shape_and_rejects_goals():
+    rod_file = REPO / 'config' / 'jones2009_nitinol_rod.yaml'
+    rod = load_robot(rod_file)
+    namespace = 'rod_' + uuid.uuid4().hex[:8]
+    process = start_bringup('--robot', str(rod_file), '--namespace', namespace)
+    context = rclpy.Context()
+    rclpy.init(context=context)
+    executor = rclpy.executors.SingleThreadedExecutor(context=context)
+    node = None
+    try:
+        node = rclpy.create_node('rod_client', namespace=namespace, context=context)
+        executor.add_node(node)
+        backbone = Collector(node, Path, 'backbone', LATCHED)
+        service = node.create_client(GetPlan, 'tip_goal')
+
+        def spin_until(predicate, timeout, what):
+            deadline = time.monotonic() + timeout
+            while not predicate():
+                assert process.poll() is None, 'bringup exited: %s' % process.stdout.read()
+                assert time.monotonic() < deadline, 'timed out after %g s: %s' % (timeout, what)
+                executor.spin_once(timeout_sec=0.02)
+
+        spin_until(lambda: len(backbone) > 0, 30.0, 'the passive backbone')
+        np.testing.assert_allclose(pose_xyz(backbone.last.poses[-1].pose),
+                                   rod.solve_bvp().tip_position, atol=1e-6)
+        spin_until(service.service_is_ready, 10.0, 'the tip_goal service')
+        started = time.monotonic()
+        future = service.call_async(request(rod.solve_bvp().tip_position, 1e-3))
+        spin_until(future.done, 10.0, 'the answer')
+        assert time.monotonic() - started < 2.0
+        assert len(future.result().plan.poses) == 0
+        time.sleep(2.5)  # long enough for a repeated warning to show
+    finally:
+        executor.shutdown()
+        if node is not None:
+            node.destroy_node()
+        rclpy.try_shutdown(context=context)
+        code = stop_process(process)
+    output = process.stdout.read()
+    assert code == 0, output
+    assert 'robot has no cables' in output
+    assert 'no cable names in the message' not in output, output
+    assert 'Traceback' not in output, output

@@ -289,3 +289,26 @@ def test_a_robot_without_cables_is_a_passive_rod_under_gravity_and_tip_load(harn
                                rod.solve_bvp(tip_force=(0.0, 0.0, -0.196)).tip_position,
                                atol=1e-6)
     wait_until(lambda: 'passive rod' in rig.values().get('status', ''), 5.0, 'the status')
+
+
+def test_measured_tensions_are_used_when_complete(harness):
+    robot_file = REPO / 'config' / 'two_section_robot.yaml'
+    robot = load_robot(robot_file)
+    rig = Rig(harness, robot_file=str(robot_file))
+    tensions = [0.4, 0.0, 0.1, 0.0, 0.3, 0.0]
+    shape = robot.solve_tensions(tensions)
+    lengths = robot.cable_lengths(shape)
+    msg = JointState(name=list(robot.cable_names), position=[float(v) for v in lengths],
+                     effort=tensions)
+    rig.stamp += 1
+    msg.header.stamp = Time(sec=rig.stamp)
+    publish_until(rig.states, msg, lambda: rig.backbone.last is not None
+                  and rig.backbone.last.header.stamp.sec == rig.stamp, 10.0, 'the backbone')
+    np.testing.assert_allclose(pose_xyz(rig.backbone.last.poses[-1].pose), shape.tip_position,
+                               atol=1e-5)
+    wait_until(lambda: rig.values().get('measured_tensions_used') == 'True', 5.0,
+               'tensions used')
+    msg.effort = [0.4, -1.0, 0.1, 0.0, 0.3, 0.0]  # a signed current is no tension: not used
+    publish_until(rig.states, msg,
+                  lambda: rig.values().get('measured_tensions_used') == 'False', 5.0,
+                  'tensions not used')
