@@ -194,21 +194,35 @@ def test_duration_namespace_filter_and_topic_list(harness, tmp_path):
 
     publisher = threading.Thread(target=publish, daemon=True)
     publisher.start()
+
+    def until_recorded(topic, seconds=1.5):
+        """Stop ``seconds`` after the recorder subscribed to ``topic`` (discovery varies)."""
+        subscribed = []
+
+        def log(text):
+            if text.startswith('record: recording %s ' % topic):
+                subscribed.append(time.monotonic())
+        return log, lambda: bool(subscribed) and time.monotonic() > subscribed[0] + seconds
+
     try:
         namespace = harness.namespace.strip('/')
+        mine = '/%s/tip_goal_pose' % namespace
+        log, done = until_recorded(mine)
+        counts, _ = record(tmp_path / 'all', duration=30.0, namespace=namespace, log=log,
+                           stop_requested=done)
+        log, done = until_recorded('/elsewhere/tip_goal_pose')
+        listed, _ = record(tmp_path / 'listed', duration=30.0, namespace=namespace,
+                           topics=['/elsewhere/tip_goal_pose'], log=log, stop_requested=done)
         start = time.monotonic()
-        counts, elapsed = record(tmp_path / 'all', duration=2.0, namespace=namespace,
-                                 log=lambda text: None)
-        assert time.monotonic() - start >= 2.0 and elapsed >= 2.0
-        listed, _ = record(tmp_path / 'listed', duration=2.0, namespace=namespace,
-                           topics=['/elsewhere/tip_goal_pose'], log=lambda text: None)
+        _, elapsed = record(tmp_path / 'short', duration=0.5, namespace=namespace,
+                            log=lambda text: None)
+        assert time.monotonic() - start >= 0.5 and elapsed >= 0.5
     finally:
         stop.set()
         publisher.join()
     # /diagnostics is in the default set too (another test's node may still be publishing it).
-    assert set(counts) - {'/diagnostics'} == {'/%s/tip_goal_pose' % namespace}
-    assert counts['/%s/tip_goal_pose' % namespace] > 10
-    assert set(listed) == {'/elsewhere/tip_goal_pose'}
+    assert set(counts) - {'/diagnostics'} == {mine} and counts[mine] > 10
+    assert set(listed) == {'/elsewhere/tip_goal_pose'} and listed['/elsewhere/tip_goal_pose'] > 10
     assert read_counts(tmp_path / 'all') == {t: n for t, n in counts.items() if n}
     with pytest.raises(ValueError, match='exists already'):
         record(tmp_path / 'all', duration=0.1, namespace=namespace)
