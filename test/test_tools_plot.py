@@ -135,3 +135,13 @@ def test_bags_without_anything_to_plot_or_unreadable_are_clear_errors(tmp_path):
     (broken / 'metadata.yaml').write_text('not: [a, bag')
     result = run_plot(broken)
     assert result.returncode == 1 and 'cannot read bag' in result.stderr
+
+
+def test_long_recordings_are_thinned_evenly(tmp_path, monkeypatch):
+    bag = write_bag(tmp_path / 'bag', FULL, seconds=5, rate=20)
+    monkeypatch.setattr(plot, 'MAX_POINTS', 30)
+    rec = plot.read_recording(bag)
+    # 100 messages per series, at most 30 kept: every 4th, from the first on.
+    assert [t for t, *_ in rec.tip] == pytest.approx([0.2 * i for i in range(25)])
+    assert len(rec.measured['cable_0']) == 25 and len(rec.solver) == 25
+    assert len(rec.snapshots) == plot.SNAPSHOTS  # snapshots are picked by time, not thinned

@@ -22,6 +22,8 @@ import numpy as np
 
 #: Backbone snapshots drawn in backbone.png.
 SNAPSHOTS = 6
+#: Most samples kept per time series (longer recordings are thinned evenly: bounded memory).
+MAX_POINTS = 20000
 
 
 @dataclass
@@ -98,6 +100,11 @@ def _read(reader, count):
         'diagnostics': _pick(connections, 'diagnostics', 'diagnostic_msgs/msg/DiagnosticArray'),
     }
     role_of = {c.id: role for role, conns in roles.items() for c in conns}
+    # Keep every stride-th message of a series (the counts are in the bag's index).
+    stride = {role: max(1, -(-sum(c.msgcount for c in conns) // MAX_POINTS))
+              for role, conns in roles.items()}
+    stride['goal'] = 1  # every goal counts
+    seen = dict.fromkeys(roles, -1)
     wanted = [c for conns in roles.values() for c in conns]
     duration = max(reader.end_time - 1 - reader.start_time, 1)  # end_time: last stamp + 1
     # Snapshot instants spread over the recording; the first backbone after each is kept.
@@ -109,10 +116,12 @@ def _read(reader, count):
     for connection, stamp, raw in (reader.messages(connections=wanted) if wanted else ()):
         role = role_of[connection.id]
         t = (stamp - reader.start_time) * 1e-9
+        seen[role] += 1
+        sampled = seen[role] % stride[role] == 0
         if role == 'backbone':
             last_backbone = (t, connection, raw)
             take = next_target < len(targets) and stamp >= targets[next_target]
-            if not (take or tip_from_backbone):
+            if not (take or (tip_from_backbone and sampled)):
                 continue
             msg = reader.deserialize(raw, connection.msgtype)
             if not msg.poses:
@@ -123,8 +132,10 @@ def _read(reader, count):
                 rec.snapshots.append((t, positions))
                 while next_target < len(targets) and stamp >= targets[next_target]:
                     next_target += 1
-            if tip_from_backbone:
+            if tip_from_backbone and sampled:
                 rec.tip.append((t, *_point(msg.poses[-1].pose.position)))
+        elif not sampled:
+            continue
         elif role == 'tip_pose':
             msg = reader.deserialize(raw, connection.msgtype)
             rec.frame_id = rec.frame_id or msg.header.frame_id
