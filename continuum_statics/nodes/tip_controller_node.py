@@ -383,7 +383,10 @@ class TipControllerNode(Node):
             if previous is not None:
                 self._finish_locked(previous, False, 'pre-empted by a new goal')
             self._goal = goal
-            self._commanded = commanded
+            if recover is not None or self._commanded is None:
+                self._commanded = commanded
+            # else a running goal may have moved the command on meanwhile: the ramp closes that
+            # gap at max_cable_speed (see _advance_locked) instead of jumping back
             self._command_state = start if recover is None else None
             self._recover_target = recover
             self._start_path_locked(start, solution, load)
