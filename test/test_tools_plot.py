@@ -145,3 +145,38 @@ def test_long_recordings_are_thinned_evenly(tmp_path, monkeypatch):
     assert [t for t, *_ in rec.tip] == pytest.approx([0.2 * i for i in range(25)])
     assert len(rec.measured['cable_0']) == 25 and len(rec.solver) == 25
     assert len(rec.snapshots) == plot.SNAPSHOTS  # snapshots are picked by time, not thinned
+
+
+def test_goals_from_the_topic_and_the_controller_diagnostics_count_once(tmp_path):
+    """A streamed goal echoed in the controller's ``goal_m`` counts once; a service goal too."""
+    PoseStamped = STORE.types['geometry_msgs/msg/PoseStamped']
+    Pose = STORE.types['geometry_msgs/msg/Pose']
+    Point = STORE.types['geometry_msgs/msg/Point']
+    Quaternion = STORE.types['geometry_msgs/msg/Quaternion']
+    Array = STORE.types['diagnostic_msgs/msg/DiagnosticArray']
+    Status = STORE.types['diagnostic_msgs/msg/DiagnosticStatus']
+    KeyValue = STORE.types['diagnostic_msgs/msg/KeyValue']
+    first, second = (0.05, 0.0, 0.29), (-0.04, 0.03, 0.285)
+    goal_msg = PoseStamped(header=header(0.0), pose=Pose(
+        position=Point(x=first[0], y=first[1], z=first[2]),
+        orientation=Quaternion(x=0.0, y=0.0, z=0.0, w=1.0)))
+
+    def controller(t):
+        goal = first if t < 2.5 else second
+        return Array(header=header(t), status=[Status(
+            level=0, name='continuum/tip_controller', message='moving', hardware_id='robot',
+            values=[KeyValue(key='goal_m', value='%.5f %.5f %.5f' % goal)])])
+
+    bag = tmp_path / 'bag'
+    with Writer(bag, version=9, storage_plugin=StoragePlugin.MCAP) as writer:
+        goals = writer.add_connection('/continuum/tip_goal_pose', 'geometry_msgs/msg/PoseStamped',
+                                      typestore=STORE)
+        diag = writer.add_connection('/diagnostics', 'diagnostic_msgs/msg/DiagnosticArray',
+                                     typestore=STORE)
+        writer.write(goals, int(100e9), STORE.serialize_cdr(goal_msg, goals.msgtype))
+        for i in range(1, 6):
+            writer.write(diag, int((100 + i) * 1e9),
+                         STORE.serialize_cdr(controller(float(i)), diag.msgtype))
+    rec = plot.read_recording(bag)
+    assert [g[0] for g in rec.goals] == [0.0, 3.0]
+    np.testing.assert_allclose([g[1:] for g in rec.goals], [first, second])

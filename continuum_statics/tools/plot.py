@@ -142,7 +142,8 @@ def _read(reader, count):
             rec.tip.append((t, *_point(msg.pose.position)))
         elif role == 'goal':
             msg = reader.deserialize(raw, connection.msgtype)
-            rec.goals.append((t, *_point(msg.pose.position)))
+            last_goal = _point(msg.pose.position)
+            rec.goals.append((t, *last_goal))
         elif role in ('commands', 'states'):
             msg = reader.deserialize(raw, connection.msgtype)
             series = rec.commanded if role == 'commands' else rec.measured
@@ -158,7 +159,9 @@ def _read(reader, count):
                                        _float(values.get('residual_m'))))
                 if 'goal_m' in values:  # the tip controller's current goal (service goals)
                     goal = tuple(_float(v) for v in values['goal_m'].split()[:3])
-                    if len(goal) == 3 and goal != last_goal:
+                    # the same goal seen again (or first seen on tip_goal_pose) is one goal
+                    if len(goal) == 3 and (last_goal is None or np.max(
+                            np.abs(np.subtract(goal, last_goal))) > 1e-4):
                         rec.goals.append((t, *goal))
                         last_goal = goal
     if last_backbone is not None and len(rec.snapshots) < count and (
