@@ -308,6 +308,9 @@ def main(argv=None):
         for sig, handler in previous.items():
             signal.signal(sig, handler)
     print_summary(output, counts, elapsed)
+    never = sorted(absolute_topics(args.topics, args.namespace) - set(counts))
+    if never:
+        print('record: never saw a publisher on %s' % ', '.join(never), flush=True)
     return 0
 
 
