@@ -289,6 +289,8 @@ def test_a_robot_without_cables_is_a_passive_rod_under_gravity_and_tip_load(harn
                                rod.solve_bvp(tip_force=(0.0, 0.0, -0.196)).tip_position,
                                atol=1e-6)
     wait_until(lambda: 'passive rod' in rig.values().get('status', ''), 5.0, 'the status')
+    wait_until(lambda: len(rig.markers) > 0, 5.0, 'markers of the passive rod')
+    assert 'markers' not in rig.values().get('last_rejection', '')
 
 
 def test_measured_tensions_are_used_when_complete(harness):
