@@ -473,9 +473,6 @@ def workspace_goals(robot, geometry, count, rng):
     raise AssertionError(f'only {len(goals)} goals inside the length limits')
 
 
-@pytest.mark.xfail(reason='core 017e73f: 3 of 39 reachable goals missed (cold: 5.6e-4 m; '
-                          'warm from the previous goal: 4.6e-3 and 0.115 m; converged=False)',
-                   strict=False)
 def test_tip_goals_across_the_two_section_workspace():
     robot = load_robot(TWO_SECTION)
     geometry = Geometry(read_yaml(TWO_SECTION))
