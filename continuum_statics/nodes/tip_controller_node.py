@@ -77,6 +77,9 @@ MIN_TOLERANCE = 1e-6
 OFF_COMMAND = 2e-3
 #: Tip samples needed before the mean is judged (three identical ones: no noise).
 MIN_TIP_SAMPLES = 3
+#: A goal starts from the mean of the cable lengths measured in this window, s (at rest it
+#: averages the encoder noise; a moving cable lags by at most speed x window).
+MEAN_WINDOW_S = 0.05
 
 
 def _towards(commanded, target, step):
@@ -158,6 +161,7 @@ class TipControllerNode(Node):
         self._fraction = 0.0
         self._fraction_step = 0.05
         self._tip_history = deque(maxlen=4000)  # (position, stamp ns) of recent tip poses
+        self._recent_lengths = deque(maxlen=64)  # recent measurements, for a low-noise mean
         self._judged_mean = None
         self._recover_target = None
         self._judge_start = None
@@ -264,6 +268,7 @@ class TipControllerNode(Node):
         measured[self._index] = view.position
         # One tuple, one assignment: the control loop always sees a consistent measurement.
         self._measurement = (measured, view.sec * 1_000_000_000 + view.nanosec, time.monotonic())
+        self._recent_lengths.append(self._measurement)
 
     def _on_tip_wrench(self, msg):
         try:
@@ -343,7 +348,7 @@ class TipControllerNode(Node):
                 time.monotonic() < limit:
             time.sleep(0.01)
         measurement, tip = self._measurement, self._tip
-        measured = None if measurement is None else measurement[0]
+        measured = None if measurement is None else self._mean_lengths(measurement)
         if measured is None or tip is None:
             raise ValueError('no %s yet: are statics and cable_driver running?'
                              % ('cable_states' if measured is None else 'tip_pose'))
@@ -401,6 +406,11 @@ class TipControllerNode(Node):
             *position, tolerance, source,
             '' if recover is None else ' (cables off the last command: onto the model first)'))
         return goal
+
+    def _mean_lengths(self, newest):
+        """Mean of the measurements of the last MEAN_WINDOW_S s: encoder noise averaged out."""
+        recent = [m[0] for m in list(self._recent_lengths) if newest[2] - m[2] <= MEAN_WINDOW_S]
+        return np.mean(recent, axis=0) if recent else newest[0].copy()
 
     def _start_path_locked(self, start, solution, load):
         self._path = (start, solution, load)
