@@ -16,6 +16,7 @@ from continuum_statics.core import bvp
 from continuum_statics.core.inputs import as_vector
 from continuum_statics.core.least_squares import constrained_gauss_newton
 from continuum_statics.core.shape import Shape
+from continuum_statics.core.tracking import track
 
 #: RMS length residual (m) above which an estimate says in its message that it is a best fit.
 BEST_FIT_NOTE = 1e-6
@@ -94,26 +95,39 @@ def estimate_shape(robot, cable_lengths, tip_force=(0.0, 0.0, 0.0), tip_moment=(
     size = robot.state_size
 
     runs = [0]
+    if jacobians is not None:  # tracking: the previous Jacobians, Broyden-updated, compiled
+        x, res, _, states, jac, con_jac, iterations, used, ok = track(
+            *robot.kernel_args(tip_force, tip_moment), measured, start, jacobians[0],
+            jacobians[1], robot.solver.estimate_tolerance, robot.length)
+        runs[0] = used
+        if ok:
+            return _finish(robot, x, tip_force, states, res, True, iterations, observable,
+                           notes, (jac, con_jac), used)
+        start = x  # keep the progress; go on with fresh Jacobians
 
-    def evaluate(x, with_jacobians):
-        runs[0] += robot.probe_runs if with_jacobians else 1
-        values, jac, states = robot.probe(x, size if with_jacobians else 0, tip_force,
-                                          tip_moment)
-        if not with_jacobians:
-            return values[cables] - measured, None, values[balance], None, states
+    def evaluate(x):
+        runs[0] += robot.probe_runs
+        values, jac, states = robot.probe(x, size, tip_force, tip_moment)
         return values[cables] - measured, jac[cables], values[balance], jac[balance], states
 
     result = constrained_gauss_newton(
         evaluate, start, robot.solver.max_iterations, robot.solver.estimate_tolerance,
-        constraint_weight=robot.length, jacobians=jacobians)
-    residual = _rms(result.residual)
-    if not result.stationary:
-        notes.insert(0, 'not converged in %d iterations' % result.iterations)
+        constraint_weight=robot.length)
+    return _finish(robot, result.x, tip_force, result.evaluation, result.residual,
+                   result.stationary, result.iterations, observable, notes, result.jacobians,
+                   runs[0])
+
+
+def _finish(robot, x, tip_force, states, length_residual, stationary, iterations, observable,
+            notes, jacobians, runs):
+    """Build the estimate record, with notes on convergence and on the fit."""
+    residual = _rms(length_residual)
+    if not stationary:
+        notes.insert(0, 'not converged in %d iterations' % iterations)
     if residual > BEST_FIT_NOTE:
         notes.insert(0, 'best fit: the lengths fit no shape to RMS %.3g m' % residual)
-    shape = robot.make_shape(result.x, tip_force, result.evaluation)
-    return _result(shape, result.stationary, residual, result.iterations, observable, notes,
-                   result.jacobians, runs[0])
+    shape = robot.make_shape(x, tip_force, states)
+    return _result(shape, stationary, residual, iterations, observable, notes, jacobians, runs)
 
 
 def _rms(values):

@@ -125,7 +125,7 @@ def _matmul9(a, b, out):
                               + a[3 * i + 2] * b[6 + j])
 
 
-@numba.njit(cache=True)
+@numba.njit(cache=True, inline='always')
 def _strain(rot, moment, force, p, model, tensions, offsets, active, u, w):
     """Strains u (1/m) and v - e3 at a cross-section from the moment M and force N beyond it.
 
@@ -221,7 +221,7 @@ def _cross_into(a0, a1, a2, b, out, k):
     out[k + 2] = a0 * b[1] - a1 * b[0]
 
 
-@numba.njit(cache=True)
+@numba.njit(cache=True, inline='always')
 def _dexpinv(theta, xi, out, tmp):
     """Out = dexp^-1_(-theta)(xi) on se(3), series truncated after the double commutator.
 

@@ -10,9 +10,6 @@ from dataclasses import dataclass
 import numba
 import numpy as np
 
-#: Iterations on reused (Broyden-updated) Jacobians before they are recomputed.
-QUASI_ITERATIONS = 3
-
 
 @dataclass
 class LeastSquaresResult:
@@ -58,25 +55,17 @@ def _step(res, jac, con, con_jac, damping):
     return step, jac @ step
 
 
-def constrained_gauss_newton(evaluate, x0, max_iterations, step_tolerance, constraint_weight,
-                             jacobians=None):
+def constrained_gauss_newton(evaluate, x0, max_iterations, step_tolerance, constraint_weight):
     """Solve min |r(x)|^2 s.t. c(x) = 0 from ``x0``.
 
-    :param evaluate: (x, with_jacobians) -> (r, dr/dx, c, dc/dx, evaluation), numpy arrays but
-        the last, which is handed back with the result (e.g. the solved states); the Jacobians
-        may be None when ``with_jacobians`` is False (one model run instead of 1 + len(x))
+    :param evaluate: x -> (r, dr/dx, c, dc/dx, evaluation), all numpy arrays except the last,
+        which is handed back with the result (e.g. the solved states)
     :param step_tolerance: stop when the predicted change of r and the constraint correction
         (weighted) are both below this (units of r)
     :param constraint_weight: converts constraint units to residual units in the merit function
-    :param jacobians: (dr/dx, dc/dx) from a solve near ``x0`` (a tracking estimator's previous
-        cycle): they are reused and corrected by Broyden updates instead of recomputed, and
-        recomputed only when a step fails
     """
     x = np.array(x0, dtype=float)
-    quasi = jacobians is not None
-    res, jac, con, con_jac, evaluation = evaluate(x, not quasi)
-    if quasi:
-        jac, con_jac = (np.array(j, dtype=float) for j in jacobians)
+    res, jac, con, con_jac, evaluation = evaluate(x)
     if not all(np.all(np.isfinite(a)) for a in (res, jac, con, con_jac)):
         raise ValueError('the rod model is not finite at the start state %s (1/m): is the tip '
                          'load far beyond what the rod can carry?' % np.round(x, 4).tolist())
@@ -96,9 +85,6 @@ def constrained_gauss_newton(evaluate, x0, max_iterations, step_tolerance, const
 
     current = merit(res, con)
     for iteration in range(1, max_iterations + 1):
-        if quasi and iteration > QUASI_ITERATIONS:  # slow: the secants drifted; start afresh
-            quasi = False
-            res, jac, con, con_jac, evaluation = evaluate(x, True)
         step, predicted = _step(res, jac, con, con_jac, damping)
         small = (predicted @ predicted <= step_tolerance ** 2
                  and constraint_weight ** 2 * (con @ con) <= step_tolerance ** 2)
@@ -106,42 +92,26 @@ def constrained_gauss_newton(evaluate, x0, max_iterations, step_tolerance, const
             return result(iteration, small)
         for _ in range(12):
             trial = x + step
-            t_res, t_jac, t_con, t_con_jac, t_eval = evaluate(trial, not quasi)
+            t_res, t_jac, t_con, t_con_jac, t_eval = evaluate(trial)
             t_merit = merit(t_res, t_con)
             if not (np.isfinite(t_merit) and t_merit < current) and len(t_con):
                 # second-order correction: the step left the curved constraint surface; pull the
                 # trial back onto it before judging it (avoids the Maratos effect's tiny steps)
-                # (with reused Jacobians the correction is a chord iteration: up to 3 rounds)
-                c_trial, c_con = trial, t_con
-                for _ in range(3 if quasi else 1):
-                    correction, _ = _step(np.zeros(0), np.zeros((0, len(x))), c_con,
-                                          con_jac if quasi else t_con_jac, 0.0)
-                    if not np.all(np.isfinite(correction)):
-                        break
-                    c_trial = c_trial + correction
-                    c_eval = evaluate(c_trial, not quasi)
-                    c_merit, c_con = merit(c_eval[0], c_eval[2]), c_eval[2]
+                correction, _ = _step(np.zeros(0), np.zeros((0, len(x))), t_con, t_con_jac, 0.0)
+                if np.all(np.isfinite(correction)):
+                    c_trial = trial + correction
+                    c_eval = evaluate(c_trial)
+                    c_merit = merit(c_eval[0], c_eval[2])
                     if np.isfinite(c_merit) and c_merit < current:
                         trial, (t_res, t_jac, t_con, t_con_jac, t_eval) = c_trial, c_eval
                         t_merit = c_merit
-                        break
             if np.isfinite(t_merit) and t_merit < current:
                 damping = max(damping / 4.0, 1e-9)
                 break
-            if quasi:  # the reused Jacobians misled the step: recompute them here, once
-                quasi = False
-                res, jac, con, con_jac, evaluation = evaluate(x, True)
-            else:
-                damping *= 8.0
+            damping *= 8.0
             step, predicted = _step(res, jac, con, con_jac, damping)
         else:
             return result(iteration, False)
-        if quasi:  # Broyden: the secant condition J dx = df for both row blocks
-            dx = trial - x
-            scale = 1.0 / (dx @ dx)
-            jac = jac + np.outer(t_res - res - jac @ dx, dx) * scale
-            con_jac = con_jac + np.outer(t_con - con - con_jac @ dx, dx) * scale
-            t_jac, t_con_jac = jac, con_jac
         x, res, jac, con, con_jac, evaluation = trial, t_res, t_jac, t_con, t_con_jac, t_eval
         current = t_merit
     return result(max_iterations, False)

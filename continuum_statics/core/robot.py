@@ -204,6 +204,15 @@ class Robot:
                      self.cable_offsets, self.guide_nodes, self.cable_last_guide,
                      self.cable_end_node, self.section_end_node)
 
+    def kernel_args(self, tip_force, tip_moment, fixed_tensions=None, params=None):
+        """Return the model arguments of :func:`kernel.probe` but the state (compiled solvers)."""
+        return (self.s_grid, self.params if params is None else params, self.model_code,
+                np.asarray(tip_force, dtype=float), np.asarray(tip_moment, dtype=float),
+                self.bending_step(), self._fixed(fixed_tensions), self.section_state_index,
+                self.section_bases, self.section_ranks, self.section_cables,
+                self.section_cable_count, self.cable_offsets, self.guide_nodes,
+                self.cable_last_guide, self.cable_end_node, self.section_end_node)
+
     def make_shape(self, state, tip_force, states, fixed_tensions=None):
         """Wrap kernel states in a :class:`Shape` that remembers its solver state."""
         return Shape(self.s_grid, states, np.array(state[:3]), tip_force, self.c, self.d,

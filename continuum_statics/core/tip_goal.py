@@ -153,7 +153,7 @@ class _Problem:
             rows = [6 + i for i in self.held]
             held_at = np.array(self.held_at)
 
-            def evaluate(x, _with_jacobians, rows=rows, held_at=held_at):
+            def evaluate(x, rows=rows, held_at=held_at):
                 values, jac, states = robot.probe(x, robot.state_size, self.tip_force,
                                                   self.tip_moment)
                 goal_res, goal_jac = self._goal(values, jac)

@@ -54,12 +54,21 @@ def stop(process, timeout=15.0):
 
 
 def measurement_lengths(robot, count, rate):
-    """Cable lengths of shapes circling at 0.5 Hz (|u(0)| = 2 1/m): realistic, always solvable."""
-    lengths = []
+    """Cable lengths of equilibria circling at 0.5 Hz: realistic, always solvable.
+
+    Every section's cables bend it by 2 1/m in a direction turning at 0.5 Hz (robot equilibria
+    of any robot file, solved along the way with :meth:`Robot.equilibrium_between`).
+    """
+    lengths, previous = [], None
     for i in range(count):
         angle = 2.0 * np.pi * 0.5 * i / rate
-        shape = robot.solve_ivp([2.0 * np.cos(angle), 2.0 * np.sin(angle), 0.0])
-        lengths.append(robot.cable_lengths(shape).tolist())
+        state = robot.passive_state()
+        for first, rank in zip(robot.section_state_index, robot.section_ranks):
+            if rank == 2:
+                state[first:first + 2] = 2.0 * np.array([np.cos(angle), np.sin(angle)])
+        target = robot.make_shape(state, np.zeros(3), robot.integrate_state(state, np.zeros(3)))
+        previous = robot.equilibrium_between(target, target, 0.0, warm_start=previous)
+        lengths.append(previous.cable_lengths.tolist())
     return lengths
 
 
