@@ -182,3 +182,24 @@ def test_a_robot_without_cables_is_said_once_and_the_driver_stays_quiet(harness)
     assert len(said) == 1, [m.msg for m in logs.messages]
     assert 'no cables' in said[0]
     assert len(states) == 0
+
+
+def test_empty_and_malformed_raw_commands_are_counted(harness):
+    _, states, diagnostics, commands = start(harness)
+
+    def values():
+        return (diagnostic_values(diagnostics, 'cable_driver') or ({},))[0]
+
+    cases = [(b'', 'empty payload'),
+             (b'\x00\x01\x00\x00' + b'\xff' * 40, 'malformed JointState')]
+    for count, (payload, reason) in enumerate(cases, 1):
+        commands.publish(payload)  # serialized bytes, as a raw publisher sends them
+        wait_until(lambda: values().get('rejected_cable_commands') == str(count), 5.0,
+                   'raw rejection %d on diagnostics' % count)
+        assert reason in values()['last_rejection']
+    assert values()['empty_payloads_total'] == '1'
+    # a correct command still moves the cables
+    target = ROBOT.straight_cable_lengths - 0.001
+    commands.publish(JointState(name=list(ROBOT.cable_names), position=target.tolist()))
+    wait_until(lambda: np.allclose(states.last.position, target, atol=1e-4), 5.0,
+               'the cables at the commanded lengths')

@@ -28,6 +28,7 @@ from pathlib import Path
 import sys
 import threading
 import time
+from types import SimpleNamespace
 
 import numpy as np
 from rclpy.node import Node
@@ -46,7 +47,12 @@ from continuum_statics.nodes.node_params import (
     load_robot_file,
     robot_file_spec,
 )
-from continuum_statics.nodes.ros_conversions import cable_index, joint_positions, joint_state
+from continuum_statics.nodes.ros_conversions import (
+    cable_index,
+    joint_positions,
+    joint_state,
+    parse_joint_state,
+)
 
 #: Commands and goals: reliable, depth 10 (docs/architecture.md, ROS interfaces).
 COMMAND_QOS = QoSProfile(depth=10, reliability=ReliabilityPolicy.RELIABLE)
@@ -146,6 +152,7 @@ class CableDriverNode(Node):
                     self._home_file, zero_option, zeros))
 
         self._problems = diag.Problems()
+        self._empty_payloads = 0
         self._clamped = 0
         self._commands = 0
         self._refused = 0
@@ -183,7 +190,9 @@ class CableDriverNode(Node):
 
         self._publisher = self.create_publisher(JointState, 'cable_states',
                                                 qos_profile_sensor_data)
-        self.create_subscription(JointState, 'cable_commands', self._on_command, COMMAND_QOS)
+        # raw: a malformed or empty payload is then seen (and counted), not dropped by rclpy
+        self.create_subscription(JointState, 'cable_commands', self._on_raw_command,
+                                 COMMAND_QOS, raw=True)
         self.create_service(Trigger, '~/reset', self._on_reset)
         self.create_service(Trigger, '~/set_home', self._on_set_home)
         # cable_states from a thread of its own: steadier and ~10x cheaper than a 200 Hz timer.
@@ -272,6 +281,17 @@ class CableDriverNode(Node):
         if status is not None and status.level >= diag.ERROR:
             return 'actuator fault: %s' % status.message
         return ''
+
+    def _on_raw_command(self, data):
+        try:
+            view = parse_joint_state(data)
+        except ValueError as error:
+            if len(data) == 0:
+                self._empty_payloads += 1
+            self._reject('cable_commands', error)
+            return
+        self._on_command(SimpleNamespace(name=view.names, position=view.position,
+                                         velocity=view.velocity, effort=view.effort))
 
     def _on_command(self, msg):
         try:
@@ -441,6 +461,7 @@ class CableDriverNode(Node):
                 'holding': self._holding,
             })
             values.update(self._problems.values())
+            values['empty_payloads_total'] = str(self._empty_payloads)
             values.update(status.values)
         self._diagnostics.publish(diag.diagnostic_array(
             self.get_clock().now().to_msg(), self.get_fully_qualified_name().lstrip('/'),
