@@ -26,6 +26,10 @@ from sensor_msgs.msg import JointState  # noqa: E402
 from visualization_msgs.msg import MarkerArray  # noqa: E402
 
 from continuum_statics import load_robot  # noqa: E402
+from continuum_statics.core.rotations import (  # noqa: E402
+    quaternion_to_rotation,
+    rotation_to_quaternion,
+)
 from continuum_statics.nodes.cable_driver_node import CableDriverNode  # noqa: E402
 from continuum_statics.nodes.statics_node import StaticsNode  # noqa: E402
 from continuum_statics.nodes.tip_controller_node import TipControllerNode  # noqa: E402
@@ -290,3 +294,29 @@ def test_a_two_section_robot_reaches_a_goal_with_commands_that_are_shapes(harnes
     wait_until(lambda: len(markers) > 0, 5.0, 'markers')
     cables = [m for m in markers.last.markers if m.ns.endswith('cables')]
     assert sorted(len(m.points) for m in cables) == [7, 7, 7, 13, 13, 13]
+
+
+def test_goal_orientation_direction_points_the_tip_of_a_two_section_robot(harness):
+    robot_file = str(REPO / 'config' / 'two_section_robot.yaml')
+    robot = load_robot(robot_file)
+    stack = Stack(harness, statics={'robot_file': robot_file},
+                  driver={'robot_file': robot_file}, robot_file=robot_file,
+                  goal_orientation='direction')
+    # an S-shape: for its tip position alone the controller would pick a tip axis 19 deg away
+    shape = robot.solve_tensions([12.0, 0.0, 0.0, 0.0, 8.0, 0.0])
+    goal, axis = shape.tip_position, shape.tip_rotation[:, 2]
+    request = stack.request(goal, 1e-3)
+    q = request.goal.pose.orientation
+    q.x, q.y, q.z, q.w = (float(v) for v in rotation_to_quaternion(shape.tip_rotation))
+    plan = call(stack.service, request, 40.0).plan
+    assert len(plan.poses) == 20, stack.values().get('last_outcome')
+    tip = plan.poses[-1].pose
+    assert np.linalg.norm(pose_xyz(tip) - goal) <= 1e-3
+    reached_axis = quaternion_to_rotation(np.array(
+        [tip.orientation.x, tip.orientation.y, tip.orientation.z, tip.orientation.w]))[:, 2]
+    assert np.degrees(np.arccos(np.clip(reached_axis @ axis, -1.0, 1.0))) < 1.0
+    # the same position with the tip pointing straight down is out of reach: rejected
+    request = stack.request(goal, 1e-3)
+    request.goal.pose.orientation.x, request.goal.pose.orientation.w = 1.0, 0.0
+    assert len(call(stack.service, request, 40.0).plan.poses) == 0
+    assert 'direction' in stack.values().get('last_outcome', '')

@@ -44,6 +44,7 @@ from rclpy.serialization import deserialize_message
 from sensor_msgs.msg import JointState
 from std_msgs.msg import Header
 
+from continuum_statics.core.rotations import quaternion_to_rotation
 from continuum_statics.nodes import diagnostics_util as diag
 from continuum_statics.nodes.cable_driver_node import COMMAND_QOS
 from continuum_statics.nodes.dedicated_intake import make_intake
@@ -105,6 +106,7 @@ class Goal:
     reason: str = ''
     tip_stamp: int = None  # ns
     error: float = math.nan
+    direction: np.ndarray = None  # unit tip z axis goal (base frame), or None
 
 
 class TipControllerNode(Node):
@@ -118,6 +120,10 @@ class TipControllerNode(Node):
             robot_file_spec('must be the one statics uses'),
             diagnostics_rate_spec(),
             ParamSpec('max_cable_speed', 0.02, 'fastest cable speed of a ramp, m/s', 1e-5, 1.0),
+            ParamSpec('goal_orientation', 'ignore', 'ignore: goals are tip positions; direction: '
+                      'the tip z axis also points along the z axis of the goal orientation',
+                      check=lambda v: None if v in ('ignore', 'direction')
+                      else "must be 'ignore' or 'direction'"),
             ParamSpec('control_rate', 50.0, 'cable_commands rate while a goal runs, Hz', 1.0,
                       1000.0),
             ParamSpec('goal_timeout', 10.0, 'a goal not reached after this long fails, s', 0.1,
@@ -306,7 +312,7 @@ class TipControllerNode(Node):
                 raise ValueError('tolerance must be between %g m and the rod length %g m, got %r'
                                  % (MIN_TOLERANCE, self.robot.length, tolerance))
             goal = self._start_goal(goal_position(request.goal, self.base_frame_id), tolerance,
-                                    'tip_goal service')
+                                    'tip_goal service', self._goal_direction(request.goal))
         except ValueError as error:
             self._goal_rejected(error)
             return response
@@ -324,7 +330,8 @@ class TipControllerNode(Node):
     def _on_goal_pose(self, msg):
         try:
             self._start_goal(goal_position(msg, self.base_frame_id),
-                             self._params['default_tolerance'], 'tip_goal_pose')
+                             self._params['default_tolerance'], 'tip_goal_pose',
+                             self._goal_direction(msg))
         except ValueError as error:
             self._goal_rejected(error)
         except Exception as error:  # never let one message take the node down
@@ -337,7 +344,19 @@ class TipControllerNode(Node):
         self._problems.add('tip_goal', error)
         self.get_logger().warning('tip goal rejected: %s' % error)
 
-    def _start_goal(self, position, tolerance, source):
+    def _goal_direction(self, pose_stamped):
+        """Tip direction goal (unit z axis of the goal orientation), or None when ignored."""
+        if self._params['goal_orientation'] != 'direction':
+            return None
+        q = pose_stamped.pose.orientation
+        quaternion = np.array([q.x, q.y, q.z, q.w])
+        norm = float(np.linalg.norm(quaternion))
+        if not abs(norm - 1.0) < 1e-3:
+            raise ValueError('goal_orientation is direction but the goal orientation is not a '
+                             'unit quaternion (norm %.3g)' % norm)
+        return quaternion_to_rotation(quaternion / norm)[:, 2]
+
+    def _start_goal(self, position, tolerance, source, direction=None):
         """Solve the goal and make it the active one; ValueError says why it is rejected."""
         if not self.cable_names:
             raise ValueError('robot has no cables: %r is a passive rod, nothing to move'
@@ -370,7 +389,10 @@ class TipControllerNode(Node):
             commanded = measured.copy()
         solution = self.robot.solve_tip_goal(position, tip_force=load[:3], tip_moment=load[3:],
                                              tolerance=self._model_tolerance(tolerance),
-                                             warm_start=start)
+                                             goal_direction=direction, warm_start=start)
+        if direction is not None and not solution.converged:
+            raise ValueError('unreachable goal (%.4f, %.4f, %.4f) m with direction %s: %s'
+                             % (*position, np.round(direction, 3).tolist(), solution.message))
         if not solution.error <= tolerance:
             limited = ', '.join(solution.limited_cables)
             raise ValueError('unreachable goal (%.4f, %.4f, %.4f) m: the nearest reachable tip '
@@ -382,7 +404,7 @@ class TipControllerNode(Node):
             raise ValueError('the solver returned non-finite cable lengths')
         now = time.monotonic()
         goal = Goal(position=position, tolerance=tolerance, source=source, started=now,
-                    deadline=now + self._params['goal_timeout'])
+                    deadline=now + self._params['goal_timeout'], direction=direction)
         with self._lock:
             previous = self._goal
             if previous is not None:
@@ -600,7 +622,8 @@ class TipControllerNode(Node):
         try:
             solution = self.robot.solve_tip_goal(
                 self._corrected_goal, tip_force=load[:3], tip_moment=load[3:],
-                tolerance=self._model_tolerance(goal.tolerance), warm_start=start)
+                tolerance=self._model_tolerance(goal.tolerance), goal_direction=goal.direction,
+                warm_start=start)
         except ValueError as error:
             self._finish_locked(goal, False, 'correction failed: %s' % error)
             return
