@@ -167,10 +167,16 @@ def check_robot_file(value):
     return None
 
 
-def load_robot_file(path):
-    """Load the robot description named by a ``robot_file`` parameter (ValueError when bad)."""
+def load_robot_file(path, logger=None):
+    """Load the robot description named by a ``robot_file`` parameter (ValueError when bad).
+
+    :param logger: when given, each implausible value of the file is logged as a warning
+    """
     from continuum_statics import load_robot
-    return load_robot(resolve_config_path(path))
+    robot = load_robot(resolve_config_path(path))
+    for warning in robot.description.warnings if logger is not None else ():
+        logger.warning('robot file %s: %s' % (path, warning))
+    return robot
 
 
 def tip_wrench_limit_specs():

@@ -128,7 +128,7 @@ class StaticsNode(Node):
                       'longer ago than this, skip to the newest, s', 0.0, 1.0, read_only=True),
         ] + tip_wrench_limit_specs()
         self._params = ParameterTable(self, specs)
-        self.robot = load_robot_file(self._params['robot_file'])
+        self.robot = load_robot_file(self._params['robot_file'], self.get_logger())
         self.cable_names = tuple(self.robot.cable_names)
         self._passive = not self.cable_names
         self._tracking = self._tracking_robot(self._params['max_iterations'])
