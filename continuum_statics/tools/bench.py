@@ -162,20 +162,23 @@ def bench_sections(path, repeat):
               np.linalg.norm(tight - reference)))
     _row('tension solve (cold)', timings(lambda: robot.solve_tensions(tensions, force),
                                          max(20, repeat // 20), warmup=3))
-    # warm estimate: lengths of a nearby equilibrium whose largest change is 1 mm
-    lengths = robot.cable_lengths(shape)
-    previous = robot.estimate_shape(lengths, force)
-    direction = rng.uniform(0.0, 1.0, len(tensions))
-    for scale in (1.0, 0.5, 2.0, 0.25, 4.0):
-        nearby = robot.solve_tensions(tensions + scale * direction, force)
-        change = np.max(np.abs(robot.cable_lengths(nearby) - lengths))
-        direction *= 1e-3 / change
-    changed = robot.cable_lengths(robot.solve_tensions(tensions + direction, force))
+    # warm estimate: a nearby equilibrium of the estimator's own model (section moments, the
+    # least tensions that carry them) whose largest cable change is 1 mm
+    previous = robot.estimate_shape(robot.cable_lengths(shape), force)
+    lengths = robot.cable_lengths(previous.shape)
+    direction = robot.passive_state()
+    direction[3:] = rng.normal(size=robot.state_size - 3)
+    for _ in range(4):
+        moved = robot.make_shape(previous.state + direction, force, shape.states)
+        nearby = robot.equilibrium_between(moved, moved, 0.0, force, warm_start=previous)
+        direction *= 1e-3 / np.max(np.abs(nearby.cable_lengths - lengths))
+    changed = nearby.cable_lengths
     est = robot.estimate_shape(changed, force, warm_start=previous)
     _row('shape estimate (warm, 1 mm change)', timings(
         lambda: robot.estimate_shape(changed, force, warm_start=previous), repeat))
-    print('  estimate: %d iterations, residual %.1e m, max cable change %.2f mm'
-          % (est.iterations, est.residual, 1e3 * np.max(np.abs(changed - lengths))))
+    print('  estimate: %d iterations, %d IVPs, residual %.1e m, max cable change %.2f mm'
+          % (est.iterations, est.model_runs, est.residual,
+             1e3 * np.max(np.abs(changed - lengths))))
     goal = robot.solve_tensions(rng.uniform(0.0, 6.0, len(tensions)), force).tip_position
     sol = robot.solve_tip_goal(goal, force)
     _row('tip-goal solve (cold, %.0f mm from straight)' % (
@@ -222,8 +225,9 @@ def bench_robot(path, repeat):
         est = robot.estimate_shape(changed, force, warm_start=previous)
         _row('shape estimate (warm, 1 mm change)', timings(
             lambda: robot.estimate_shape(changed, force, warm_start=previous), repeat))
-        print('  estimate: %d iterations, residual %.1e m, max cable change %.2f mm'
-              % (est.iterations, est.residual, 1e3 * np.max(np.abs(changed - lengths))))
+        print('  estimate: %d iterations, %d IVPs, residual %.1e m, max cable change %.2f mm'
+              % (est.iterations, est.model_runs, est.residual,
+                 1e3 * np.max(np.abs(changed - lengths))))
         # a reachable goal about 5 cm from the current tip
         goal = robot.solve_ivp(u0 + [0.0, 1.3, 0.0], force).tip_position
         start_tip = shape.tip_position
