@@ -319,4 +319,5 @@ def test_goal_orientation_direction_points_the_tip_of_a_two_section_robot(harnes
     request = stack.request(goal, 1e-3)
     request.goal.pose.orientation.x, request.goal.pose.orientation.w = 1.0, 0.0
     assert len(call(stack.service, request, 40.0).plan.poses) == 0
-    assert 'direction' in stack.values().get('last_outcome', '')
+    wait_until(lambda: 'direction' in stack.values().get('last_outcome', ''), 5.0,
+               'the rejection, with the direction, on diagnostics')
