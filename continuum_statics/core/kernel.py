@@ -66,6 +66,15 @@ def _so3_exp(w0, w1, w2, out):
         a = math.sin(t) / t
         half = math.sin(0.5 * t) / t
         b = 2.0 * half * half
+    _fill_rotation(a, b, w0, w1, w2, out)
+
+
+@numba.njit(cache=True, inline='always')
+def _fill_rotation(a, b, w0, w1, w2, out):
+    """Rodrigues: out (9, row-major) = I + a hat(w) + b hat(w)^2.
+
+    With a = sin t / t and b = (1 - cos t) / t^2, t = |w|, this is exp(hat(w)).
+    """
     out[0] = 1.0 - b * (w1 * w1 + w2 * w2)
     out[1] = -a * w2 + b * w0 * w1
     out[2] = a * w1 + b * w0 * w2
@@ -95,16 +104,7 @@ def _se3_exp(rho, w, rot, out):
         half = math.sin(0.5 * t) / t
         b = 2.0 * half * half
         c = (t - sin_t) / (t2 * t)
-    w0, w1, w2 = w[0], w[1], w[2]
-    rot[0] = 1.0 - b * (w1 * w1 + w2 * w2)
-    rot[1] = -a * w2 + b * w0 * w1
-    rot[2] = a * w1 + b * w0 * w2
-    rot[3] = a * w2 + b * w0 * w1
-    rot[4] = 1.0 - b * (w0 * w0 + w2 * w2)
-    rot[5] = -a * w0 + b * w1 * w2
-    rot[6] = -a * w1 + b * w0 * w2
-    rot[7] = a * w0 + b * w1 * w2
-    rot[8] = 1.0 - b * (w0 * w0 + w1 * w1)
+    _fill_rotation(a, b, w[0], w[1], w[2], rot)
     x0 = w[1] * rho[2] - w[2] * rho[1]  # w x rho
     x1 = w[2] * rho[0] - w[0] * rho[2]
     x2 = w[0] * rho[1] - w[1] * rho[0]
