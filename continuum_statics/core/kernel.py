@@ -249,6 +249,28 @@ def _dexpinv(theta, xi, out, tmp):
         out[i] = xi[i] + 0.5 * tmp[i] + out[i] / 12.0
 
 
+@numba.njit(cache=True, inline='always')
+def _cable_sums(u, w, tensions, offsets, active, out):
+    """Sum t l x tau (out[0:3]) and t tau (out[3:6]) over active cables; tau ~ v + u x l."""
+    for i in range(6):
+        out[i] = 0.0
+    for j in range(active.shape[0]):
+        t = tensions[j]
+        if not active[j] or t == 0.0:
+            continue
+        l0, l1, l2 = offsets[j, 0], offsets[j, 1], offsets[j, 2]
+        q0 = w[0] + u[1] * l2 - u[2] * l1
+        q1 = w[1] + u[2] * l0 - u[0] * l2
+        q2 = w[2] + 1.0 + u[0] * l1 - u[1] * l0
+        inv = t / math.sqrt(q0 * q0 + q1 * q1 + q2 * q2)
+        out[0] += inv * (l1 * q2 - l2 * q1)
+        out[1] += inv * (l2 * q0 - l0 * q2)
+        out[2] += inv * (l0 * q1 - l1 * q0)
+        out[3] += inv * q0
+        out[4] += inv * q1
+        out[5] += inv * q2
+
+
 @numba.njit(cache=True)
 def _base_stretch(rot, force, p, model, tensions, offsets, active, u, w):
     """v(0) - e3 for a given u(0): D (v - e3) = R^T N - sum t tau(u, v), by fixed-point steps."""
@@ -258,23 +280,12 @@ def _base_stretch(rot, force, p, model, tensions, offsets, active, u, w):
     w[0], w[1], w[2] = nl0 * p[_D_INV], nl1 * p[_D_INV + 1], nl2 * p[_D_INV + 2]
     if model != DISTRIBUTED:
         return
+    sums = np.empty(6)
     for _ in range(6):  # converges by a factor t / EA per step
-        sn0 = sn1 = sn2 = 0.0
-        for j in range(active.shape[0]):
-            t = tensions[j]
-            if not active[j] or t == 0.0:
-                continue
-            l0, l1, l2 = offsets[j, 0], offsets[j, 1], offsets[j, 2]
-            q0 = w[0] + u[1] * l2 - u[2] * l1
-            q1 = w[1] + u[2] * l0 - u[0] * l2
-            q2 = w[2] + 1.0 + u[0] * l1 - u[1] * l0
-            inv = t / math.sqrt(q0 * q0 + q1 * q1 + q2 * q2)
-            sn0 += inv * q0
-            sn1 += inv * q1
-            sn2 += inv * q2
-        w[0] = (nl0 - sn0) * p[_D_INV]
-        w[1] = (nl1 - sn1) * p[_D_INV + 1]
-        w[2] = (nl2 - sn2) * p[_D_INV + 2]
+        _cable_sums(u, w, tensions, offsets, active, sums)
+        w[0] = (nl0 - sums[3]) * p[_D_INV]
+        w[1] = (nl1 - sums[4]) * p[_D_INV + 1]
+        w[2] = (nl2 - sums[5]) * p[_D_INV + 2]
 
 
 @numba.njit(cache=True)
@@ -324,18 +335,8 @@ def integrate_batch(s_grid, params, model, tip_forces, base_bendings, disk_momen
         # M(0) = R(0) (C u(0) + sum t l x tau)
         ml0, ml1, ml2 = params[_C] * u[0], params[_C + 1] * u[1], params[_C + 2] * u[2]
         if model == DISTRIBUTED:
-            for j in range(n_cables):
-                t = tens[j]
-                if not active[j] or t == 0.0:
-                    continue
-                l0, l1, l2 = offsets[j, 0], offsets[j, 1], offsets[j, 2]
-                q0 = w[0] + u[1] * l2 - u[2] * l1
-                q1 = w[1] + u[2] * l0 - u[0] * l2
-                q2 = w[2] + 1.0 + u[0] * l1 - u[1] * l0
-                inv = t / math.sqrt(q0 * q0 + q1 * q1 + q2 * q2)
-                ml0 += inv * (l1 * q2 - l2 * q1)
-                ml1 += inv * (l2 * q0 - l0 * q2)
-                ml2 += inv * (l0 * q1 - l1 * q0)
+            _cable_sums(u, w, tens, offsets, active, tmp)
+            ml0, ml1, ml2 = ml0 + tmp[0], ml1 + tmp[1], ml2 + tmp[2]
         for i in range(3):
             moment[i] = rot[3 * i] * ml0 + rot[3 * i + 1] * ml1 + rot[3 * i + 2] * ml2
             y[12 + i] = w[i]
