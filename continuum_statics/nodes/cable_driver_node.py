@@ -37,7 +37,7 @@ from sensor_msgs.msg import JointState
 from std_srvs.srv import Trigger
 import yaml
 
-from continuum_statics.drivers import ConnectionLost, backend_class
+from continuum_statics.drivers import BackendStatus, ConnectionLost, backend_class
 from continuum_statics.nodes import diagnostics_util as diag
 from continuum_statics.nodes.dedicated_intake import PeriodicThread
 from continuum_statics.nodes.node_params import (
@@ -440,8 +440,15 @@ class CableDriverNode(Node):
         if self.backend is None:
             level, message = diag.OK, 'robot has no cables: nothing to drive'
         else:
-            with self._lock:
-                status = self.backend.status()
+            # a reconnection can hold the lock for seconds (drive timeouts): never let it stall
+            # diagnostics; report the last status read instead
+            if self._lock.acquire(timeout=0.05):
+                try:
+                    status = self._status = self.backend.status()
+                finally:
+                    self._lock.release()
+            else:
+                status = self._status or BackendStatus(diag.WARN, 'actuators busy')
             level, message = status.level, status.message
             if not self._connected:
                 level, message = diag.ERROR, 'connection lost: %s' % self._connection_error
