@@ -11,6 +11,7 @@ commands:
   bringup   start the statics, tip_controller and cable_driver nodes in one process
   statics | tip_controller | cable_driver
             run one node alone, like `ros2 run` (options: --ros-args ...)
+  warmup    compile the kernels into the numba cache (the venv setup does it once)
   demo      bringup with the simulated driver plus a client sending tip goals
   record    record the robot's topics into a rosbag2 directory (MCAP; Ctrl-C to stop)
   plot      PNG figures of a recording (backbone, tip path, cable lengths, solver)
@@ -39,6 +40,8 @@ def main(argv=None):
         import importlib
         node_main = importlib.import_module('continuum_statics.nodes.%s_node' % command).main
         return node_main([command] + rest)
+    elif command == 'warmup':
+        from continuum_statics.core.warmup import main as run
     elif command == 'demo':
         from continuum_statics.tools.demo import main as run
     elif command == 'record':

@@ -21,5 +21,8 @@ fi
 "$VENV/bin/python" -m pip install --quiet --upgrade pip
 "$VENV/bin/python" -m pip install --quiet -r "$REQUIREMENTS"
 "$VENV/bin/python" -m pip install --quiet --no-deps -e .
+# Compile the numba kernels once into their cache (__pycache__ in the source tree, or
+# NUMBA_CACHE_DIR): every later process loads them in ~0.1 s instead of compiling for ~20 s.
+"$VENV/bin/python" -m continuum_statics warmup
 echo "$want" > "$stamp"
 echo "setup_venv: $VENV ready"

@@ -20,18 +20,14 @@ os.environ.setdefault(
 def pytest_sessionstart(session):
     """Compile and cache the numba kernels once, before any test starts a node subprocess.
 
-    In a fresh clone the first solve compiles for ~20 s; doing it here keeps that out of the
-    deadlines of the cross-process tests, whose subprocesses then load the on-disk cache.
+    The same warm-up every node runs at start-up; done here it keeps the compile out of the
+    deadlines of the cross-process tests, whose subprocesses then load the on-disk cache
+    (``test_cold_start.py`` starts its subprocesses with an empty cache on purpose).
     """
     from continuum_statics import load_robot
+    from continuum_statics.core.warmup import warm_up
 
-    robot = load_robot(REPO / 'config' / 'tendon_robot.yaml')
-    shape = robot.solve_ivp([1.0, 0.5, 0.0])
-    robot.cable_lengths(shape)
-    robot.estimate_shape(robot.cable_lengths(shape), u0_guess=shape.u0)
-    robot.solve_tip_goal(shape.tip_position)
-    robot.jacobian(shape.u0)
-    robot.solve_bvp(tip_force=(0.0, 0.0, -0.1))
+    warm_up(load_robot(REPO / 'config' / 'tendon_robot.yaml'))
 
 
 @pytest.fixture

@@ -321,3 +321,30 @@ def test_goal_orientation_direction_points_the_tip_of_a_two_section_robot(harnes
     assert len(call(stack.service, request, 40.0).plan.poses) == 0
     wait_until(lambda: 'direction' in stack.values().get('last_outcome', ''), 5.0,
                'the rejection, with the direction, on diagnostics')
+
+
+def test_a_goal_before_any_state_waits_for_it_and_the_controller_says_it_is_starting(harness):
+    # The controller alone first: it is up but cannot serve yet, and says so.
+    harness.add(TipControllerNode, state_wait=20.0)
+    client = harness.client()
+    diagnostics = Collector(client, DiagnosticArray, '/diagnostics', 10)
+
+    def status():
+        found = diagnostic_values(diagnostics, 'tip_controller')
+        return (found[0], found[1].message) if found else ({}, '')
+
+    wait_until(lambda: status()[0].get('state') == 'starting', 10.0, 'a starting status')
+    assert status()[1].startswith('starting: waiting for state: no cable_states'), status()[1]
+    service = client.create_client(GetPlan, 'tip_goal')
+    assert service.wait_for_service(timeout_sec=10.0)
+    goal = reachable(1.0, -1.0)
+    future = service.call_async(Stack.request(goal, 1e-3))
+    time.sleep(0.3)  # the goal is waiting for state now; then statics and the driver start
+    assert not future.done(), 'a goal before the first state must wait, not fail at once'
+    harness.add(StaticsNode, marker_rate=0.0)
+    harness.add(CableDriverNode)
+    wait_until(future.done, 30.0, 'the goal to be answered')
+    plan = future.result().plan
+    assert plan.poses, status()
+    assert np.linalg.norm(pose_xyz(plan.poses[-1].pose) - goal) <= 1e-3
+    wait_until(lambda: status()[0].get('state') == 'ready', 10.0, 'a ready status')

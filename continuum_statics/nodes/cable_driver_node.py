@@ -456,9 +456,12 @@ class CableDriverNode(Node):
                 level, message = diag.ERROR, self._backend_error
             elif level < diag.ERROR and self._problems.recent(2.0):
                 level, message = max(level, diag.WARN), 'rejected ' + self._problems.last_reason
+            elif level == diag.OK and self._rate.total == 0:
+                message = diag.STARTING + 'waiting for the first reading (%s)' % message
             elif level == diag.OK and self._holding:
                 message = '%s; holding position (no command)' % message
             values.update({
+                'state': 'ready' if self._rate.total else 'starting',
                 'connected': self._connected,
                 'reconnects': self._reconnects,
                 'publish_rate_hz': self._rate.report(),

@@ -117,3 +117,17 @@ class ValueWindow:
         if samples.size == 0:
             return 0, math.nan, math.nan
         return samples.size, float(np.median(samples)), float(samples.max())
+
+
+#: Message prefix of a node that cannot serve yet (compiling kernels, waiting for its inputs).
+STARTING = 'starting: '
+
+
+def publish_starting(node, publisher, hardware_id, waiting_for):
+    """Publish one ``starting`` status at once (before the node spins), saying what it waits for.
+
+    Level OK: a node that starts is not faulty; the ``state`` value says it is not ready.
+    """
+    publisher.publish(diagnostic_array(
+        node.get_clock().now().to_msg(), node.get_fully_qualified_name().lstrip('/'),
+        hardware_id, OK, STARTING + waiting_for, {'state': 'starting'}))

@@ -53,6 +53,7 @@ from visualization_msgs.msg import MarkerArray
 
 from continuum_statics.core.backbone_sampling import BackboneSampler
 from continuum_statics.core.rotations import rotation_to_quaternion
+from continuum_statics.core.warmup import warm_up
 from continuum_statics.nodes import diagnostics_util as diag
 from continuum_statics.nodes.dedicated_intake import make_intake
 from continuum_statics.nodes.marker_geometry import (
@@ -129,6 +130,11 @@ class StaticsNode(Node):
         ] + tip_wrench_limit_specs()
         self._params = ParameterTable(self, specs)
         self.robot = load_robot_file(self._params['robot_file'], self.get_logger())
+        # Compile every kernel now, on this thread, before any input can arrive (numba compiles
+        # at first use otherwise: seconds without output, and crashes when two threads compile).
+        self._diagnostics = self.create_publisher(diag.DiagnosticArray, '/diagnostics', 10)
+        diag.publish_starting(self, self._diagnostics, self.robot.name, 'compiling kernels')
+        warm_up(self.robot, self.get_logger().info)
         self.cable_names = tuple(self.robot.cable_names)
         self._passive = not self.cable_names
         self._tracking = self._tracking_robot(self._params['max_iterations'])
@@ -155,11 +161,7 @@ class StaticsNode(Node):
         self._path_encoder = PoseSequenceEncoder(self.base_frame_id,
                                                  self._params['path_samples'])
         self._tip_encoder = PoseSequenceEncoder(self.base_frame_id)
-        # Compiles (or loads from the numba cache) now rather than on the first measurement.
-        straight = self.robot.solve_ivp(np.zeros(3))
-        self._sampler = BackboneSampler(straight.s, self._params['path_samples'])
-        self._sampler.sample(straight.positions, straight.rotations)
-        rotation_to_quaternion(straight.rotations[:1])
+        self._sampler = BackboneSampler(self.robot.s_grid, self._params['path_samples'])
         self._markers = BackboneMarkers(self.get_name(), self._params['tube_diameter'],
                                         self._disk_diameter)
         # Multi-section robots: each cable drawn to its own end disk, the tube by section.
@@ -178,11 +180,11 @@ class StaticsNode(Node):
         self._output_rate = diag.RateMeter()
         self._problems = diag.Problems()
         self._not_converged = 0
+        self._lost_reported = 0
 
         self._backbone_pub = self.create_publisher(Path, 'backbone', LATCHED_QOS)
         self._tip_pub = self.create_publisher(PoseStamped, 'tip_pose', LATCHED_QOS)
         self._marker_pub = self.create_publisher(MarkerArray, 'backbone_markers', LATCHED_QOS)
-        self._diagnostics = self.create_publisher(diag.DiagnosticArray, '/diagnostics', 10)
         input_qos = QoSProfile(history=HistoryPolicy.KEEP_LAST,
                                depth=self._params['input_queue_depth'],
                                reliability=ReliabilityPolicy.BEST_EFFORT,
@@ -454,8 +456,15 @@ class StaticsNode(Node):
         _, cycle_median, cycle_max = self._cycle_times.report()
         fits, residual_median, residual_max = self._residuals.report()
         level, message = diag.OK, 'estimating the shape'
+        lost = 0 if self._input is None else max(self._input.lost, 0)
+        lost_now, self._lost_reported = lost - self._lost_reported, lost
         if self._passive:
             message = last['message']
+        elif self._output_rate.total == 0:
+            message = diag.STARTING + (
+                'waiting for the first cable_states (is cable_driver running?)'
+                if last['time'] is None else 'no cable_states fits a shape yet: %s'
+                % (self._problems.last_reason or last['message']))
         elif last['time'] is None or now - last['time'] > 1.0:
             level, message = diag.WARN, 'no cable_states for over 1 s'
         elif residual_median > warn:
@@ -465,10 +474,14 @@ class StaticsNode(Node):
                 % (residual_median, warn))
         if self._problems.recent(2.0):
             level, message = diag.WARN, 'rejected ' + self._problems.last_reason
+        if lost_now > 0:  # the node stalled (or the transport dropped): never under an OK
+            level, message = diag.WARN, '%d cable_states lost since the last report (%s)' % (
+                lost_now, message)
         wrench_age = math.inf if self._wrench_time is None else now - self._wrench_time
         force_limit, torque_limit = tip_wrench_limits(self.robot, self._params)
         values = {
             'status': message,
+            'state': 'starting' if self._output_rate.total == 0 else 'ready',
             'input_rate_hz': input_rate,
             'output_rate_hz': output_rate,
             'solves': solves,

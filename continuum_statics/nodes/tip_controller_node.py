@@ -45,6 +45,7 @@ from sensor_msgs.msg import JointState
 from std_msgs.msg import Header
 
 from continuum_statics.core.rotations import quaternion_to_rotation
+from continuum_statics.core.warmup import warm_up
 from continuum_statics.nodes import diagnostics_util as diag
 from continuum_statics.nodes.cable_driver_node import COMMAND_QOS
 from continuum_statics.nodes.dedicated_intake import make_intake
@@ -69,8 +70,6 @@ from continuum_statics.nodes.ros_conversions import (
 from continuum_statics.nodes.statics_node import LATCHED_QOS, LATEST_SENSOR_QOS
 
 THROTTLE_S = 2.0
-#: How long a goal that arrives before the first tip_pose / cable_states waits for them, s.
-STATE_WAIT_S = 2.0
 #: Smallest tip_goal tolerance, m: below a micrometre the model's own accuracy decides.
 MIN_TOLERANCE = 1e-6
 #: Measured lengths further than this from the last command (m) are not where the controller put
@@ -141,6 +140,9 @@ class TipControllerNode(Node):
                       'replaced by zero, s (0: never expires)', 0.0, 3600.0),
             ParamSpec('max_state_age', 0.5, 'cable_states and tip_pose older than this mean a '
                       'dead driver or statics: goals are rejected or fail, s', 0.01, 60.0),
+            ParamSpec('state_wait', 3.0, 'a goal that arrives while cable_states or tip_pose '
+                      'is missing or older than max_state_age (start-up, a restarted driver) '
+                      'waits this long for fresh state before it is rejected, s', 0.0, 60.0),
             ParamSpec('tip_average_time', 1.0, 'longest time the tip is averaged after the '
                       'cables settled (noisy measurements: the mean must be known well inside '
                       'the tolerance before the goal is judged), s', 0.0, 60.0),
@@ -150,6 +152,10 @@ class TipControllerNode(Node):
         ] + tip_wrench_limit_specs()
         self._params = ParameterTable(self, specs)
         self.robot = load_robot_file(self._params['robot_file'])
+        # Compile every kernel now, on this thread, before the service is advertised.
+        self._diagnostics = self.create_publisher(diag.DiagnosticArray, '/diagnostics', 10)
+        diag.publish_starting(self, self._diagnostics, self.robot.name, 'compiling kernels')
+        warm_up(self.robot, self.get_logger().info)
         self.cable_names = tuple(self.robot.cable_names)
         self.base_frame_id = self.robot.base_frame_id
         self._limits = np.asarray(self.robot.cable_length_limits, dtype=float)
@@ -192,7 +198,6 @@ class TipControllerNode(Node):
         self._control_group = MutuallyExclusiveCallbackGroup()
         service_group = ReentrantCallbackGroup()
         self._command_pub = self.create_publisher(JointState, 'cable_commands', COMMAND_QOS)
-        self._diagnostics = self.create_publisher(diag.DiagnosticArray, '/diagnostics', 10)
         # The state topics arrive at the measurement rate (hundreds of Hz): a thread of their own
         # serves them, which costs a tenth of the multi-threaded executor's overhead.
         self._intake = make_intake(self, self._params['dedicated_intake_thread'],
@@ -361,19 +366,20 @@ class TipControllerNode(Node):
         if not self.cable_names:
             raise ValueError('robot has no cables: %r is a passive rod, nothing to move'
                              % self.robot.name)
-        # Right after start-up the first state may still be on its way: wait a little for it.
-        limit = time.monotonic() + STATE_WAIT_S
-        while (self._measurement is None or self._tip is None) and not self._closing and \
-                time.monotonic() < limit:
+        # Right after start-up, or while a driver or statics restarts, the state may be missing
+        # or old for a moment: wait up to state_wait for fresh state before answering.
+        limit = time.monotonic() + self._params['state_wait']
+        while True:
+            missing = self._missing_state()
+            stale = self._stale_state(time.monotonic())
+            if not (missing or stale) or self._closing or time.monotonic() >= limit:
+                break
             time.sleep(0.01)
-        measurement, tip = self._measurement, self._tip
-        measured = None if measurement is None else self._mean_lengths(measurement)
-        if measured is None or tip is None:
-            raise ValueError('no %s yet: are statics and cable_driver running?'
-                             % ('cable_states' if measured is None else 'tip_pose'))
-        stale = self._stale_state(time.monotonic())
+        if missing:
+            raise ValueError('%s (waited %.3g s)' % (missing, self._params['state_wait']))
         if stale:
-            raise ValueError(stale)
+            raise ValueError('%s (waited %.3g s)' % (stale, self._params['state_wait']))
+        measured = self._mean_lengths(self._measurement)
         load = self._current_tip_load()
         with self._lock:
             command_state, commanded = self._command_state, self._commanded
@@ -467,6 +473,13 @@ class TipControllerNode(Node):
             self._problems.add('tip_goal', reason)
             self.get_logger().warning('tip goal (%.4f, %.4f, %.4f) m not reached: %s'
                                       % (*goal.position, reason))
+
+    def _missing_state(self):
+        """Return which state has never arrived, or '' when both have."""
+        missing = [what for what, state in (('cable_states from cable_driver', self._measurement),
+                                            ('tip_pose from statics', self._tip))
+                   if state is None]
+        return ('no %s yet' % ' and no '.join(missing)) if missing else ''
 
     def _stale_state(self, now):
         """Return why the measured state is too old to control with, or '' when it is fresh."""
@@ -650,9 +663,13 @@ class TipControllerNode(Node):
         with self._lock:
             goal, phase = self._goal, self._phase
         level, message = diag.OK, 'idle' if goal is None else 'moving to a goal (%s)' % phase
+        missing = self._missing_state()
+        if missing:
+            message = diag.STARTING + 'waiting for state: ' + missing
         if self._problems.recent(5.0):
             level, message = diag.WARN, self._problems.last_reason
         values = {
+            'state': 'starting' if missing else 'ready',
             'phase': phase,
             'goals_reached': self._counts['reached'],
             'goals_failed': self._counts['failed'],

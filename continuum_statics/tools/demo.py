@@ -39,11 +39,17 @@ def tip_goals(robot, count):
 
 
 def run_client(robot_file, namespace, goals=5, tolerance=1e-3, print_rows=True, process=None,
-               timeout=60.0):
+               timeout=60.0, ready_timeout=600.0):
     """Send the goals through ``<namespace>/tip_goal``; return one dict per goal.
 
+    Waits until bringup is ready (service advertised, which its nodes do only once their
+    kernels are compiled, and a first tip pose), up to ``ready_timeout`` s while ``process``
+    lives: a cold numba cache on a busy 2-core machine takes a minute or more.
+
     :param process: the bringup subprocess, to stop waiting early if it dies
-    :raises RuntimeError: when the service or the tip pose does not appear within ``timeout``
+    :param timeout: longest wait for one goal's answer, s
+    :raises RuntimeError: when bringup is not ready within ``ready_timeout`` or a goal is not
+        answered within ``timeout``
     """
     from geometry_msgs.msg import PoseStamped
     from nav_msgs.srv import GetPlan
@@ -64,12 +70,19 @@ def run_client(robot_file, namespace, goals=5, tolerance=1e-3, print_rows=True, 
     client = node.create_client(GetPlan, 'tip_goal')
     rows = []
     try:
-        deadline = time.monotonic() + timeout
+        started = time.monotonic()
+        next_note = started + 10.0
         while not (client.service_is_ready() and tips):
             if process is not None and process.poll() is not None:
                 raise RuntimeError('bringup exited with code %s' % process.returncode)
-            if time.monotonic() > deadline:
-                raise RuntimeError('no tip_goal service and tip_pose within %g s' % timeout)
+            now = time.monotonic()
+            if now > started + ready_timeout:
+                raise RuntimeError('bringup not ready within %g s (no tip_goal service and '
+                                   'tip_pose)' % ready_timeout)
+            if print_rows and now > next_note:
+                next_note = now + 10.0
+                print('demo: waiting for bringup to be ready (%.0f s; a first run compiles the '
+                      'kernels)' % (now - started), flush=True)
             executor.spin_once(timeout_sec=0.05)
         if print_rows:
             print('%-28s %-28s %9s %7s  %s' % ('goal x y z [mm]', 'reached tip x y z [mm]',
@@ -143,6 +156,12 @@ def main(argv=None):
     os.environ['ROS_DOMAIN_ID'] = str(options.domain_id)
     ros_environment()
     robot_file = os.path.abspath(options.robot)
+    # Compile the kernels here first (or load them from the cache): bringup then loads them
+    # from the cache instead of both processes compiling at once on a fresh machine.
+    from continuum_statics import load_robot
+    from continuum_statics.core.warmup import warm_up
+
+    warm_up(load_robot(robot_file), log=lambda line: print('demo: %s' % line, flush=True))
     print('demo: bringup (simulated cables, robot %s, namespace /%s) + tip_goal client'
           % (os.path.basename(robot_file), options.namespace), flush=True)
     process = subprocess.Popen(

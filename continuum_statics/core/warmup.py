@@ -1,0 +1,147 @@
+"""Compile every numba kernel at process start, on one thread, before anything is served.
+
+numba compiles a kernel the first time it is called with a new set of argument types, in whatever
+thread calls it: seconds per kernel on a cold cache, and two threads compiling at once have
+crashed the process (segfault, LLVM assertion). A node therefore calls :func:`warm_up` in its
+constructor, before it creates a subscription, a service or a thread; tools call it before they
+start work. It runs the same public calls the nodes and tools make (so the same argument types:
+array layouts included), once per process; later calls return at once.
+
+Compiled code is cached on disk (``cache=True``): next to the sources when that directory is
+writable (the venv route: ``__pycache__`` in the source tree), else in numba's per-user cache
+directory (``~/.cache/numba`` or ``$XDG_CACHE_HOME/numba``, colcon/apt installs), or wherever
+``NUMBA_CACHE_DIR`` points. With a warm cache the whole warm-up takes ~0.1-0.3 s.
+"""
+import sys
+import threading
+import time
+
+import numpy as np
+
+_LOCK = threading.Lock()
+_DONE = False
+#: Modules whose numba dispatchers the warm-up must cover (see :func:`kernel_signatures`).
+KERNEL_MODULES = (
+    'continuum_statics.core.kernel',
+    'continuum_statics.core.tracking',
+    'continuum_statics.core.least_squares',
+    'continuum_statics.core.rotations',
+    'continuum_statics.core.backbone_sampling',
+)
+
+
+def warm_up(robot=None, log=None):
+    """Compile (or load from the cache) every kernel a node or tool can call; once per process.
+
+    :param robot: the caller's :class:`~continuum_statics.core.robot.Robot`; a robot without
+        cables is complemented by a small robot with cables, so the cable kernels are ready too
+    :param log: callable(str) for one line saying how long it took (None: silent)
+    :returns: seconds spent (0.0 when already done in this process)
+    """
+    global _DONE
+    with _LOCK:
+        if _DONE:
+            return 0.0
+        start = time.perf_counter()
+        robots = [] if robot is None else [robot]
+        if robot is None or not robot.cable_names:
+            robots.append(_bundled_robot())
+        for each in robots:
+            _exercise(each)
+        _DONE = True
+        elapsed = time.perf_counter() - start
+    if log is not None:
+        log('kernels ready in %.2f s (%s)' % (elapsed, 'compiled or loaded from the numba cache'))
+    return elapsed
+
+
+#: A small one-section robot with cables: the cable kernels of a passive caller's process.
+_CABLE_ROBOT = {
+    'name': 'warmup',
+    'rod': {'length': 0.3, 'diameter': 2e-3, 'youngs_modulus': 58e9, 'poisson_ratio': 0.33,
+            'density': 6450.0},
+    'base': {'frame_id': 'base_link', 'position': [0, 0, 0], 'orientation': [0, 0, 0, 1]},
+    'gravity': [0.0, 0.0, -9.81],
+    'cables': [{'name': 'c%d' % i, 'offset': offset, 'length_limits': [0.27, 0.33]}
+               for i, offset in enumerate(([0.01, 0, 0], [0, 0.01, 0], [-0.01, 0, 0]))],
+    'guides': [0.1, 0.2, 0.3],
+    'solver': {'steps': 12},
+}
+
+
+def _bundled_robot():
+    from continuum_statics.core.robot import Robot
+    from continuum_statics.core.robot_file import parse_robot_description
+
+    return Robot(parse_robot_description(_CABLE_ROBOT, 'warm-up robot'))
+
+
+def _exercise(robot):
+    """Make every call the nodes and tools make, with their argument types."""
+    from continuum_statics.core.backbone_sampling import BackboneSampler
+    from continuum_statics.core.rotations import rotation_to_quaternion
+
+    zero = np.zeros(3)
+    load = np.zeros(6)  # the nodes pass slices of a 6-vector as tip force and moment
+    shape = robot.solve_ivp(np.zeros(3))
+    sampler = BackboneSampler(shape.s, 20)
+    sampler.sample(shape.positions, shape.rotations)
+    rotation_to_quaternion(shape.rotations)
+    rotation_to_quaternion(shape.rotations[:1])
+    rotation_to_quaternion(shape.tip_rotation)
+    robot.jacobian(zero)
+    robot.solve_bvp(tip_force=load[:3], tip_moment=load[3:])
+    if not robot.cable_names:
+        return
+    u0 = np.full(3, 0.5 / robot.length)
+    u0[2] = 0.0
+    bent = robot.solve_ivp(u0)
+    robot.cable_jacobian(u0)
+    lengths = robot.cable_lengths(bent)
+    estimate = robot.estimate_shape(lengths, tip_force=load[:3], tip_moment=load[3:])
+    # tracking: warm start with the previous Jacobians (the compiled Broyden path)
+    robot.estimate_shape(lengths + 1e-5, tip_force=load[:3], tip_moment=load[3:],
+                         warm_start=estimate)
+    tensions = np.full(len(robot.cable_names), 0.1)
+    robot.estimate_shape(lengths, tip_force=load[:3], tip_moment=load[3:], tensions=tensions,
+                         warm_start=estimate)
+    robot.solve_tensions(tensions)
+    goal = robot.solve_tip_goal(bent.tip_position, tip_force=load[:3], tip_moment=load[3:],
+                                warm_start=estimate)
+    robot.solve_tip_goal(bent.tip_position, goal_direction=bent.tip_rotation[:, 2])
+    robot.equilibrium_between(estimate, goal, 0.5, tip_force=load[:3], tip_moment=load[3:],
+                              warm_start=estimate)
+
+
+def kernel_signatures():
+    """Return {kernel name: number of compiled signatures} over :data:`KERNEL_MODULES`.
+
+    A call after :func:`warm_up` that raises a count compiled at first use (the tests check that
+    a node's normal work never does).
+    """
+    from numba.core.registry import CPUDispatcher
+
+    counts = {}
+    for name in KERNEL_MODULES:
+        module = sys.modules.get(name)
+        if module is None:
+            continue
+        for attribute, value in vars(module).items():
+            if isinstance(value, CPUDispatcher):
+                counts['%s.%s' % (name, attribute)] = len(value.signatures)
+    return counts
+
+
+def main(argv=None):
+    """``python -m continuum_statics warmup [--robot FILE ...]``: fill the kernel cache."""
+    import argparse
+
+    from continuum_statics.core.robot import load_robot
+
+    parser = argparse.ArgumentParser(prog='python -m continuum_statics warmup',
+                                     description='compile the kernels into the numba cache')
+    parser.add_argument('--robot', default=None, help='robot file (default: the bundled one)')
+    options = parser.parse_args(argv)
+    robot = None if options.robot is None else load_robot(options.robot)
+    warm_up(robot, log=lambda line: print('warmup: %s' % line, flush=True))
+    return 0
