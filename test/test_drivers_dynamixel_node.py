@@ -151,7 +151,9 @@ def test_servo_power_loss_is_named_and_survived(harness, bus):
 
 def test_set_home_writes_the_home_file_and_a_new_driver_loads_it(harness, bus, tmp_path):
     home = tmp_path / 'home.yaml'
-    driver, client, states, _, commands = start(harness, bus, home_file=str(home))
+    # the previous home is off by 20 mm on cable_3: forced (a straight robot reads bent)
+    driver, client, states, _, commands = start(harness, bus, home_file=str(home),
+                                                home_force=True)
     publish_until(commands, JointState(name=['cable_3'], position=[0.28]),
                   lambda: abs(states.last.position[3] - 0.28) < METRES_PER_TICK, 10.0,
                   'cable_3 at 0.28 m')
@@ -172,6 +174,24 @@ def test_set_home_writes_the_home_file_and_a_new_driver_loads_it(harness, bus, t
     _, _, states, _, _ = start(harness, bus, home_file=str(home),
                                **{'dynamixel.zero_ticks': [0]})
     np.testing.assert_allclose(states.last.position, ROBOT.straight_cable_lengths, atol=1e-12)
+
+
+def test_set_home_is_refused_while_the_robot_is_bent(harness, bus, tmp_path):
+    home = tmp_path / 'home.yaml'
+    _, client, states, _, commands = start(harness, bus, home_file=str(home))
+    publish_until(commands, JointState(name=['cable_3'], position=[0.2906]),
+                  lambda: abs(states.last.position[3] - 0.2906) < METRES_PER_TICK, 10.0,
+                  'cable_3 9.4 mm short')
+    answer = trigger(client, 'cable_driver/set_home')
+    assert not answer.success and 'not straight' in answer.message, answer.message
+    assert 'cable_3' in answer.message and '-9.4' in answer.message, answer.message
+    assert not home.exists()
+    straight = float(ROBOT.straight_cable_lengths[3])
+    publish_until(commands, JointState(name=['cable_3'], position=[straight]),
+                  lambda: abs(states.last.position[3] - straight) < METRES_PER_TICK, 10.0,
+                  'cable_3 straight again')
+    answer = trigger(client, 'cable_driver/set_home')
+    assert answer.success and home.exists(), answer.message
 
 
 def test_the_example_params_file_runs(harness, bus, tmp_path):

@@ -85,6 +85,19 @@ def solve_tip_goal(robot, goal_position, tip_force=(0.0, 0.0, 0.0), tolerance=No
             raise ValueError('goal_direction must be a non-zero vector')
         direction = direction / norm
     if start is None:
+        return _solve(robot, goal, direction, tip_force, tip_moment, tolerance, None)
+    # A warm start can lead the solve astray (another branch of the redundant solutions, a
+    # limit on the way): a warm solve that fails is retried cold before it answers.
+    warm = _solve(robot, goal, direction, tip_force, tip_moment, tolerance, start)
+    if warm.converged:
+        return warm
+    cold = _solve(robot, goal, direction, tip_force, tip_moment, tolerance, None)
+    return cold if cold.converged or cold.error < warm.error else warm
+
+
+def _solve(robot, goal, direction, tip_force, tip_moment, tolerance, start):
+    """One tip-goal solve from ``start`` (None: the passive rod); see :func:`solve_tip_goal`."""
+    if start is None:
         start = robot.passive_state(bvp.linear_guess(robot, tip_force, tip_moment))
     problem = _Problem(robot, goal, direction, tip_force, tip_moment, tolerance, start)
     if not len(robot.cable_names):

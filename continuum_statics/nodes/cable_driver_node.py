@@ -53,6 +53,7 @@ from continuum_statics.nodes.ros_conversions import (
     joint_state,
     parse_joint_state,
 )
+from continuum_statics.nodes.timers import steady_timer
 
 #: Commands and goals: reliable, depth 10 (docs/architecture.md, ROS interfaces).
 COMMAND_QOS = QoSProfile(depth=10, reliability=ReliabilityPolicy.RELIABLE)
@@ -127,6 +128,11 @@ class CableDriverNode(Node):
                       'this are clamped, further out rejected, m', 0.0, 0.1),
             ParamSpec('home_file', '', 'YAML of the actuator positions at the straight pose '
                       '(written by ~/set_home, loaded at start; empty: none)', read_only=True),
+            ParamSpec('home_tolerance', 0.002, '~/set_home is refused while a cable reads '
+                      'further than this from its straight length (the robot is bent, or the '
+                      'previous home is off), m', 1e-5, 1.0),
+            ParamSpec('home_force', False, '~/set_home takes the current positions as the '
+                      'straight pose whatever they read (a first homing, a known-bad home)'),
             ParamSpec('reconnect_max_interval', 2.0, 'longest wait between two reconnection '
                       'attempts after a lost port or bus, s', 0.1, 60.0),
         ]
@@ -171,7 +177,7 @@ class CableDriverNode(Node):
         self._last_command_time = None
         self._holding = True
         self._diagnostics = self.create_publisher(diag.DiagnosticArray, '/diagnostics', 10)
-        self.create_timer(1.0 / self._params['diagnostics_rate'], self._publish_diagnostics)
+        steady_timer(self, 1.0 / self._params['diagnostics_rate'], self._publish_diagnostics)
         self._loop = None
         self.backend = None
         if not self.cable_names:
@@ -409,6 +415,9 @@ class CableDriverNode(Node):
             try:
                 if not self._connected:
                     raise ValueError('actuators not connected (%s)' % self._connection_error)
+                refusal = self._home_refusal()
+                if refusal:
+                    raise ValueError(refusal)
                 zeros = self.backend.set_home()
                 self._holding = True
                 self._last_reading = None
@@ -433,6 +442,22 @@ class CableDriverNode(Node):
         response.success, response.message = True, message
         self.get_logger().info('set_home: %s' % message)
         return response
+
+    def _home_refusal(self):
+        """Why the current positions are no straight pose to home at, or ''."""
+        if self._params['home_force']:
+            return ''
+        if self._last_reading is None:
+            return 'no reading yet (home_force:=true to home anyway)'
+        offset = self._last_reading - self.robot.straight_cable_lengths
+        worst = int(np.argmax(np.abs(offset)))
+        tolerance = self._params['home_tolerance']
+        if abs(offset[worst]) <= tolerance:
+            return ''
+        return ('the robot is not straight: %s reads %+.2f mm from its straight length '
+                '(home_tolerance %.2f mm); straighten it, or set home_force:=true if the '
+                'previous home is wrong' % (self.cable_names[worst], offset[worst] * 1e3,
+                                             tolerance * 1e3))
 
     # -- diagnostics --------------------------------------------------------------------------
     def _publish_diagnostics(self):

@@ -43,6 +43,9 @@ def cable_index(names, cable_names, require_all=True):
     :returns: int array ``index`` with ``values_in_robot_order[index] = message_values``
     :raises ValueError: on unknown, repeated or (with ``require_all``) missing names
     """
+    if len(names) > len(cable_names):  # bounded work per message, whatever its size
+        raise ValueError('%d names for a robot with %d cables (%s)'
+                         % (len(names), len(cable_names), ', '.join(cable_names)))
     lookup = {name: i for i, name in enumerate(cable_names)}
     index = []
     for name in names:
@@ -51,7 +54,8 @@ def cable_index(names, cable_names, require_all=True):
                              % (name, ', '.join(cable_names)))
         index.append(lookup[name])
     if len(set(index)) != len(index):
-        repeated = sorted({name for name in names if list(names).count(name) > 1})
+        seen = set()
+        repeated = sorted({name for name in names if name in seen or seen.add(name)})
         raise ValueError('repeated cable names %s' % ', '.join(repeated))
     if require_all and len(index) != len(cable_names):
         missing = [name for name in cable_names if name not in set(names)]

@@ -77,6 +77,7 @@ from continuum_statics.nodes.ros_conversions import (
     parse_joint_state,
     tip_load,
 )
+from continuum_statics.nodes.timers import steady_timer
 
 #: Newest measurement only: best effort, keep last 1 (a slow cycle never builds a backlog).
 LATEST_SENSOR_QOS = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=1,
@@ -105,9 +106,11 @@ class StaticsNode(Node):
                       'replaced by zero, s (0: never expires)', 0.0, 3600.0),
             ParamSpec('warn_residual', 1e-4, 'above this cable-length residual (RMS) the '
                       'lengths are not exactly a shape: the best fit is published with WARN on '
-                      'diagnostics, m', 0.0, 1.0),
+                      'diagnostics, m (>= 1e-7: a smaller one would warn on round-off)', 1e-7,
+                      1.0),
             ParamSpec('max_residual', 2e-3, 'above this residual no shape is near the measured '
-                      'lengths: the input is dropped and the last good shape kept, m', 0.0, 1.0),
+                      'lengths: the input is dropped and the last good shape kept, m (>= 1e-6: '
+                      'a smaller one would drop every real measurement)', 1e-6, 1.0),
             ParamSpec('length_noise_std', 0.0, 'standard deviation of the measured cable lengths '
                       '(encoder noise), m: the thresholds are at least 3x (warn) and 10x (drop) '
                       'this', 0.0, 0.1),
@@ -118,7 +121,12 @@ class StaticsNode(Node):
                       'this estimate with the next measurement; one that is still far off is '
                       'finished at once', 0, 1000),
             ParamSpec('use_measured_tensions', True, 'estimate with cable_states.effort as cable '
-                      'tensions (N) when every one is present, finite and >= 0'),
+                      'tensions (N) when every one is present, finite, >= 0 and <= max_tension, '
+                      'and the shape they give agrees with the lengths within warn_residual '
+                      '(else the shape follows the lengths, with WARN)'),
+            ParamSpec('max_tension', 0.0, 'measured tensions above this are implausible and '
+                      'rejected, N (0: the tension that bends the rod into a full circle from '
+                      'its outermost hole, 2 pi EI / (L r))', 0.0, 1e6),
             ParamSpec('tube_diameter', 0.006, 'diameter of the rod drawn in RViz, m', 1e-4, 0.2),
             ParamSpec('dedicated_intake_thread', True, 'serve cable_states from a thread of its '
                       'own instead of the executor (~0.3 ms less per message)', read_only=True),
@@ -181,6 +189,13 @@ class StaticsNode(Node):
         self._problems = diag.Problems()
         self._not_converged = 0
         self._lost_reported = 0
+        self._tensions_distrusted = 0
+        self._distrust = ('', None)  # (why the tensions were not used, monotonic time)
+        rod = self.robot
+        radius = float(np.max(np.hypot(rod.cable_offsets[:, 0], rod.cable_offsets[:, 1]),
+                              initial=1e-3))
+        # a tension that bends the whole rod into a full circle from its outermost hole
+        self._full_circle_tension = 2.0 * math.pi * float(rod.c[0]) / (rod.length * radius)
 
         self._backbone_pub = self.create_publisher(Path, 'backbone', LATCHED_QOS)
         self._tip_pub = self.create_publisher(PoseStamped, 'tip_pose', LATCHED_QOS)
@@ -204,7 +219,7 @@ class StaticsNode(Node):
             self._solve_passive(None)
         self._marker_timer = None
         self._set_marker_timer(self._params['marker_rate'])
-        self.create_timer(1.0 / self._params['diagnostics_rate'], self._publish_diagnostics)
+        steady_timer(self, 1.0 / self._params['diagnostics_rate'], self._publish_diagnostics)
         self._params.on_change = self._on_parameter_change
         self.get_logger().info('statics: robot %r, %d cables, frame %r, %d path samples%s' % (
             self.robot.name, len(self.cable_names), self.base_frame_id,
@@ -229,7 +244,7 @@ class StaticsNode(Node):
             self.destroy_timer(self._marker_timer)
             self._marker_timer = None
         if rate > 0.0:
-            self._marker_timer = self.create_timer(1.0 / rate, self._publish_markers)
+            self._marker_timer = steady_timer(self, 1.0 / rate, self._publish_markers)
 
     # -- inputs ----------------------------------------------------------------------------
     def _reject(self, kind, reason):
@@ -297,14 +312,14 @@ class StaticsNode(Node):
                     self.cable_names[self._index[i]]
                     for i in np.flatnonzero(~(positions > 0.0))))
         except ValueError as error:
-            self._reject('cable_states', error)
+            self._reject_input(error)
             return
         lengths = self._lengths
         lengths[self._index] = positions
         outside = np.flatnonzero((lengths < self._low - margin) | (lengths > self._high + margin))
         if outside.size:
             self._limit_rejections += 1
-            self._reject('cable_states', "lengths outside the robot file's length limits (margin "
+            self._reject_input("lengths outside the robot file's length limits (margin "
                          '%.3g m): %s' % (margin, ', '.join(
                              '%s %.4f m not in [%.4f, %.4f]' % (
                                  self.cable_names[i], lengths[i], self._low[i], self._high[i])
@@ -315,16 +330,31 @@ class StaticsNode(Node):
             self._tensions[self._index] = view.effort
             if (self._tensions >= 0.0).all() and np.isfinite(self._tensions).all():
                 tensions = self._tensions
+                high = np.flatnonzero(tensions > self._tension_limit())
+                if high.size:  # one absurd reading costs a slow solve and a nonsense shape
+                    self._reject_input('implausible tensions (max_tension %.4g N): %s' % (
+                        self._tension_limit(), ', '.join('%s %.4g N' % (
+                            self.cable_names[i], tensions[i]) for i in high[:4])))
+                    return
         load = self._current_tip_load(time.monotonic())
+        distrust = ''
         try:
             estimate = self._estimate(self._tracking, lengths, load, tensions, self._warm)
+            if tensions is not None and not estimate.residual <= warn:
+                # tensions and lengths disagree: the lengths (encoders) are trusted, the
+                # tensions (a sensor, a current estimate) are not used for this shape
+                distrust = ('measured tensions disagree with the lengths (shape from the '
+                            'tensions %.3g m RMS off them): shape from the lengths'
+                            % estimate.residual)
+                tensions = None
+                estimate = self._estimate(self._tracking, lengths, load, None, self._warm)
             capped = not estimate.converged and self._tracking is not self.robot
             if capped and not estimate.residual <= drop:
                 # far from the last shape (a jump, a restart): finish the fit now
                 estimate = self._estimate(self.robot, lengths, load, tensions, estimate)
                 capped = False
         except ValueError as error:
-            self._reject('cable_states', error)
+            self._reject_input(error)
             return
         solved = time.perf_counter()
         self._solve_times.add(solved - start)
@@ -338,6 +368,10 @@ class StaticsNode(Node):
         if not good_fit:
             message = ('best fit: cable lengths %.3g m RMS from the nearest shape (warn above '
                        '%.3g m)%s' % (residual, warn, '; ' + message if message else ''))
+        if distrust:
+            self._tensions_distrusted += 1
+            self._distrust = (distrust, time.monotonic())
+            message = distrust + ('; ' + message if message else '')
         # converged: stationary, or (iteration cap) being refined from one measurement to the
         # next, and in both cases the lengths are a shape within warn_residual
         self._last.update(residual=residual, iterations=estimate.iterations,
@@ -359,6 +393,16 @@ class StaticsNode(Node):
         if self._publish_shape(estimate.shape, view.sec, view.nanosec):
             self._warm = estimate
             self._cycle_times.add(time.perf_counter() - start)
+
+    def _tension_limit(self):
+        """Largest plausible measured tension, N (max_tension, or the full-circle tension)."""
+        return self._params['max_tension'] or self._full_circle_tension
+
+    def _reject_input(self, reason):
+        """Drop one cable_states; the diagnostics no longer show the last estimate's values."""
+        self._last.update(residual=math.nan, iterations=0, converged=False,
+                          message='no estimate: the last cable_states was rejected')
+        self._reject('cable_states', reason)
 
     def _estimate(self, robot, lengths, load, tensions, warm):
         """Estimate the shape; a tip load the model cannot take is dropped as a bad tip_wrench."""
@@ -472,6 +516,8 @@ class StaticsNode(Node):
                 'publishing best fits: residual median %.3g m > warn_residual %.3g m (cable '
                 'slack, stretch or encoder noise above length_noise_std?)'
                 % (residual_median, warn))
+        if self._distrust[1] is not None and now - self._distrust[1] < 2.0:
+            level, message = diag.WARN, self._distrust[0]
         if self._problems.recent(2.0):
             level, message = diag.WARN, 'rejected ' + self._problems.last_reason
         if lost_now > 0:  # the node stalled (or the transport dropped): never under an OK
@@ -507,6 +553,8 @@ class StaticsNode(Node):
             'not_converged_total': self._not_converged,
             'iteration_capped_total': self._capped,
             'measured_tensions_used': last['tensions'],
+            'tensions_distrusted_total': self._tensions_distrusted,
+            'max_tension_n': self._tension_limit(),
             'tip_force_n': ' '.join('%.4g' % f for f in self._tip_load[:3]),
             'tip_moment_nm': ' '.join('%.4g' % f for f in self._tip_load[3:]),
             'max_tip_force_n': force_limit,

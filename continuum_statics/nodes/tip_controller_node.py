@@ -68,6 +68,7 @@ from continuum_statics.nodes.ros_conversions import (
     tip_load,
 )
 from continuum_statics.nodes.statics_node import LATCHED_QOS, LATEST_SENSOR_QOS
+from continuum_statics.nodes.timers import steady_timer
 
 THROTTLE_S = 2.0
 #: Smallest tip_goal tolerance, m: below a micrometre the model's own accuracy decides.
@@ -172,14 +173,14 @@ class TipControllerNode(Node):
         self._path = None  # (start, goal solution, tip load) of the ramp in progress
         self._fraction = 0.0
         self._fraction_step = 0.05
-        self._tip_history = deque(maxlen=4000)  # (position, stamp ns) of recent tip poses
+        # (position, stamp ns, monotonic receive time) of recent tip poses
+        self._tip_history = deque(maxlen=4000)
         self._recent_lengths = deque(maxlen=64)  # recent measurements, for a low-noise mean
         self._judged_mean = None
         self._recover_target = None
         self._judge_start = None
         self._corrections = 0
         self._settle_start = None
-        self._settled_stamp = None
         # (lengths in robot order, stamp ns, monotonic receive time) of the last cable_states
         self._measurement = None
         self._last_tick = None
@@ -212,10 +213,10 @@ class TipControllerNode(Node):
         self.create_subscription(PoseStamped, 'tip_goal_pose', self._on_goal_pose, COMMAND_QOS,
                                  callback_group=self._control_group)
         self.create_service(GetPlan, 'tip_goal', self._on_tip_goal, callback_group=service_group)
-        self._timer = self.create_timer(1.0 / self._params['control_rate'], self._on_control,
+        self._timer = steady_timer(self, 1.0 / self._params['control_rate'], self._on_control,
                                         callback_group=self._control_group)
         self._timer.cancel()  # runs only while a goal does
-        self.create_timer(1.0 / self._params['diagnostics_rate'], self._publish_diagnostics,
+        steady_timer(self, 1.0 / self._params['diagnostics_rate'], self._publish_diagnostics,
                           callback_group=self._control_group)
         self._params.on_change = self._on_parameter_change
         self.get_logger().info('tip_controller: robot %r, frame %r, max cable speed %g m/s' % (
@@ -225,7 +226,7 @@ class TipControllerNode(Node):
         if name == 'control_rate':
             with self._lock:  # goals reset/cancel the timer under the same lock
                 self.destroy_timer(self._timer)
-                self._timer = self.create_timer(1.0 / value, self._on_control,
+                self._timer = steady_timer(self, 1.0 / value, self._on_control,
                                                 callback_group=self._control_group)
                 if self._goal is None:
                     self._timer.cancel()
@@ -247,7 +248,7 @@ class TipControllerNode(Node):
             return
         stamp = msg.header.stamp.sec * 1_000_000_000 + msg.header.stamp.nanosec
         self._tip = (position, stamp, time.monotonic())
-        self._tip_history.append((position, stamp))
+        self._tip_history.append(self._tip)
 
     def _on_backbone(self, data):
         # Only the stamp is read here (decoding every Path costs ~0.2 ms); the whole message
@@ -375,16 +376,23 @@ class TipControllerNode(Node):
             if not (missing or stale) or self._closing or time.monotonic() >= limit:
                 break
             time.sleep(0.01)
-        if missing:
-            raise ValueError('%s (waited %.3g s)' % (missing, self._params['state_wait']))
-        if stale:
-            raise ValueError('%s (waited %.3g s)' % (stale, self._params['state_wait']))
+        no_lengths = ('no cable_states from cable_driver yet' if self._measurement is None
+                      else self._stale_state(time.monotonic(), need_tip=False))
+        if no_lengths:
+            raise ValueError('%s (waited %.3g s)' % (no_lengths, self._params['state_wait']))
+        # Fresh lengths but no fresh tip pose: statics drops the lengths (they fit no shape, e.g.
+        # after a hand-made command or a removed tip load). Start from the measured lengths'
+        # nearest shape and move the cables onto it: statics then follows again.
+        tip_lost = missing or stale
+        if tip_lost:
+            self.get_logger().warning('goal without a fresh tip pose (%s): moving the cables '
+                                      'onto the model from the measured lengths first' % tip_lost)
         measured = self._mean_lengths(self._measurement)
         load = self._current_tip_load()
         with self._lock:
             command_state, commanded = self._command_state, self._commanded
         recover = None
-        if command_state is not None and commanded is not None and float(
+        if not tip_lost and command_state is not None and commanded is not None and float(
                 np.max(np.abs(measured - commanded))) <= OFF_COMMAND:
             start = command_state  # the cables are where the last command (a shape) put them
         else:
@@ -392,13 +400,22 @@ class TipControllerNode(Node):
                                               warm_start=self._warm)
             recover = np.clip(self.robot.cable_lengths(start.shape), self._limits[:, 0],
                               self._limits[:, 1])
-            commanded = measured.copy()
+            # the ramp starts where the cables are, but never commands outside the limits
+            commanded = np.clip(measured, self._limits[:, 0], self._limits[:, 1])
         solution = self.robot.solve_tip_goal(position, tip_force=load[:3], tip_moment=load[3:],
                                              tolerance=self._model_tolerance(tolerance),
                                              goal_direction=direction, warm_start=start)
-        if direction is not None and not solution.converged:
-            raise ValueError('unreachable goal (%.4f, %.4f, %.4f) m with direction %s: %s'
-                             % (*position, np.round(direction, 3).tolist(), solution.message))
+        if direction is not None:
+            # judged against the goal's tolerance (the model solved to 1 % of it, which a
+            # direction goal may not reach): position within it, direction within it over L
+            angle = float(np.arccos(np.clip(solution.shape.tip_rotation[:, 2] @ direction,
+                                            -1.0, 1.0)))
+            if not (solution.error <= tolerance and angle <= tolerance / self.robot.length):
+                raise ValueError('unreachable goal (%.4f, %.4f, %.4f) m with direction %s: tip '
+                                 '%.2f mm and %.3g rad from it (tolerance %.2f mm, %.3g rad); '
+                                 '%s' % (*position, np.round(direction, 3).tolist(),
+                                         solution.error * 1e3, angle, tolerance * 1e3,
+                                         tolerance / self.robot.length, solution.message))
         if not solution.error <= tolerance:
             limited = ', '.join(solution.limited_cables)
             raise ValueError('unreachable goal (%.4f, %.4f, %.4f) m: the nearest reachable tip '
@@ -481,14 +498,19 @@ class TipControllerNode(Node):
                    if state is None]
         return ('no %s yet' % ' and no '.join(missing)) if missing else ''
 
-    def _stale_state(self, now):
-        """Return why the measured state is too old to control with, or '' when it is fresh."""
+    def _stale_state(self, now, need_tip=True):
+        """Return why the measured state is too old to control with, or '' when it is fresh.
+
+        Moving the cables needs only fresh ``cable_states``; judging the tip needs ``tip_pose``.
+        """
         limit = self._params['max_state_age']
-        for what, state, source in (('cable_states', self._measurement, 'cable_driver'),
-                                    ('tip_pose', self._tip, 'statics')):
-            if state is not None and now - state[2] > limit:
-                return ('no %s for %.2f s (max_state_age %.3g s): is %s running?'
-                        % (what, now - state[2], limit, source))
+        if self._measurement is not None and now - self._measurement[2] > limit:
+            return ('no cable_states for %.2f s (max_state_age %.3g s): is cable_driver '
+                    'running?' % (now - self._measurement[2], limit))
+        if need_tip and self._tip is not None and now - self._tip[2] > limit:
+            return ('no tip_pose for %.2f s (max_state_age %.3g s): statics is not running or '
+                    'drops every cable_states (its /diagnostics status says why)'
+                    % (now - self._tip[2], limit))
         return ''
 
     def _plan_after(self, tip_stamp, wait=0.5):
@@ -535,7 +557,7 @@ class TipControllerNode(Node):
                 self._finish_locked(goal, False, 'not reached within %.3g s (tip error %.2f mm)'
                                     % (self._params['goal_timeout'], goal.error * 1e3))
                 return
-            stale = self._stale_state(now)
+            stale = self._stale_state(now, need_tip=self._phase in ('settle', 'judge'))
             if stale:
                 self._finish_locked(goal, False, stale)
                 return
@@ -553,17 +575,18 @@ class TipControllerNode(Node):
                     self._finish_locked(goal, False, 'ramp failed: %s' % error)
                     return
                 if self._fraction >= 1.0:
-                    self._phase, self._settle_start, self._settled_stamp = 'settle', now, None
-            elif self._settled_stamp is None:
+                    self._phase, self._settle_start = 'settle', now
+            elif self._phase == 'settle':
                 # Settled: every cable measured at its command (or settle_time passed, e.g. with
-                # noise). The tip is judged only on measurements from then on, so a tip pose
-                # still on its way through statics never triggers a wrong correction.
+                # noise). The tip is judged only on poses received from then on (arrival time,
+                # never a stamp the sender controls: unstamped input and clock jumps happen), so
+                # a tip pose of the moving cables never triggers a wrong correction.
                 measurement = self._measurement
                 if measurement is not None and measurement[2] > self._settle_start and (
                         now - self._settle_start >= self._params['settle_time'] or float(
                             np.max(np.abs(measurement[0] - self._commanded)))
                         <= self._params['settled_cable_error']):
-                    self._settled_stamp, self._judge_start = measurement[1], now
+                    self._phase, self._judge_start = 'judge', now
             else:
                 self._judge_locked(goal, now)
             commanded = self._commanded
@@ -602,7 +625,8 @@ class TipControllerNode(Node):
 
     def _judge_locked(self, goal, now):
         """Judge the mean tip since the cables settled: reached, correct, or wait for more."""
-        samples = [p for p, stamp in list(self._tip_history) if stamp >= self._settled_stamp]
+        samples = [p for p, _, received in list(self._tip_history)
+                   if received >= self._judge_start]
         if len(samples) < MIN_TIP_SAMPLES:
             return
         points = np.asarray(samples)
@@ -650,6 +674,7 @@ class TipControllerNode(Node):
         self._phase = 'ramp'
 
     def _publish_command(self, lengths):
+        lengths = np.clip(lengths, self._limits[:, 0], self._limits[:, 1])
         try:
             msg = joint_state(self.cable_names, lengths, self.get_clock().now().to_msg(),
                               msg=self._command_msg)
