@@ -66,6 +66,12 @@ BAD_FILES = [
      'cables[0].length_limits'),
     ({'guides': [], 'cables': [CABLE]}, 'guides'),
     ({'solver': {'steps': 0}}, 'solver.steps'),
+    # issue 17: values that loaded and then made every measurement fail without a name
+    (with_rod(youngs_modulus=1e-30), 'rod.youngs_modulus'),
+    (with_rod(density=1e12), 'rod.density'),
+    ({'guides': [0.39], 'cables': [{'name': 'a', 'offset': [0.01, 0.0, 0.05]}]},
+     'cables[0].offset z'),
+    ({'solver': {'steps': 100000}}, 'solver.steps'),
     ({'solver': {'bvp_tolerance': -1.0}}, 'solver.bvp_tolerance'),
     ({'solver': {'stepz': 10}}, 'solver'),
 ]
@@ -123,3 +129,22 @@ def test_sections_validation_names_the_field():
         data.update(changes)
         with pytest.raises(ValueError, match=message):
             parse_robot_description(data)
+
+
+def test_a_straight_length_outside_the_cable_limits_is_an_error_naming_the_cable():
+    from continuum_statics.core.robot import Robot
+
+    data = description(guides=[0.39], cables=[{**CABLE, 'length_limits': [0.1, 0.2]}])
+    with pytest.raises(ValueError, match="cable 'a': length_limits .* straight length 0.39"):
+        Robot(parse_robot_description(data))
+
+
+def test_solve_prints_the_plausibility_warnings(tmp_path, capsys):
+    import yaml
+
+    from continuum_statics.tools.cli import solve_main
+
+    path = tmp_path / 'thick.yaml'
+    path.write_text(yaml.safe_dump(description(**with_rod(diameter=0.05))))
+    assert solve_main(['--robot', str(path)]) == 0
+    assert 'warning: rod.diameter' in capsys.readouterr().err

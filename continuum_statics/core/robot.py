@@ -117,6 +117,13 @@ class Robot:
         self.s_grid, self.guide_nodes = _grid(rod.length, self.guides, self.solver.steps)
         self._layout()
         self.straight_cable_lengths = self.cable_lengths(self._straight_shape())
+        limits = np.asarray(self.cable_length_limits, dtype=float).reshape(-1, 2)
+        for name, length, (low, high) in zip(self.cable_names, self.straight_cable_lengths,
+                                             limits):
+            if not low <= length <= high:  # the homed robot would be outside its own limits
+                raise ValueError('cable %r: length_limits [%g, %g] m exclude its straight '
+                                 'length %.6g m (the homed pose): check the limits, the hole '
+                                 'offset and the guides' % (name, low, high, length))
 
     def _layout(self):
         """Index tables the kernel reads: disks, cable ends, moment bases, state layout."""

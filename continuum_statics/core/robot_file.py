@@ -9,6 +9,12 @@ import math
 import numpy as np
 import yaml
 
+#: Plausible backbone materials: Young's modulus (Pa) and density (kg/m^3).
+YOUNGS_RANGE = (1e5, 1e13)
+MAX_DENSITY = 3e4
+#: Most integration steps over the rod a robot file may ask for.
+MAX_STEPS = 2000
+
 
 @dataclass(frozen=True)
 class Rod:
@@ -190,6 +196,14 @@ def _parse_rod(data):
     density = _number(_section(rod, 'density', 'rod.density'), 'rod.density')
     if density < 0.0:
         raise ValueError('rod.density must be >= 0, got %g' % density)
+    # beyond what any backbone material has, the model gives no usable shape (every
+    # measurement would be rejected later without naming the cause)
+    if not YOUNGS_RANGE[0] <= youngs <= YOUNGS_RANGE[1]:
+        raise ValueError('rod.youngs_modulus must be in [%g, %g] Pa (soft polymers to steel '
+                         'and beyond), got %g' % (*YOUNGS_RANGE, youngs))
+    if density > MAX_DENSITY:
+        raise ValueError('rod.density must be <= %g kg/m^3 (denser than any metal), got %g'
+                         % (MAX_DENSITY, density))
     if 'shear_modulus' in rod and 'poisson_ratio' in rod:
         raise ValueError('rod: give either poisson_ratio or shear_modulus, not both')
     if 'shear_modulus' in rod:
@@ -252,6 +266,9 @@ def _parse_cables(data, guides, prefix='', names=None):
         if name in names:
             raise ValueError('%s.name: duplicate cable name %r' % (field, name))
         offset = _vector(_section(cable, 'offset', field + '.offset'), 3, field + '.offset')
+        if abs(offset[2]) > 1e-9:
+            raise ValueError('%s.offset z must be 0: the hole lies in the plane of its disk '
+                             '(the disks are placed by guides), got %g m' % (field, offset[2]))
         if np.hypot(offset[0], offset[1]) <= 0.0:
             raise ValueError('%s.offset must be off the backbone axis (x or y non-zero), got %s'
                              % (field, offset.tolist()))
@@ -329,8 +346,10 @@ def _parse_solver(data):
     defaults = SolverSettings()
     solver = _mapping(solver, 'solver', set(defaults.__dataclass_fields__))
     steps = solver.get('steps', defaults.steps)
-    if isinstance(steps, bool) or not isinstance(steps, int) or not 1 <= steps <= 100000:
-        raise ValueError('solver.steps must be an integer in [1, 100000], got %r' % (steps,))
+    if isinstance(steps, bool) or not isinstance(steps, int) or not 1 <= steps <= MAX_STEPS:
+        raise ValueError('solver.steps must be an integer in [1, %d] (the default 40 is within '
+                         '1e-5 m of converged; more only slows every solve), got %r'
+                         % (MAX_STEPS, steps))
     iterations = solver.get('max_iterations', defaults.max_iterations)
     if isinstance(iterations, bool) or not isinstance(iterations, int) or iterations < 1:
         raise ValueError('solver.max_iterations must be an integer >= 1, got %r' % (iterations,))

@@ -173,6 +173,7 @@ class TipControllerNode(Node):
         self._path = None  # (start, goal solution, tip load) of the ramp in progress
         self._fraction = 0.0
         self._fraction_step = 0.05
+        self._straight_ramp = False  # no equilibrium path found: straight in cable space
         # (position, stamp ns, monotonic receive time) of recent tip poses
         self._tip_history = deque(maxlen=4000)
         self._recent_lengths = deque(maxlen=64)  # recent measurements, for a low-noise mean
@@ -463,6 +464,7 @@ class TipControllerNode(Node):
                                self._limits[:, 0], self._limits[:, 1])
         self._fraction = 0.0
         self._fraction_step = min(self._fraction_step * 4.0, 0.25)
+        self._straight_ramp = False
 
     def _model_tolerance(self, tolerance):
         """Solve the model well inside the goal's tolerance, so the tip lands near its centre."""
@@ -596,6 +598,9 @@ class TipControllerNode(Node):
     def _advance_locked(self, budget):
         """Step along the equilibrium path so that no cable moves more than ``budget`` m."""
         start, solution, load = self._path
+        if self._straight_ramp:
+            self._straight_towards_locked(solution, budget)
+            return
         step = self._fraction_step
         for _ in range(12):
             fraction = min(1.0, self._fraction + step)
@@ -617,11 +622,23 @@ class TipControllerNode(Node):
                 return
             step *= 0.5 if not usable else max(0.1, min(0.9, 0.95 * budget / change))
         if not usable:
-            raise ValueError('no equilibrium %.3g of the way to the goal' % self._fraction)
+            # No equilibrium part of the way (e.g. a heavy tip load near what the model can
+            # hold): go straight to the goal's lengths, themselves a shape, at max_cable_speed.
+            self._straight_ramp = True
+            self._problems.add('ramp', 'the model found no equilibrium %.0f %% of the way to '
+                               'the goal under tip load %s N: straight to the goal lengths'
+                               % (100.0 * self._fraction, np.round(load[:3], 3).tolist()))
+            self._straight_towards_locked(solution, budget)
+            return
         # Even the smallest step moves a cable faster than allowed (the start was not exactly
         # the model's equilibrium): close that gap at max_cable_speed, then go on.
         self._commanded = _towards(self._commanded, lengths, budget)
         self._fraction_step = max(step, 1e-3)
+
+    def _straight_towards_locked(self, solution, budget):
+        self._commanded = _towards(self._commanded, self._target, budget)
+        if np.array_equal(self._commanded, self._target):
+            self._fraction, self._command_state = 1.0, solution
 
     def _judge_locked(self, goal, now):
         """Judge the mean tip since the cables settled: reached, correct, or wait for more."""
@@ -693,6 +710,11 @@ class TipControllerNode(Node):
             message = diag.STARTING + 'waiting for state: ' + missing
         if self._problems.recent(5.0):
             level, message = diag.WARN, self._problems.last_reason
+        publishers = self.count_publishers(self._command_pub.topic_name)
+        if publishers > 1:  # e.g. two bringups in one namespace: two loops fight over the cables
+            level, message = diag.WARN, (
+                'another node also publishes %s (%d publishers): two controllers in one '
+                'namespace?' % (self._command_pub.topic_name, publishers))
         values = {
             'state': 'starting' if missing else 'ready',
             'phase': phase,

@@ -36,6 +36,8 @@ def solve_main(argv=None):
     estimate = None
     try:
         robot = load_robot(args.robot)
+        for warning in robot.description.warnings:
+            print('warning: %s' % warning, file=sys.stderr)
         for name, values in (('--tensions', args.tensions),
                              ('--cable-lengths', args.cable_lengths)):
             if values is not None and len(values) != len(robot.cable_names):
