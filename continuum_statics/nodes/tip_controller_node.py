@@ -27,7 +27,7 @@ is accepted as soon as the state is fresh. The service runs in its own reentrant
 so a waiting call never blocks the topics it is waiting for (multi-threaded executor).
 """
 from collections import deque
-from dataclasses import dataclass, field
+import dataclasses
 import math
 import struct
 import sys
@@ -44,6 +44,8 @@ from rclpy.serialization import deserialize_message
 from sensor_msgs.msg import JointState
 from std_msgs.msg import Header
 
+from continuum_statics.control.goal_run import Goal, GoalRun, RunSettings, stale_state
+from continuum_statics.control.records import Measurement, TipLoad, TipSample, current_load
 from continuum_statics.core.rotations import quaternion_to_rotation
 from continuum_statics.core.warmup import warm_up
 from continuum_statics.nodes import diagnostics_util as diag
@@ -73,40 +75,9 @@ from continuum_statics.nodes.timers import steady_timer
 THROTTLE_S = 2.0
 #: Smallest tip_goal tolerance, m: below a micrometre the model's own accuracy decides.
 MIN_TOLERANCE = 1e-6
-#: Measured lengths further than this from the last command (m) are not where the controller put
-#: them: a goal then starts from the estimate of the measurement and moves onto it first.
-OFF_COMMAND = 2e-3
-#: Tip samples needed before the mean is judged (three identical ones: no noise).
-MIN_TIP_SAMPLES = 3
 #: A goal starts from the mean of the cable lengths measured in this window, s (at rest it
 #: averages the encoder noise; a moving cable lags by at most speed x window).
 MEAN_WINDOW_S = 0.05
-
-
-def _towards(commanded, target, step):
-    """Move towards ``target`` along a straight line; the largest change moves ``step``."""
-    delta = target - commanded
-    largest = float(np.max(np.abs(delta)))
-    if largest <= step:
-        return target.copy()
-    return commanded + delta * (step / largest)
-
-
-@dataclass(eq=False)
-class Goal:
-    """One tip goal in progress; ``done`` is set when it ends, ``reason`` says how."""
-
-    position: np.ndarray
-    tolerance: float
-    source: str
-    started: float
-    deadline: float
-    done: threading.Event = field(default_factory=threading.Event)
-    reached: bool = False
-    reason: str = ''
-    tip_stamp: int = None  # ns
-    error: float = math.nan
-    direction: np.ndarray = None  # unit tip z axis goal (base frame), or None
 
 
 class TipControllerNode(Node):
@@ -159,41 +130,21 @@ class TipControllerNode(Node):
         warm_up(self.robot, self.get_logger().info)
         self.cable_names = tuple(self.robot.cable_names)
         self.base_frame_id = self.robot.base_frame_id
-        self._limits = np.asarray(self.robot.cable_length_limits, dtype=float)
 
-        self._lock = threading.Lock()
+        self._lock = threading.Lock()  # guards the run: the control loop and goal starts
         self._closing = False
-        self._goal = None
-        self._phase = 'idle'
-        self._commanded = None
-        self._target = None
-        self._corrected_goal = None
-        self._warm = None  # the last estimate or solution: warm start of the next solve
-        self._command_state = None  # the equilibrium whose lengths were commanded last
-        self._path = None  # (start, goal solution, tip load) of the ramp in progress
-        self._fraction = 0.0
-        self._fraction_step = 0.05
-        self._straight_ramp = False  # no equilibrium path found: straight in cable space
-        # (position, stamp ns, monotonic receive time) of recent tip poses
-        self._tip_history = deque(maxlen=4000)
-        self._recent_lengths = deque(maxlen=64)  # recent measurements, for a low-noise mean
-        self._judged_mean = None
-        self._recover_target = None
-        self._judge_start = None
-        self._corrections = 0
-        self._settle_start = None
-        # (lengths in robot order, stamp ns, monotonic receive time) of the last cable_states
-        self._measurement = None
+        self._run = GoalRun(self.robot, self._run_settings())
         self._last_tick = None
+        self._tips = deque(maxlen=4000)  # recent TipSamples, for the judgement of a goal
+        self._recent_lengths = deque(maxlen=64)  # recent Measurements, for a low-noise mean
+        self._measurement = None  # newest Measurement (one assignment: always consistent)
+        self._tip = None  # newest TipSample
         self._name_bytes = None
         self._index = None
-        self._tip = None  # (position (3,), stamp s, monotonic receive time)
-        self._backbone = None
-        self._tip_load = np.zeros(6)
-        self._wrench_time = None
+        self._backbone = None  # (stamp ns, serialized Path) of the newest backbone
+        self._load = None  # newest TipLoad
         self._problems = diag.Problems()
         self._counts = {'reached': 0, 'failed': 0, 'rejected': 0, 'preempted': 0}
-        self._moved_onto_model = 0
         self._last_outcome = 'no goal yet'
         self._command_msg = JointState()
 
@@ -215,21 +166,28 @@ class TipControllerNode(Node):
                                  callback_group=self._control_group)
         self.create_service(GetPlan, 'tip_goal', self._on_tip_goal, callback_group=service_group)
         self._timer = steady_timer(self, 1.0 / self._params['control_rate'], self._on_control,
-                                        callback_group=self._control_group)
+                                   callback_group=self._control_group)
         self._timer.cancel()  # runs only while a goal does
         steady_timer(self, 1.0 / self._params['diagnostics_rate'], self._publish_diagnostics,
-                          callback_group=self._control_group)
+                     callback_group=self._control_group)
         self._params.on_change = self._on_parameter_change
         self.get_logger().info('tip_controller: robot %r, frame %r, max cable speed %g m/s' % (
             self.robot.name, self.base_frame_id, self._params['max_cable_speed']))
 
+    def _run_settings(self):
+        params = self._params
+        return RunSettings(**{name: params[name] for name in RunSettings.__dataclass_fields__})
+
     def _on_parameter_change(self, name, value):
-        if name == 'control_rate':
-            with self._lock:  # goals reset/cancel the timer under the same lock
+        # called before the table stores the new value
+        with self._lock:  # goals reset/cancel the timer under the same lock
+            if name in RunSettings.__dataclass_fields__:
+                self._run.settings = dataclasses.replace(self._run.settings, **{name: value})
+            elif name == 'control_rate':
                 self.destroy_timer(self._timer)
                 self._timer = steady_timer(self, 1.0 / value, self._on_control,
-                                                callback_group=self._control_group)
-                if self._goal is None:
+                                           callback_group=self._control_group)
+                if self._run.goal is None:
                     self._timer.cancel()
 
     # -- state inputs ----------------------------------------------------------------------
@@ -248,8 +206,8 @@ class TipControllerNode(Node):
             self._reject('tip_pose', 'non-finite position')
             return
         stamp = msg.header.stamp.sec * 1_000_000_000 + msg.header.stamp.nanosec
-        self._tip = (position, stamp, time.monotonic())
-        self._tip_history.append(self._tip)
+        self._tip = TipSample(position, stamp, time.monotonic())
+        self._tips.append(self._tip)
 
     def _on_backbone(self, data):
         # Only the stamp is read here (decoding every Path costs ~0.2 ms); the whole message
@@ -279,26 +237,21 @@ class TipControllerNode(Node):
             return
         measured = np.empty(len(self.cable_names))
         measured[self._index] = view.position
-        # One tuple, one assignment: the control loop always sees a consistent measurement.
-        self._measurement = (measured, view.sec * 1_000_000_000 + view.nanosec, time.monotonic())
+        self._measurement = Measurement(measured, view.sec * 1_000_000_000 + view.nanosec,
+                                        time.monotonic())
         self._recent_lengths.append(self._measurement)
 
     def _on_tip_wrench(self, msg):
         try:
-            self._tip_load = tip_load(msg, self.base_frame_id,
-                                      *tip_wrench_limits(self.robot, self._params))
+            wrench = tip_load(msg, self.base_frame_id,
+                              *tip_wrench_limits(self.robot, self._params))
         except ValueError as error:
             self._reject('tip_wrench', error)
             return
-        self._wrench_time = time.monotonic()
+        self._load = TipLoad(wrench, time.monotonic())
 
     def _current_tip_load(self):
-        timeout = self._params['tip_wrench_timeout']
-        if self._wrench_time is None:
-            return np.zeros(6)
-        if timeout > 0.0 and time.monotonic() - self._wrench_time > timeout:
-            return np.zeros(6)
-        return self._tip_load
+        return current_load(self._load, time.monotonic(), self._params['tip_wrench_timeout'])
 
     # -- goals -----------------------------------------------------------------------------
     def _on_tip_goal(self, request, response):
@@ -388,110 +341,50 @@ class TipControllerNode(Node):
         if tip_lost:
             self.get_logger().warning('goal without a fresh tip pose (%s): moving the cables '
                                       'onto the model from the measured lengths first' % tip_lost)
-        measured = self._mean_lengths(self._measurement)
         load = self._current_tip_load()
         with self._lock:
-            command_state, commanded = self._command_state, self._commanded
-        recover = None
-        if not tip_lost and command_state is not None and commanded is not None and float(
-                np.max(np.abs(measured - commanded))) <= OFF_COMMAND:
-            start = command_state  # the cables are where the last command (a shape) put them
-        else:
-            start = self.robot.estimate_shape(measured, tip_force=load[:3], tip_moment=load[3:],
-                                              warm_start=self._warm)
-            recover = np.clip(self.robot.cable_lengths(start.shape), self._limits[:, 0],
-                              self._limits[:, 1])
-            # the ramp starts where the cables are, but never commands outside the limits
-            commanded = np.clip(measured, self._limits[:, 0], self._limits[:, 1])
-        solution = self.robot.solve_tip_goal(position, tip_force=load[:3], tip_moment=load[3:],
-                                             tolerance=self._model_tolerance(tolerance),
-                                             goal_direction=direction, warm_start=start)
-        if direction is not None:
-            # judged against the goal's tolerance (the model solved to 1 % of it, which a
-            # direction goal may not reach): position within it, direction within it over L
-            angle = float(np.arccos(np.clip(solution.shape.tip_rotation[:, 2] @ direction,
-                                            -1.0, 1.0)))
-            if not (solution.error <= tolerance and angle <= tolerance / self.robot.length):
-                raise ValueError('unreachable goal (%.4f, %.4f, %.4f) m with direction %s: tip '
-                                 '%.2f mm and %.3g rad from it (tolerance %.2f mm, %.3g rad); '
-                                 '%s' % (*position, np.round(direction, 3).tolist(),
-                                         solution.error * 1e3, angle, tolerance * 1e3,
-                                         tolerance / self.robot.length, solution.message))
-        if not solution.error <= tolerance:
-            limited = ', '.join(solution.limited_cables)
-            raise ValueError('unreachable goal (%.4f, %.4f, %.4f) m: the nearest reachable tip '
-                             'is %.1f mm away (tolerance %.2f mm)%s' % (
-                                 *position, solution.error * 1e3, tolerance * 1e3,
-                                 '; cables at a length limit: ' + limited if limited else ''))
-        lengths = np.asarray(solution.cable_lengths, dtype=float)
-        if not np.all(np.isfinite(lengths)):
-            raise ValueError('the solver returned non-finite cable lengths')
+            snapshot = self._run.snapshot()
+        plan = self._run.plan(position, tolerance, direction,
+                              self._mean_lengths(self._measurement), load, not tip_lost,
+                              snapshot)
         now = time.monotonic()
         goal = Goal(position=position, tolerance=tolerance, source=source, started=now,
                     deadline=now + self._params['goal_timeout'], direction=direction)
         with self._lock:
-            previous = self._goal
+            previous = self._run.begin(goal, plan, now)
             if previous is not None:
-                self._finish_locked(previous, False, 'pre-empted by a new goal')
-            self._goal = goal
-            if recover is not None or self._commanded is None:
-                self._commanded = commanded
-            # else a running goal may have moved the command on meanwhile: the ramp closes that
-            # gap at max_cable_speed (see _advance_locked) instead of jumping back
-            self._command_state = start if recover is None else None
-            self._recover_target = recover
-            self._start_path_locked(start, solution, load)
-            self._corrected_goal = position.copy()
-            self._warm = solution
-            self._corrections = 0
-            self._phase = 'ramp' if recover is None else 'recover'
-            self._moved_onto_model += recover is not None
+                self._report(previous)
             self._last_tick = now
             self._timer.reset()
         self.get_logger().info('tip goal (%.4f, %.4f, %.4f) m, tolerance %.2g m from %s%s' % (
-            *position, tolerance, source,
-            '' if recover is None else ' (cables off the last command: onto the model first)'))
+            *position, tolerance, source, '' if plan.recover is None
+            else ' (cables off the last command: onto the model first)'))
         return goal
 
     def _mean_lengths(self, newest):
         """Mean of the measurements of the last MEAN_WINDOW_S s: encoder noise averaged out."""
-        recent = [m[0] for m in list(self._recent_lengths) if newest[2] - m[2] <= MEAN_WINDOW_S]
-        return np.mean(recent, axis=0) if recent else newest[0].copy()
-
-    def _start_path_locked(self, start, solution, load):
-        self._path = (start, solution, load)
-        self._target = np.clip(np.asarray(solution.cable_lengths, dtype=float),
-                               self._limits[:, 0], self._limits[:, 1])
-        self._fraction = 0.0
-        self._fraction_step = min(self._fraction_step * 4.0, 0.25)
-        self._straight_ramp = False
-
-    def _model_tolerance(self, tolerance):
-        """Solve the model well inside the goal's tolerance, so the tip lands near its centre."""
-        return min(0.01 * tolerance, self.robot.solver.goal_tolerance)
+        recent = [m.lengths for m in list(self._recent_lengths)
+                  if newest.received - m.received <= MEAN_WINDOW_S]
+        return np.mean(recent, axis=0) if recent else newest.lengths.copy()
 
     def _finish(self, goal, reached, reason):
         with self._lock:
-            self._finish_locked(goal, reached, reason)
+            if self._run.finish(goal, reached, reason):
+                self._report(goal)
 
-    def _finish_locked(self, goal, reached, reason):
-        if goal.done.is_set():
-            return
-        goal.reached, goal.reason = reached, reason
-        self._judged_mean = None
-        if self._goal is goal:
-            self._goal, self._phase = None, 'idle'
+    def _report(self, goal):
+        """Count, log and put on diagnostics a goal that ended (under the lock)."""
+        if self._run.goal is None:
             self._timer.cancel()
-        key = 'reached' if reached else ('preempted' if 'pre-empted' in reason else 'failed')
+        key = goal.outcome
         self._counts[key] += 1
-        self._last_outcome = '%s (%.4f, %.4f, %.4f): %s' % (key, *goal.position, reason)
-        goal.done.set()
-        if reached:
-            self.get_logger().info('tip goal reached: %s' % reason)
+        self._last_outcome = '%s (%.4f, %.4f, %.4f): %s' % (key, *goal.position, goal.reason)
+        if goal.reached:
+            self.get_logger().info('tip goal reached: %s' % goal.reason)
         else:
-            self._problems.add('tip_goal', reason)
+            self._problems.add('tip_goal', goal.reason)
             self.get_logger().warning('tip goal (%.4f, %.4f, %.4f) m not reached: %s'
-                                      % (*goal.position, reason))
+                                      % (*goal.position, goal.reason))
 
     def _missing_state(self):
         """Return which state has never arrived, or '' when both have."""
@@ -501,19 +394,8 @@ class TipControllerNode(Node):
         return ('no %s yet' % ' and no '.join(missing)) if missing else ''
 
     def _stale_state(self, now, need_tip=True):
-        """Return why the measured state is too old to control with, or '' when it is fresh.
-
-        Moving the cables needs only fresh ``cable_states``; judging the tip needs ``tip_pose``.
-        """
-        limit = self._params['max_state_age']
-        if self._measurement is not None and now - self._measurement[2] > limit:
-            return ('no cable_states for %.2f s (max_state_age %.3g s): is cable_driver '
-                    'running?' % (now - self._measurement[2], limit))
-        if need_tip and self._tip is not None and now - self._tip[2] > limit:
-            return ('no tip_pose for %.2f s (max_state_age %.3g s): statics is not running or '
-                    'drops every cable_states (its /diagnostics status says why)'
-                    % (now - self._tip[2], limit))
-        return ''
+        return stale_state(now, self._measurement, self._tip, self._params['max_state_age'],
+                           need_tip)
 
     def _plan_after(self, tip_stamp, wait=0.5):
         """Return the newest backbone, waiting briefly for the one of the reached tip pose."""
@@ -545,153 +427,26 @@ class TipControllerNode(Node):
     # -- control loop ----------------------------------------------------------------------
     def _on_control(self):
         with self._lock:
-            goal = self._goal
+            goal = self._run.goal
             if goal is None:
                 return
             now = time.monotonic()
             dt = min(max(now - self._last_tick, 0.0), 3.0 / self._params['control_rate'])
             self._last_tick = now
-            tip = self._tip
-            error = math.inf if tip is None else float(
-                np.linalg.norm(goal.position - tip[0]))
-            goal.error = error if self._judged_mean is None else self._judged_mean
-            if now > goal.deadline:
-                self._finish_locked(goal, False, 'not reached within %.3g s (tip error %.2f mm)'
-                                    % (self._params['goal_timeout'], goal.error * 1e3))
-                return
-            stale = self._stale_state(now, need_tip=self._phase in ('settle', 'judge'))
-            if stale:
-                self._finish_locked(goal, False, stale)
-                return
-            budget = self._params['max_cable_speed'] * dt
-            if self._phase == 'recover':
-                # Off the model (e.g. a restarted driver): straight onto the estimate's lengths,
-                # the nearest shape, then along the model.
-                self._commanded = _towards(self._commanded, self._recover_target, budget)
-                if np.array_equal(self._commanded, self._recover_target):
-                    self._phase = 'ramp'
-            elif self._phase == 'ramp':
-                try:
-                    self._advance_locked(budget)
-                except ValueError as error:
-                    self._finish_locked(goal, False, 'ramp failed: %s' % error)
-                    return
-                if self._fraction >= 1.0:
-                    self._phase, self._settle_start = 'settle', now
-            elif self._phase == 'settle':
-                # Settled: every cable measured at its command (or settle_time passed, e.g. with
-                # noise). The tip is judged only on poses received from then on (arrival time,
-                # never a stamp the sender controls: unstamped input and clock jumps happen), so
-                # a tip pose of the moving cables never triggers a wrong correction.
-                measurement = self._measurement
-                if measurement is not None and measurement[2] > self._settle_start and (
-                        now - self._settle_start >= self._params['settle_time'] or float(
-                            np.max(np.abs(measurement[0] - self._commanded)))
-                        <= self._params['settled_cable_error']):
-                    self._phase, self._judge_start = 'judge', now
-            else:
-                self._judge_locked(goal, now)
-            commanded = self._commanded
+            commanded = self._run.tick(now, dt, self._measurement, self._tip, self._tips,
+                                       self._current_tip_load())
+            for note in self._run.notes:
+                self._problems.add('ramp', note)
+                self.get_logger().warning(note)
+            self._run.notes.clear()
+            if goal.done.is_set():
+                self._report(goal)
         if commanded is not None:
             self._publish_command(commanded)
 
-    def _advance_locked(self, budget):
-        """Step along the equilibrium path so that no cable moves more than ``budget`` m."""
-        start, solution, load = self._path
-        if self._straight_ramp:
-            self._straight_towards_locked(solution, budget)
-            return
-        step = self._fraction_step
-        for _ in range(12):
-            fraction = min(1.0, self._fraction + step)
-            if fraction >= 1.0:
-                state, lengths = solution, self._target
-            else:
-                state = self.robot.equilibrium_between(
-                    start, solution, fraction, tip_force=load[:3], tip_moment=load[3:],
-                    warm_start=self._command_state)
-                lengths = np.clip(np.asarray(state.cable_lengths, dtype=float),
-                                  self._limits[:, 0], self._limits[:, 1])
-            change = float(np.max(np.abs(lengths - self._commanded)))
-            usable = (state is solution or state.converged) and np.all(np.isfinite(lengths))
-            if usable and change <= budget * 1.05:
-                self._fraction, self._commanded, self._command_state = fraction, lengths, state
-                # lengths are smooth in the fraction: aim the next step at the budget
-                self._fraction_step = min(0.5, max(1e-6, step * (
-                    2.0 if change <= 0.0 else min(2.0, budget / change))))
-                return
-            step *= 0.5 if not usable else max(0.1, min(0.9, 0.95 * budget / change))
-        if not usable:
-            # No equilibrium part of the way (e.g. a heavy tip load near what the model can
-            # hold): go straight to the goal's lengths, themselves a shape, at max_cable_speed.
-            self._straight_ramp = True
-            self._problems.add('ramp', 'the model found no equilibrium %.0f %% of the way to '
-                               'the goal under tip load %s N: straight to the goal lengths'
-                               % (100.0 * self._fraction, np.round(load[:3], 3).tolist()))
-            self._straight_towards_locked(solution, budget)
-            return
-        # Even the smallest step moves a cable faster than allowed (the start was not exactly
-        # the model's equilibrium): close that gap at max_cable_speed, then go on.
-        self._commanded = _towards(self._commanded, lengths, budget)
-        self._fraction_step = max(step, 1e-3)
-
-    def _straight_towards_locked(self, solution, budget):
-        self._commanded = _towards(self._commanded, self._target, budget)
-        if np.array_equal(self._commanded, self._target):
-            self._fraction, self._command_state = 1.0, solution
-
-    def _judge_locked(self, goal, now):
-        """Judge the mean tip since the cables settled: reached, correct, or wait for more."""
-        samples = [p for p, _, received in list(self._tip_history)
-                   if received >= self._judge_start]
-        if len(samples) < MIN_TIP_SAMPLES:
-            return
-        points = np.asarray(samples)
-        mean = points.mean(axis=0)
-        error = float(np.linalg.norm(mean - goal.position))
-        # standard error of the mean tip (noise): 0 for identical samples
-        spread = float(np.linalg.norm(points.std(axis=0))) / math.sqrt(len(points))
-        self._judged_mean = error
-        goal.error = error
-        timed_out = now - self._judge_start >= self._params['tip_average_time']
-        if error + 2.0 * spread <= goal.tolerance or (timed_out and error <= goal.tolerance):
-            goal.tip_stamp = self._tip_history[-1][1]
-            self._judged_mean = None
-            self._finish_locked(goal, True, 'tip %.2f mm from the goal (mean of %d tip poses) '
-                                'after %.2f s, %d correction(s)' % (
-                                    error * 1e3, len(points), now - goal.started,
-                                    self._corrections))
-        elif error - 2.0 * spread > goal.tolerance or timed_out:
-            self._judged_mean = None
-            self._correct_locked(goal, mean)
-
-    def _correct_locked(self, goal, measured_tip):
-        if self._corrections >= self._params['max_corrections']:
-            self._finish_locked(goal, False, 'still %.2f mm from the goal after %d corrections'
-                                % (goal.error * 1e3, self._corrections))
-            return
-        self._corrected_goal = self._corrected_goal + (goal.position - measured_tip)
-        load = self._current_tip_load()
-        start = self._command_state
-        try:
-            solution = self.robot.solve_tip_goal(
-                self._corrected_goal, tip_force=load[:3], tip_moment=load[3:],
-                tolerance=self._model_tolerance(goal.tolerance), goal_direction=goal.direction,
-                warm_start=start)
-        except ValueError as error:
-            self._finish_locked(goal, False, 'correction failed: %s' % error)
-            return
-        lengths = np.asarray(solution.cable_lengths, dtype=float)
-        if not np.all(np.isfinite(lengths)):
-            self._finish_locked(goal, False, 'correction gave non-finite cable lengths')
-            return
-        self._corrections += 1
-        self._warm = solution
-        self._start_path_locked(start, solution, load)
-        self._phase = 'ramp'
-
     def _publish_command(self, lengths):
-        lengths = np.clip(lengths, self._limits[:, 0], self._limits[:, 1])
+        limits = self._run.limits
+        lengths = np.clip(lengths, limits[:, 0], limits[:, 1])
         try:
             msg = joint_state(self.cable_names, lengths, self.get_clock().now().to_msg(),
                               msg=self._command_msg)
@@ -703,7 +458,9 @@ class TipControllerNode(Node):
     # -- diagnostics and shutdown ----------------------------------------------------------
     def _publish_diagnostics(self):
         with self._lock:
-            goal, phase = self._goal, self._phase
+            run = self._run
+            goal, phase = run.goal, run.phase.value
+            corrections, fraction, moved = run.corrections, run.fraction, run.moved_onto_model
         level, message = diag.OK, 'idle' if goal is None else 'moving to a goal (%s)' % phase
         missing = self._missing_state()
         if missing:
@@ -722,7 +479,7 @@ class TipControllerNode(Node):
             'goals_failed': self._counts['failed'],
             'goals_rejected': self._counts['rejected'],
             'goals_preempted': self._counts['preempted'],
-            'moved_onto_model_total': self._moved_onto_model,
+            'moved_onto_model_total': moved,
             'last_outcome': self._last_outcome,
             'have_tip_pose': self._tip is not None,
             'have_cable_states': self._measurement is not None,
@@ -730,8 +487,8 @@ class TipControllerNode(Node):
         if goal is not None:
             values['goal_m'] = '%.5f %.5f %.5f' % tuple(goal.position)
             values['tip_error_mm'] = goal.error * 1e3
-            values['corrections'] = self._corrections
-            values['ramp_fraction'] = self._fraction
+            values['corrections'] = corrections
+            values['ramp_fraction'] = fraction
         values.update(self._problems.values())
         self._diagnostics.publish(diag.diagnostic_array(
             self.get_clock().now().to_msg(), self.get_fully_qualified_name().lstrip('/'),
@@ -741,8 +498,9 @@ class TipControllerNode(Node):
         """End the goal in progress so that a waiting service call returns (shutdown)."""
         self._closing = True
         with self._lock:
-            if self._goal is not None:
-                self._finish_locked(self._goal, False, 'shutting down')
+            goal = self._run.goal
+            if goal is not None and self._run.finish(goal, False, 'shutting down'):
+                self._report(goal)
 
     def destroy_node(self):
         """Release waiting service calls, stop the intake thread, then destroy the node."""

@@ -1,0 +1,385 @@
+"""The tip-goal run: from a goal to cable-length commands, closed loop on the measured tip.
+
+A state machine (:class:`Phase`) the tip_controller node ticks at its control rate:
+
+1. ``RECOVER``: when the measured lengths are not where the last command put them (a restarted
+   driver, a hand-made command, lengths statics could not fit), move straight onto the lengths
+   of the measurement's nearest shape, back onto the model;
+2. ``RAMP``: step from that equilibrium to the goal's through the model's own unknowns
+   (``Robot.equilibrium_between``: section moments interpolated, base state solved), so every
+   command is the cable-length set of an equilibrium, with no cable faster than
+   ``max_cable_speed`` (straight in cable space only where no equilibrium is found);
+3. ``SETTLE``: wait until every cable is measured at its command (or ``settle_time``);
+4. ``JUDGE``: average the tip poses that *arrived* since then (enough that the noise of the mean
+   is inside the tolerance, at most ``tip_average_time``): reached, or correct the goal by the
+   remaining error (``target += goal - mean_tip``) and ramp again, up to ``max_corrections``.
+
+Not thread-safe: the node calls it under its own lock. No ROS: tested without DDS.
+"""
+from dataclasses import dataclass, field
+import enum
+import math
+import threading
+
+import numpy as np
+
+#: Measured lengths further than this from the last command (m) are not where the controller put
+#: them: a goal then starts from the estimate of the measurement and moves onto it first.
+OFF_COMMAND = 2e-3
+#: Tip samples needed before the mean is judged (three identical ones: no noise).
+MIN_TIP_SAMPLES = 3
+
+
+class Phase(enum.Enum):
+    """Where a run is; ``IDLE`` without a goal."""
+
+    IDLE = 'idle'
+    RECOVER = 'recover'
+    RAMP = 'ramp'
+    SETTLE = 'settle'
+    JUDGE = 'judge'
+
+
+@dataclass(frozen=True)
+class RunSettings:
+    """The node parameters the run reads (units as the parameters: m, m/s, s)."""
+
+    max_cable_speed: float = 0.02
+    settle_time: float = 0.2
+    settled_cable_error: float = 1e-6
+    max_corrections: int = 10
+    tip_average_time: float = 1.0
+    max_state_age: float = 0.5
+
+
+@dataclass(eq=False)
+class Goal:
+    """One tip goal in progress; ``done`` is set when it ends, ``reason`` says how."""
+
+    position: np.ndarray
+    tolerance: float
+    source: str
+    started: float
+    deadline: float
+    done: threading.Event = field(default_factory=threading.Event)
+    reached: bool = False
+    reason: str = ''
+    tip_stamp: int = None  # ns
+    error: float = math.nan
+    direction: np.ndarray = None  # unit tip z axis goal (base frame), or None
+
+    @property
+    def outcome(self):
+        """'reached', 'preempted' or 'failed' once done."""
+        if self.reached:
+            return 'reached'
+        return 'preempted' if 'pre-empted' in self.reason else 'failed'
+
+
+@dataclass(frozen=True, eq=False)
+class Plan:
+    """A solved goal, ready to run: where it starts and what it commands first."""
+
+    start: object  # equilibrium of the start (estimate or the last commanded state)
+    solution: object  # the goal's tip-goal solution
+    load: np.ndarray  # tip wrench (6,) it was solved under
+    commanded: np.ndarray  # first command (m): the measured lengths when recovering
+    recover: np.ndarray  # lengths to recover onto first (m), or None
+
+
+def towards(commanded, target, step):
+    """Move towards ``target`` along a straight line; the largest change moves ``step``."""
+    delta = target - commanded
+    largest = float(np.max(np.abs(delta)))
+    if largest <= step:
+        return target.copy()
+    return commanded + delta * (step / largest)
+
+
+def stale_state(now, measurement, tip, max_age, need_tip=True):
+    """Why the measured state is too old to control with, or '' when it is fresh.
+
+    Moving the cables needs only fresh ``cable_states``; judging the tip needs ``tip_pose``.
+    """
+    if measurement is not None and measurement.age(now) > max_age:
+        return ('no cable_states for %.2f s (max_state_age %.3g s): is cable_driver running?'
+                % (measurement.age(now), max_age))
+    if need_tip and tip is not None and tip.age(now) > max_age:
+        return ('no tip_pose for %.2f s (max_state_age %.3g s): statics is not running or drops '
+                'every cable_states (its /diagnostics status says why)' % (tip.age(now), max_age))
+    return ''
+
+
+def direction_error(solution, direction):
+    """Angle (rad) between a solution's tip z axis and a goal direction."""
+    return float(np.arccos(np.clip(solution.shape.tip_rotation[:, 2] @ direction, -1.0, 1.0)))
+
+
+class GoalRun:
+    """The goal in progress of one controller and the commands that move the robot to it."""
+
+    def __init__(self, robot, settings=RunSettings()):
+        self.robot = robot
+        self.settings = settings
+        self.limits = np.asarray(robot.cable_length_limits, dtype=float).reshape(-1, 2)
+        self.goal = None
+        self.phase = Phase.IDLE
+        self.commanded = None  # last command (m), inside the limits
+        self.command_state = None  # the equilibrium whose lengths were commanded last
+        self.warm = None  # the last estimate or solution: warm start of the next solve
+        self.corrections = 0
+        self.moved_onto_model = 0
+        self.judged_error = None  # mean tip error of the judgement in progress (m)
+        self.notes = []  # degraded behaviour to report (the node drains it)
+        self._target = None
+        self._corrected_goal = None
+        self._path = None  # (start, goal solution, tip load) of the ramp in progress
+        self._fraction = 0.0
+        self._fraction_step = 0.05
+        self._straight = False  # no equilibrium path found: straight in cable space
+        self._recover_target = None
+        self._settle_start = None
+        self._judge_start = None
+
+    @property
+    def fraction(self):
+        """How far the ramp in progress is (0..1)."""
+        return self._fraction
+
+    def model_tolerance(self, tolerance):
+        """Solve the model well inside the goal's tolerance, so the tip lands near its centre."""
+        return min(0.01 * tolerance, self.robot.solver.goal_tolerance)
+
+    # -- a new goal --------------------------------------------------------------------------
+    def snapshot(self):
+        """Return what :meth:`plan` starts from: (last commanded state, command, warm start)."""
+        return self.command_state, self.commanded, self.warm
+
+    def plan(self, position, tolerance, direction, measured, load, tip_fresh, snapshot):
+        """Solve a goal from the measured lengths (m); ValueError says why it is rejected.
+
+        The expensive part (estimate and tip-goal solve), done without the node's lock, from
+        a :meth:`snapshot` taken under it.
+        :param tip_fresh: False when statics publishes no tip pose for these lengths: the run
+            then starts from their nearest shape and moves the cables onto it
+        """
+        robot = self.robot
+        low, high = self.limits[:, 0], self.limits[:, 1]
+        command_state, commanded, warm = snapshot
+        if tip_fresh and command_state is not None and commanded is not None and float(
+                np.max(np.abs(measured - commanded))) <= OFF_COMMAND:
+            start, recover = command_state, None  # the cables are where the last command put them
+        else:
+            start = robot.estimate_shape(measured, tip_force=load[:3], tip_moment=load[3:],
+                                         warm_start=warm)
+            recover = np.clip(robot.cable_lengths(start.shape), low, high)
+            # the ramp starts where the cables are, but never commands outside the limits
+            commanded = np.clip(measured, low, high)
+        solution = robot.solve_tip_goal(position, tip_force=load[:3], tip_moment=load[3:],
+                                        tolerance=self.model_tolerance(tolerance),
+                                        goal_direction=direction, warm_start=start)
+        if direction is not None:
+            # judged against the goal's tolerance (the model solved to 1 % of it, which a
+            # direction goal may not reach): position within it, direction within it over L
+            angle = direction_error(solution, direction)
+            if not (solution.error <= tolerance and angle <= tolerance / robot.length):
+                raise ValueError('unreachable goal (%.4f, %.4f, %.4f) m with direction %s: tip '
+                                 '%.2f mm and %.3g rad from it (tolerance %.2f mm, %.3g rad); '
+                                 '%s' % (*position, np.round(direction, 3).tolist(),
+                                         solution.error * 1e3, angle, tolerance * 1e3,
+                                         tolerance / robot.length, solution.message))
+        if not solution.error <= tolerance:
+            limited = ', '.join(solution.limited_cables)
+            raise ValueError('unreachable goal (%.4f, %.4f, %.4f) m: the nearest reachable tip '
+                             'is %.1f mm away (tolerance %.2f mm)%s' % (
+                                 *position, solution.error * 1e3, tolerance * 1e3,
+                                 '; cables at a length limit: ' + limited if limited else ''))
+        if not np.all(np.isfinite(solution.cable_lengths)):
+            raise ValueError('the solver returned non-finite cable lengths')
+        return Plan(start, solution, np.array(load, dtype=float), commanded, recover)
+
+    def begin(self, goal, plan, now):
+        """Make ``goal`` the running one; return the goal it pre-empts (finished) or None."""
+        previous = self.goal
+        if previous is not None:
+            self.finish(previous, False, 'pre-empted by a new goal')
+        self.goal = goal
+        if plan.recover is not None or self.commanded is None:
+            self.commanded = plan.commanded
+        # else a running goal may have moved the command on meanwhile: the ramp closes that gap
+        # at max_cable_speed (see _advance) instead of jumping back
+        self.command_state = plan.start if plan.recover is None else None
+        self._recover_target = plan.recover
+        self._start_path(plan.start, plan.solution, plan.load)
+        self._corrected_goal = goal.position.copy()
+        self.warm = plan.solution
+        self.corrections = 0
+        self.phase = Phase.RAMP if plan.recover is None else Phase.RECOVER
+        self.moved_onto_model += plan.recover is not None
+        return previous
+
+    def finish(self, goal, reached, reason):
+        """End ``goal`` (idempotent); return True if this call ended it."""
+        if goal.done.is_set():
+            return False
+        goal.reached, goal.reason = reached, reason
+        self.judged_error = None
+        if self.goal is goal:
+            self.goal, self.phase = None, Phase.IDLE
+        goal.done.set()
+        return True
+
+    def _start_path(self, start, solution, load):
+        self._path = (start, solution, load)
+        self._target = np.clip(np.asarray(solution.cable_lengths, dtype=float),
+                               self.limits[:, 0], self.limits[:, 1])
+        self._fraction = 0.0
+        self._fraction_step = min(self._fraction_step * 4.0, 0.25)
+        self._straight = False
+
+    # -- the control loop --------------------------------------------------------------------
+    def stale(self, now, measurement, tip):
+        """Why the state is too old for the current phase, or '' (see :func:`stale_state`)."""
+        return stale_state(now, measurement, tip, self.settings.max_state_age,
+                           need_tip=self.phase in (Phase.SETTLE, Phase.JUDGE))
+
+    def tick(self, now, dt, measurement, tip, tips, load):
+        """Advance one control period of ``dt`` s; return the command (m) to publish, or None.
+
+        :param measurement: the newest :class:`~continuum_statics.control.records.Measurement`
+        :param tip: the newest :class:`~continuum_statics.control.records.TipSample` (or None)
+        :param tips: recent tip samples, oldest first (for the judgement)
+        :param load: the current tip wrench (6,), for a correction's solve
+        A goal that ends is finished here (``goal.done``); the caller reports it.
+        """
+        goal = self.goal
+        if goal is None:
+            return None
+        error = math.inf if tip is None else float(np.linalg.norm(goal.position - tip.position))
+        goal.error = error if self.judged_error is None else self.judged_error
+        if now > goal.deadline:
+            self.finish(goal, False, 'not reached within %.3g s (tip error %.2f mm)'
+                        % (goal.deadline - goal.started, goal.error * 1e3))
+            return None
+        stale = self.stale(now, measurement, tip)
+        if stale:
+            self.finish(goal, False, stale)
+            return None
+        budget = self.settings.max_cable_speed * dt
+        if self.phase is Phase.RECOVER:
+            # Off the model (e.g. a restarted driver): straight onto the estimate's lengths,
+            # the nearest shape, then along the model.
+            self.commanded = towards(self.commanded, self._recover_target, budget)
+            if np.array_equal(self.commanded, self._recover_target):
+                self.phase = Phase.RAMP
+        elif self.phase is Phase.RAMP:
+            try:
+                self._advance(budget)
+            except ValueError as error:
+                self.finish(goal, False, 'ramp failed: %s' % error)
+                return None
+            if self._fraction >= 1.0:
+                self.phase, self._settle_start = Phase.SETTLE, now
+        elif self.phase is Phase.SETTLE:
+            # Settled: every cable measured at its command (or settle_time passed, e.g. with
+            # noise). The tip is judged only on poses that arrived from then on (arrival time,
+            # never a stamp the sender controls: unstamped input and clock jumps happen), so a
+            # tip pose of the moving cables never triggers a wrong correction.
+            if measurement is not None and measurement.received > self._settle_start and (
+                    now - self._settle_start >= self.settings.settle_time or float(
+                        np.max(np.abs(measurement.lengths - self.commanded)))
+                    <= self.settings.settled_cable_error):
+                self.phase, self._judge_start = Phase.JUDGE, now
+        else:
+            self._judge(goal, now, tips, load)
+        return self.commanded
+
+    def _advance(self, budget):
+        """Step along the equilibrium path so that no cable moves more than ``budget`` m."""
+        start, solution, load = self._path
+        if self._straight:
+            self._straight_towards(solution, budget)
+            return
+        step = self._fraction_step
+        for _ in range(12):
+            fraction = min(1.0, self._fraction + step)
+            if fraction >= 1.0:
+                state, lengths = solution, self._target
+            else:
+                state = self.robot.equilibrium_between(
+                    start, solution, fraction, tip_force=load[:3], tip_moment=load[3:],
+                    warm_start=self.command_state)
+                lengths = np.clip(np.asarray(state.cable_lengths, dtype=float),
+                                  self.limits[:, 0], self.limits[:, 1])
+            change = float(np.max(np.abs(lengths - self.commanded)))
+            usable = (state is solution or state.converged) and np.all(np.isfinite(lengths))
+            if usable and change <= budget * 1.05:
+                self._fraction, self.commanded, self.command_state = fraction, lengths, state
+                # lengths are smooth in the fraction: aim the next step at the budget
+                self._fraction_step = min(0.5, max(1e-6, step * (
+                    2.0 if change <= 0.0 else min(2.0, budget / change))))
+                return
+            step *= 0.5 if not usable else max(0.1, min(0.9, 0.95 * budget / change))
+        if not usable:
+            # No equilibrium part of the way (e.g. a heavy tip load near what the model can
+            # hold): go straight to the goal's lengths, themselves a shape, at max_cable_speed.
+            self._straight = True
+            self.notes.append('the model found no equilibrium %.0f %% of the way to the goal '
+                              'under tip load %s N: straight to the goal lengths'
+                              % (100.0 * self._fraction, np.round(load[:3], 3).tolist()))
+            self._straight_towards(solution, budget)
+            return
+        # Even the smallest step moves a cable faster than allowed (the start was not exactly
+        # the model's equilibrium): close that gap at max_cable_speed, then go on.
+        self.commanded = towards(self.commanded, lengths, budget)
+        self._fraction_step = max(step, 1e-3)
+
+    def _straight_towards(self, solution, budget):
+        self.commanded = towards(self.commanded, self._target, budget)
+        if np.array_equal(self.commanded, self._target):
+            self._fraction, self.command_state = 1.0, solution
+
+    def _judge(self, goal, now, tips, load):
+        """Judge the mean tip since the cables settled: reached, correct, or wait for more."""
+        samples = [tip.position for tip in tips if tip.received >= self._judge_start]
+        if len(samples) < MIN_TIP_SAMPLES:
+            return
+        points = np.asarray(samples)
+        mean = points.mean(axis=0)
+        error = float(np.linalg.norm(mean - goal.position))
+        # standard error of the mean tip (noise): 0 for identical samples
+        spread = float(np.linalg.norm(points.std(axis=0))) / math.sqrt(len(points))
+        self.judged_error = error
+        goal.error = error
+        timed_out = now - self._judge_start >= self.settings.tip_average_time
+        if error + 2.0 * spread <= goal.tolerance or (timed_out and error <= goal.tolerance):
+            goal.tip_stamp = tips[-1].stamp_ns
+            self.finish(goal, True, 'tip %.2f mm from the goal (mean of %d tip poses) after '
+                        '%.2f s, %d correction(s)' % (error * 1e3, len(points),
+                                                      now - goal.started, self.corrections))
+        elif error - 2.0 * spread > goal.tolerance or timed_out:
+            self.judged_error = None
+            self._correct(goal, mean, load)
+
+    def _correct(self, goal, measured_tip, load):
+        if self.corrections >= self.settings.max_corrections:
+            self.finish(goal, False, 'still %.2f mm from the goal after %d corrections'
+                        % (goal.error * 1e3, self.corrections))
+            return
+        self._corrected_goal = self._corrected_goal + (goal.position - measured_tip)
+        start = self.command_state
+        try:
+            solution = self.robot.solve_tip_goal(
+                self._corrected_goal, tip_force=load[:3], tip_moment=load[3:],
+                tolerance=self.model_tolerance(goal.tolerance), goal_direction=goal.direction,
+                warm_start=start)
+        except ValueError as error:
+            self.finish(goal, False, 'correction failed: %s' % error)
+            return
+        if not np.all(np.isfinite(solution.cable_lengths)):
+            self.finish(goal, False, 'correction gave non-finite cable lengths')
+            return
+        self.corrections += 1
+        self.warm = solution
+        self._start_path(start, solution, load)
+        self.phase = Phase.RAMP

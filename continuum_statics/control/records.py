@@ -1,0 +1,59 @@
+"""Timed inputs of the control logic and their single expiry rule.
+
+Times are ``time.monotonic()`` seconds of *arrival* (a sender's stamp may be zero or jump with a
+simulated clock; arrival times never do); stamps are kept only to pair messages with each other.
+"""
+from dataclasses import dataclass
+
+import numpy as np
+
+
+@dataclass(frozen=True, eq=False)
+class Measurement:
+    """One ``cable_states``: lengths (n_cables,) in m, robot order."""
+
+    lengths: np.ndarray
+    stamp_ns: int
+    received: float
+
+    def age(self, now):
+        """Seconds since it arrived."""
+        return now - self.received
+
+
+@dataclass(frozen=True, eq=False)
+class TipSample:
+    """One ``tip_pose``: position (3,) in m, base frame."""
+
+    position: np.ndarray
+    stamp_ns: int
+    received: float
+
+    def age(self, now):
+        """Seconds since it arrived."""
+        return now - self.received
+
+
+ZERO_LOAD = np.zeros(6)
+ZERO_LOAD.setflags(write=False)
+
+
+@dataclass(frozen=True, eq=False)
+class TipLoad:
+    """A tip-load estimate: force (N) and moment (N m) in the base frame, as one (6,) wrench."""
+
+    wrench: np.ndarray
+    received: float
+
+    def expired(self, now, timeout):
+        """Return True when older than ``timeout`` s (0: never expires)."""
+        return timeout > 0.0 and now - self.received > timeout
+
+    def current(self, now, timeout):
+        """Return the wrench, or zero once :meth:`expired` (a stale estimate is not trusted)."""
+        return ZERO_LOAD if self.expired(now, timeout) else self.wrench
+
+
+def current_load(load, now, timeout):
+    """Wrench of a :class:`TipLoad` or zero when there is none or it expired."""
+    return ZERO_LOAD if load is None else load.current(now, timeout)
