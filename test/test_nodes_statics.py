@@ -314,37 +314,3 @@ def test_measured_tensions_are_used_when_complete(harness):
     publish_until(rig.states, msg,
                   lambda: rig.values().get('measured_tensions_used') == 'False', 5.0,
                   'tensions not used')
-
-
-def test_a_tip_load_the_model_cannot_take_is_blamed_on_tip_wrench():
-    import types
-
-    class Model:
-        """Stands in for a robot whose model is not finite under any tip load."""
-
-        def estimate_shape(self, lengths, tip_force=(0.0, 0.0, 0.0), tip_moment=(0.0, 0.0, 0.0),
-                           tensions=None, warm_start=None):
-            if np.any(tip_force) or np.any(tip_moment):
-                raise ValueError('the model is not finite at the start')
-            return 'unloaded estimate'
-
-    rejected = []
-    node = types.SimpleNamespace(_tip_load=np.ones(6),
-                                 _reject=lambda kind, reason: rejected.append((kind, reason)))
-    estimate = StaticsNode._estimate(node, Model(), np.full(4, 0.3), np.ones(6), None, None)
-    assert estimate == 'unloaded estimate'
-    assert [kind for kind, _ in rejected] == ['tip_wrench']
-    assert 'no finite shape under tip load' in rejected[0][1]
-    np.testing.assert_array_equal(node._tip_load, np.zeros(6))
-
-
-def test_without_a_tip_load_a_model_failure_is_left_to_the_caller():
-    import types
-
-    class Model:
-        def estimate_shape(self, *args, **kwargs):
-            raise ValueError('cable lengths no shape can have')
-
-    node = types.SimpleNamespace(_tip_load=np.zeros(6), _reject=None)
-    with pytest.raises(ValueError, match='no shape'):
-        StaticsNode._estimate(node, Model(), np.full(4, 0.3), np.zeros(6), None, None)

@@ -51,6 +51,8 @@ from sensor_msgs.msg import JointState
 from std_msgs.msg import Header
 from visualization_msgs.msg import MarkerArray
 
+from continuum_statics.control.records import TipLoad, current_load
+from continuum_statics.control.shape_tracking import ShapeTracker, Thresholds
 from continuum_statics.core.backbone_sampling import BackboneSampler
 from continuum_statics.core.rotations import rotation_to_quaternion
 from continuum_statics.core.warmup import warm_up
@@ -145,9 +147,7 @@ class StaticsNode(Node):
         warm_up(self.robot, self.get_logger().info)
         self.cable_names = tuple(self.robot.cable_names)
         self._passive = not self.cable_names
-        self._tracking = self._tracking_robot(self._params['max_iterations'])
-        limits = np.asarray(self.robot.cable_length_limits, dtype=float).reshape(-1, 2)
-        self._low, self._high = limits[:, 0].copy(), limits[:, 1].copy()
+        self._tracker = ShapeTracker(self.robot, self.cable_names, self._params['max_iterations'])
         self.base_frame_id = self.robot.base_frame_id
         self._disk_diameter = 2.0 * float(np.max(np.linalg.norm(
             np.asarray(self.robot.cable_offsets, dtype=float).reshape(-1, 3), axis=1),
@@ -158,11 +158,9 @@ class StaticsNode(Node):
         self._index = None
         self._lengths = np.empty(len(self.cable_names))
         self._tensions = np.empty(len(self.cable_names))
-        self._warm = None  # the last estimate: warm start of the next
         self._shape = None
         self._shape_is_new = False
-        self._tip_load = np.zeros(6)
-        self._wrench_time = None
+        self._load = None  # the newest TipLoad
         self._wrench_expired = False
         self._stamp = None
         self._tip_position = None
@@ -231,13 +229,7 @@ class StaticsNode(Node):
         if name == 'marker_rate':
             self._set_marker_timer(value)
         elif name == 'max_iterations':
-            self._tracking = self._tracking_robot(value)
-
-    def _tracking_robot(self, max_iterations):
-        """Return the robot with the per-measurement iteration cap (itself for 0)."""
-        if not max_iterations or max_iterations >= self.robot.solver.max_iterations:
-            return self.robot
-        return self.robot.with_solver(max_iterations=int(max_iterations))
+            self._tracker.set_max_iterations(value)
 
     def _set_marker_timer(self, rate):
         if self._marker_timer is not None:
@@ -259,8 +251,7 @@ class StaticsNode(Node):
         except ValueError as error:
             self._reject('tip_wrench', error)
             return
-        self._tip_load = load
-        self._wrench_time = time.monotonic()
+        self._load = TipLoad(load, time.monotonic())
         if self._wrench_expired:
             self._wrench_expired = False
             self.get_logger().info('tip_wrench received again')
@@ -269,28 +260,23 @@ class StaticsNode(Node):
 
     def _current_tip_load(self, now):
         timeout = self._params['tip_wrench_timeout']
-        if self._wrench_time is None or self._wrench_expired:
-            return self._tip_load
-        if timeout > 0.0 and now - self._wrench_time > timeout:
+        if self._load is not None and self._load.expired(now, timeout) and \
+                not self._wrench_expired:
             self._wrench_expired = True
-            self._tip_load = np.zeros(6)
             self.get_logger().warning(
                 'tip_wrench estimate is older than %.3g s: using zero tip load' % timeout)
-        return self._tip_load
+        return current_load(self._load, now, timeout)
 
     def _thresholds(self):
-        """Return (warn residual, drop residual, limit margin), m, with the noise floor."""
+        """Return the residual thresholds (m) with the encoders' noise floor."""
         params = self._params
-        noise = params['length_noise_std']
-        warn = max(params['warn_residual'], 3.0 * noise)
-        return (warn, max(params['max_residual'], warn, 10.0 * noise),
-                max(params['length_limit_margin'], 5.0 * noise))
+        return Thresholds.with_noise(params['warn_residual'], params['max_residual'],
+                                     params['length_limit_margin'], params['length_noise_std'])
 
     def _on_cable_states(self, data):
         """Solve one serialized JointState (raw subscription: parsed without a message object)."""
         start = time.perf_counter()
         self._input_rate.tick()
-        warn, drop, margin = self._thresholds()
         n_cables = len(self.cable_names)
         try:
             if not data:
@@ -316,82 +302,38 @@ class StaticsNode(Node):
             return
         lengths = self._lengths
         lengths[self._index] = positions
-        outside = np.flatnonzero((lengths < self._low - margin) | (lengths > self._high + margin))
-        if outside.size:
-            self._limit_rejections += 1
-            self._reject_input("lengths outside the robot file's length limits (margin "
-                         '%.3g m): %s' % (margin, ', '.join(
-                             '%s %.4f m not in [%.4f, %.4f]' % (
-                                 self.cable_names[i], lengths[i], self._low[i], self._high[i])
-                             for i in outside[:4])))
-            return
         tensions = None
         if view.effort.shape[0] and self._params['use_measured_tensions']:
             self._tensions[self._index] = view.effort
             if (self._tensions >= 0.0).all() and np.isfinite(self._tensions).all():
                 tensions = self._tensions
-                high = np.flatnonzero(tensions > self._tension_limit())
-                if high.size:  # one absurd reading costs a slow solve and a nonsense shape
-                    self._reject_input('implausible tensions (max_tension %.4g N): %s' % (
-                        self._tension_limit(), ', '.join('%s %.4g N' % (
-                            self.cable_names[i], tensions[i]) for i in high[:4])))
-                    return
-        load = self._current_tip_load(time.monotonic())
-        distrust = ''
-        try:
-            estimate = self._estimate(self._tracking, lengths, load, tensions, self._warm)
-            if tensions is not None and not estimate.residual <= warn:
-                # tensions and lengths disagree: the lengths (encoders) are trusted, the
-                # tensions (a sensor, a current estimate) are not used for this shape
-                distrust = ('measured tensions disagree with the lengths (shape from the '
-                            'tensions %.3g m RMS off them): shape from the lengths'
-                            % estimate.residual)
-                tensions = None
-                estimate = self._estimate(self._tracking, lengths, load, None, self._warm)
-            capped = not estimate.converged and self._tracking is not self.robot
-            if capped and not estimate.residual <= drop:
-                # far from the last shape (a jump, a restart): finish the fit now
-                estimate = self._estimate(self.robot, lengths, load, tensions, estimate)
-                capped = False
-        except ValueError as error:
-            self._reject_input(error)
+        result = self._tracker.update(lengths, tensions,
+                                      self._current_tip_load(time.monotonic()),
+                                      self._thresholds(), self._tension_limit())
+        if result.load_problem:
+            self._reject('tip_wrench', result.load_problem)
+            self._load = None
+        if result.estimate is None:
+            self._limit_rejections += result.outside_limits
+            self._reject_input(result.rejection)
             return
-        solved = time.perf_counter()
-        self._solve_times.add(solved - start)
-        residual = float(estimate.residual)
-        good_fit = residual <= warn
-        message = estimate.message
-        if capped:
-            self._capped += 1
-            message = 'refined with the next measurement (max_iterations %d)' % (
-                self._params['max_iterations'])
-        if not good_fit:
-            message = ('best fit: cable lengths %.3g m RMS from the nearest shape (warn above '
-                       '%.3g m)%s' % (residual, warn, '; ' + message if message else ''))
-        if distrust:
+        self._solve_times.add(time.perf_counter() - start)
+        if result.distrust:
             self._tensions_distrusted += 1
-            self._distrust = (distrust, time.monotonic())
-            message = distrust + ('; ' + message if message else '')
-        # converged: stationary, or (iteration cap) being refined from one measurement to the
-        # next, and in both cases the lengths are a shape within warn_residual
-        self._last.update(residual=residual, iterations=estimate.iterations,
-                          converged=(bool(estimate.converged) or capped) and good_fit,
-                          message=message, time=time.monotonic(), tensions=tensions is not None)
-        self._residuals.add(residual)
-        if not (estimate.converged or capped):
+            self._distrust = (result.distrust, time.monotonic())
+        self._capped += result.capped
+        self._last.update(residual=result.residual, iterations=result.estimate.iterations,
+                          converged=result.converged, message=result.message,
+                          time=time.monotonic(), tensions=result.tensions_used)
+        self._residuals.add(result.residual)
+        if not (result.estimate.converged or result.capped):
             self._not_converged += 1
-        if not residual <= drop:
-            # lengths no shape of this robot explains (broken cable, wrong robot file, unhomed
-            # encoder): keep the last good shape rather than publish a best fit of nonsense
-            self._reject('cable_states', 'cable lengths fit no shape: RMS residual %.3g m > '
-                         'max_residual %.3g m%s' % (
-                             residual, drop,
-                             '' if estimate.converged else ' (%s)' % estimate.message))
+        if result.rejection:
+            self._reject('cable_states', result.rejection)
             return
-        if not good_fit:
-            self._best_fits += 1
-        if self._publish_shape(estimate.shape, view.sec, view.nanosec):
-            self._warm = estimate
+        self._best_fits += result.best_fit
+        if self._publish_shape(result.estimate.shape, view.sec, view.nanosec):
+            self._tracker.accept(result)
             self._cycle_times.add(time.perf_counter() - start)
 
     def _tension_limit(self):
@@ -403,19 +345,6 @@ class StaticsNode(Node):
         self._last.update(residual=math.nan, iterations=0, converged=False,
                           message='no estimate: the last cable_states was rejected')
         self._reject('cable_states', reason)
-
-    def _estimate(self, robot, lengths, load, tensions, warm):
-        """Estimate the shape; a tip load the model cannot take is dropped as a bad tip_wrench."""
-        try:
-            return robot.estimate_shape(lengths, tip_force=load[:3], tip_moment=load[3:],
-                                        tensions=tensions, warm_start=warm)
-        except ValueError as error:
-            if not load.any():
-                raise
-            self._reject('tip_wrench', 'the model has no finite shape under tip load %s (%s): '
-                         'using zero' % (np.array2string(load, precision=3), error))
-            self._tip_load = np.zeros(6)
-            return robot.estimate_shape(lengths, tensions=tensions, warm_start=None)
 
     def _solve_passive(self, stamp):
         """Passive rod: solve and publish the shape under gravity and the current tip load."""
@@ -493,7 +422,8 @@ class StaticsNode(Node):
         else:
             self._current_tip_load(now)  # expire a stale tip load while no measurement comes
         last = self._last
-        warn, drop, margin = self._thresholds()
+        thresholds = self._thresholds()
+        warn = thresholds.warn
         input_rate = self._input_rate.report()
         output_rate = self._output_rate.report()
         solves, solve_median, solve_max = self._solve_times.report()
@@ -523,7 +453,8 @@ class StaticsNode(Node):
         if lost_now > 0:  # the node stalled (or the transport dropped): never under an OK
             level, message = diag.WARN, '%d cable_states lost since the last report (%s)' % (
                 lost_now, message)
-        wrench_age = math.inf if self._wrench_time is None else now - self._wrench_time
+        wrench_age = math.inf if self._load is None else now - self._load.received
+        load = current_load(self._load, now, self._params['tip_wrench_timeout'])
         force_limit, torque_limit = tip_wrench_limits(self.robot, self._params)
         values = {
             'status': message,
@@ -545,7 +476,7 @@ class StaticsNode(Node):
             'residual_median_m': residual_median,
             'residual_max_m': residual_max,
             'warn_residual_m': warn,
-            'max_residual_m': drop,
+            'max_residual_m': thresholds.drop,
             'best_fits_total': self._best_fits,
             'iterations': last['iterations'],
             'converged': last['converged'],
@@ -555,8 +486,8 @@ class StaticsNode(Node):
             'measured_tensions_used': last['tensions'],
             'tensions_distrusted_total': self._tensions_distrusted,
             'max_tension_n': self._tension_limit(),
-            'tip_force_n': ' '.join('%.4g' % f for f in self._tip_load[:3]),
-            'tip_moment_nm': ' '.join('%.4g' % f for f in self._tip_load[3:]),
+            'tip_force_n': ' '.join('%.4g' % f for f in load[:3]),
+            'tip_moment_nm': ' '.join('%.4g' % f for f in load[3:]),
             'max_tip_force_n': force_limit,
             'max_tip_torque_nm': torque_limit,
             'tip_wrench_age_s': wrench_age,

@@ -1,0 +1,165 @@
+"""Shape tracking: what statics decides for each measurement (paper sec. V.A, per cycle).
+
+One :meth:`ShapeTracker.update` per ``cable_states``: limits and tension plausibility, the
+warm-started estimate (at most ``max_iterations`` per measurement, finished at once when far
+off), tensions that disagree with the lengths set aside, and the residual judged against the
+thresholds: published as a shape, published as a best fit (warn), or dropped. No ROS.
+"""
+from dataclasses import dataclass
+import math
+
+import numpy as np
+
+
+@dataclass(frozen=True)
+class Thresholds:
+    """The judgement of a fit.
+
+    ``warn``: RMS length residual (m) above which a fit is a best fit; ``drop``: above which no
+    shape is near; ``margin``: how far (m) lengths may be outside the robot file's limits.
+    """
+
+    warn: float
+    drop: float
+    margin: float
+
+    @classmethod
+    def with_noise(cls, warn, drop, margin, noise):
+        """Thresholds raised to the encoders' noise σ (m): 3 σ warn, 10 σ drop, 5 σ margin."""
+        warn = max(warn, 3.0 * noise)
+        return cls(warn, max(drop, warn, 10.0 * noise), max(margin, 5.0 * noise))
+
+
+@dataclass(frozen=True, eq=False)
+class TrackResult:
+    """What one measurement gave.
+
+    :ivar estimate: the shape estimate (None when rejected before solving)
+    :ivar rejection: why the measurement is dropped ('' when the shape is to be published)
+    :ivar message: what limited the estimate, for diagnostics
+    :ivar converged: stationary (or refined from one measurement to the next) and a good fit
+    :ivar capped: stopped at ``max_iterations``, refined with the next measurement
+    :ivar best_fit: residual above ``warn`` (published with WARN)
+    :ivar tensions_used: the shape follows measured tensions
+    :ivar distrust: why measured tensions were set aside ('' when not)
+    :ivar load_problem: why the tip load was replaced by zero ('' when not)
+    :ivar outside_limits: rejected for lengths outside the limits
+    """
+
+    estimate: object = None
+    rejection: str = ''
+    message: str = ''
+    converged: bool = False
+    capped: bool = False
+    best_fit: bool = False
+    tensions_used: bool = False
+    distrust: str = ''
+    load_problem: str = ''
+    outside_limits: bool = False
+
+    @property
+    def residual(self):
+        """RMS length residual (m), NaN without an estimate."""
+        return math.nan if self.estimate is None else float(self.estimate.residual)
+
+
+class ShapeTracker:
+    """The estimate of one robot, warm-started from the last published one."""
+
+    def __init__(self, robot, cable_names, max_iterations=0):
+        self.robot = robot
+        self.cable_names = cable_names
+        limits = np.asarray(robot.cable_length_limits, dtype=float).reshape(-1, 2)
+        self.low, self.high = limits[:, 0].copy(), limits[:, 1].copy()
+        self.warm = None  # the last published estimate: warm start of the next
+        self.set_max_iterations(max_iterations)
+
+    def set_max_iterations(self, max_iterations):
+        """Cap the Gauss-Newton iterations per measurement (0: the robot file's)."""
+        if not max_iterations or max_iterations >= self.robot.solver.max_iterations:
+            self._tracking = self.robot
+        else:
+            self._tracking = self.robot.with_solver(max_iterations=int(max_iterations))
+
+    def accept(self, result):
+        """Warm-start the next update from a result whose shape was published."""
+        self.warm = result.estimate
+
+    def update(self, lengths, tensions, load, thresholds, tension_limit):
+        """Judge and solve one measurement.
+
+        :param lengths: (n_cables,) measured lengths, m, robot order
+        :param tensions: (n_cables,) measured tensions, N, or None
+        :param load: (6,) tip wrench (N, N m), base frame
+        :param thresholds: :class:`Thresholds`; ``tension_limit``: largest plausible tension, N
+        """
+        names = self.cable_names
+        outside = np.flatnonzero((lengths < self.low - thresholds.margin)
+                                 | (lengths > self.high + thresholds.margin))
+        if outside.size:
+            return TrackResult(outside_limits=True, rejection=(
+                "lengths outside the robot file's length limits (margin %.3g m): %s" % (
+                    thresholds.margin, ', '.join('%s %.4f m not in [%.4f, %.4f]' % (
+                        names[i], lengths[i], self.low[i], self.high[i]) for i in outside[:4]))))
+        if tensions is not None:
+            high = np.flatnonzero(tensions > tension_limit)
+            if high.size:  # one absurd reading costs a slow solve and a nonsense shape
+                return TrackResult(rejection='implausible tensions (max_tension %.4g N): %s' % (
+                    tension_limit, ', '.join('%s %.4g N' % (names[i], tensions[i])
+                                             for i in high[:4])))
+        notes = {'load_problem': '', 'distrust': ''}
+        try:
+            estimate = self._estimate(self._tracking, lengths, load, tensions, self.warm, notes)
+            if tensions is not None and not estimate.residual <= thresholds.warn:
+                # tensions and lengths disagree: the lengths (encoders) are trusted, the
+                # tensions (a sensor, a current estimate) are not used for this shape
+                notes['distrust'] = ('measured tensions disagree with the lengths (shape from '
+                                     'the tensions %.3g m RMS off them): shape from the lengths'
+                                     % estimate.residual)
+                tensions = None
+                estimate = self._estimate(self._tracking, lengths, load, None, self.warm, notes)
+            capped = not estimate.converged and self._tracking is not self.robot
+            if capped and not estimate.residual <= thresholds.drop:
+                # far from the last shape (a jump, a restart): finish the fit now
+                estimate = self._estimate(self.robot, lengths, load, tensions, estimate, notes)
+                capped = False
+        except ValueError as error:
+            return TrackResult(rejection=str(error), load_problem=notes['load_problem'])
+        residual = float(estimate.residual)
+        good_fit = residual <= thresholds.warn
+        message = estimate.message
+        if capped:
+            message = 'refined with the next measurement (max_iterations %d)' % (
+                self._tracking.solver.max_iterations)
+        if not good_fit:
+            message = ('best fit: cable lengths %.3g m RMS from the nearest shape (warn above '
+                       '%.3g m)%s' % (residual, thresholds.warn, '; ' + message if message
+                                      else ''))
+        if notes['distrust']:
+            message = notes['distrust'] + ('; ' + message if message else '')
+        rejection = ''
+        if not residual <= thresholds.drop:
+            # lengths no shape of this robot explains (broken cable, wrong robot file, unhomed
+            # encoder): keep the last good shape rather than publish a best fit of nonsense
+            rejection = ('cable lengths fit no shape: RMS residual %.3g m > max_residual %.3g m%s'
+                         % (residual, thresholds.drop,
+                            '' if estimate.converged else ' (%s)' % estimate.message))
+        # converged: stationary, or (iteration cap) being refined from one measurement to the
+        # next, and in both cases the lengths are a shape within warn_residual
+        return TrackResult(estimate=estimate, rejection=rejection, message=message,
+                           converged=(bool(estimate.converged) or capped) and good_fit,
+                           capped=capped, best_fit=not good_fit,
+                           tensions_used=tensions is not None, **notes)
+
+    @staticmethod
+    def _estimate(robot, lengths, load, tensions, warm, notes):
+        """Estimate; a tip load the model cannot take is replaced by zero (and noted)."""
+        try:
+            return robot.estimate_shape(lengths, tip_force=load[:3], tip_moment=load[3:],
+                                        tensions=tensions, warm_start=warm)
+        except ValueError as error:
+            if not np.any(load):
+                raise
+            notes['load_problem'] = ('the model has no finite shape under tip load %s (%s): '
+                                     'using zero' % (np.array2string(load, precision=3), error))
+            return robot.estimate_shape(lengths, tensions=tensions, warm_start=None)

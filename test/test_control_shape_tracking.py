@@ -1,0 +1,84 @@
+"""Shape tracking without DDS: what statics decides for each measurement."""
+from conftest import REPO
+import numpy as np
+import pytest
+
+from continuum_statics import load_robot
+from continuum_statics.control.shape_tracking import ShapeTracker, Thresholds
+
+ROBOT = load_robot(REPO / 'config' / 'tendon_robot.yaml')
+THRESHOLDS = Thresholds(warn=1e-4, drop=2e-3, margin=1e-3)
+ZERO = np.zeros(6)
+
+
+def tracker(max_iterations=3):
+    return ShapeTracker(ROBOT, ROBOT.cable_names, max_iterations)
+
+
+def test_noise_raises_the_thresholds_to_3_10_and_5_sigma():
+    t = Thresholds.with_noise(1e-4, 2e-3, 1e-3, 1e-3)
+    assert (t.warn, t.drop, t.margin) == (3e-3, 1e-2, 5e-3)
+    assert Thresholds.with_noise(1e-4, 2e-3, 1e-3, 0.0) == THRESHOLDS
+
+
+def test_lengths_of_a_shape_are_published_and_warm_start_the_next():
+    shape = ROBOT.solve_ivp([2.0, -1.0, 0.0])
+    track = tracker()
+    result = track.update(ROBOT.cable_lengths(shape), None, ZERO, THRESHOLDS, 100.0)
+    assert result.rejection == '' and not result.best_fit
+    np.testing.assert_allclose(result.estimate.shape.tip_position, shape.tip_position,
+                               atol=1e-6)
+    track.accept(result)
+    assert track.warm is result.estimate
+
+
+def test_lengths_no_shape_fits_are_dropped_and_a_small_misfit_is_a_best_fit():
+    lengths = ROBOT.straight_cable_lengths.copy()
+    lengths += 0.004  # every cable paid out: no rod shape has these lengths
+    result = tracker().update(lengths, None, ZERO, THRESHOLDS, 100.0)
+    assert 'fit no shape' in result.rejection and result.residual > 2e-3
+    lengths = ROBOT.straight_cable_lengths + 2e-4
+    result = tracker().update(lengths, None, ZERO, THRESHOLDS, 100.0)
+    assert result.rejection == '' and result.best_fit and 'best fit' in result.message
+
+
+def test_lengths_outside_the_limits_and_implausible_tensions_are_rejected_unsolved():
+    lengths = ROBOT.straight_cable_lengths.copy()
+    lengths[2] = ROBOT.cable_length_limits[2, 1] + 2e-3
+    result = tracker().update(lengths, None, ZERO, THRESHOLDS, 100.0)
+    assert result.outside_limits and result.estimate is None and 'cable_2' in result.rejection
+    tensions = np.array([1e6, 0.0, 0.0, 0.0])
+    result = tracker().update(ROBOT.straight_cable_lengths, tensions, ZERO, THRESHOLDS, 100.0)
+    assert result.estimate is None and 'cable_0 1e+06 N' in result.rejection
+
+
+def test_tensions_that_disagree_with_the_lengths_are_set_aside():
+    bent = ROBOT.solve_ivp([2.0, 0.0, 0.0])
+    result = tracker().update(ROBOT.cable_lengths(bent), np.zeros(4), ZERO, THRESHOLDS, 100.0)
+    assert 'tensions disagree' in result.distrust and not result.tensions_used
+    np.testing.assert_allclose(result.estimate.shape.tip_position, bent.tip_position, atol=1e-5)
+
+
+def test_a_tip_load_the_model_cannot_take_is_blamed_on_tip_wrench():
+    class Model:
+        """Stands in for a robot whose model is not finite under any tip load."""
+
+        def estimate_shape(self, lengths, tip_force=(0.0, 0.0, 0.0), tip_moment=(0.0, 0.0, 0.0),
+                           tensions=None, warm_start=None):
+            if np.any(tip_force) or np.any(tip_moment):
+                raise ValueError('the model is not finite at the start')
+            return 'unloaded estimate'
+
+    notes = {'load_problem': ''}
+    estimate = ShapeTracker._estimate(Model(), np.full(4, 0.3), np.ones(6), None, None, notes)
+    assert estimate == 'unloaded estimate'
+    assert 'no finite shape under tip load' in notes['load_problem']
+
+
+def test_without_a_tip_load_a_model_failure_is_left_to_the_caller():
+    class Model:
+        def estimate_shape(self, *args, **kwargs):
+            raise ValueError('cable lengths no shape can have')
+
+    with pytest.raises(ValueError, match='no shape'):
+        ShapeTracker._estimate(Model(), np.full(4, 0.3), np.zeros(6), None, None, {})
