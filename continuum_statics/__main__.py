@@ -27,7 +27,7 @@ def main(argv=None):
         return 0 if argv else 2
     command, rest = argv[0], argv[1:]
     if command == 'solve':
-        from continuum_statics.tools.cli import solve_main as run
+        from continuum_statics.tools.solve import solve_main as run
     elif command == 'bench':
         if '--nodes' in rest:
             rest.remove('--nodes')

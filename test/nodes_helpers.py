@@ -10,7 +10,7 @@ from rclpy.parameter import Parameter
 from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
 
 from continuum_statics.nodes.node_runner import make_executor
-from continuum_statics.tools.node_bench import stop as stop_process  # noqa: F401 (re-export)
+from continuum_statics.tools.processes import stop as stop_process  # noqa: F401 (re-export)
 
 #: What late joiners use for the latched outputs (backbone, tip_pose).
 LATCHED = QoSProfile(depth=1, reliability=ReliabilityPolicy.RELIABLE,

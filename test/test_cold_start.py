@@ -22,7 +22,7 @@ from nav_msgs.srv import GetPlan  # noqa: E402
 
 from continuum_statics import load_robot  # noqa: E402
 from continuum_statics.nodes.ros_conversions import path_positions  # noqa: E402
-from continuum_statics.tools.demo import tip_goals  # noqa: E402
+from continuum_statics.tools.goal_client import tip_goals  # noqa: E402
 
 pytestmark = pytest.mark.ros
 #: Longest compile of every kernel on a loaded 2-core machine, s (seen: 20-40 s).

@@ -142,7 +142,7 @@ def test_a_straight_length_outside_the_cable_limits_is_an_error_naming_the_cable
 def test_solve_prints_the_plausibility_warnings(tmp_path, capsys):
     import yaml
 
-    from continuum_statics.tools.cli import solve_main
+    from continuum_statics.tools.solve import solve_main
 
     path = tmp_path / 'thick.yaml'
     path.write_text(yaml.safe_dump(description(**with_rod(diameter=0.05))))

@@ -23,8 +23,6 @@ parameters ``<backend>.<option>``.
   writes them to ``home_file`` (YAML), which is loaded at start.
 - A robot file without cables: the node says so once and stays up without publishing.
 """
-import os
-from pathlib import Path
 import sys
 import threading
 import time
@@ -32,12 +30,12 @@ from types import SimpleNamespace
 
 import numpy as np
 from rclpy.node import Node
-from rclpy.qos import QoSProfile, ReliabilityPolicy, qos_profile_sensor_data
+from rclpy.qos import qos_profile_sensor_data
 from sensor_msgs.msg import JointState
 from std_srvs.srv import Trigger
-import yaml
 
 from continuum_statics.drivers import BackendStatus, ConnectionLost, backend_class
+from continuum_statics.drivers.home_file import load_home_file, write_home_file
 from continuum_statics.nodes import diagnostics_util as diag
 from continuum_statics.nodes.dedicated_intake import PeriodicThread
 from continuum_statics.nodes.node_params import (
@@ -47,6 +45,7 @@ from continuum_statics.nodes.node_params import (
     load_robot_file,
     robot_file_spec,
 )
+from continuum_statics.nodes.qos import COMMAND_QOS
 from continuum_statics.nodes.ros_conversions import (
     cable_index,
     joint_positions,
@@ -55,8 +54,6 @@ from continuum_statics.nodes.ros_conversions import (
 )
 from continuum_statics.nodes.timers import steady_timer
 
-#: Commands and goals: reliable, depth 10 (docs/architecture.md, ROS interfaces).
-COMMAND_QOS = QoSProfile(depth=10, reliability=ReliabilityPolicy.RELIABLE)
 THROTTLE_S = 2.0
 #: First reconnection delay after a lost port or bus, s (doubles up to reconnect_max_interval).
 FIRST_RETRY_S = 0.1
@@ -68,44 +65,6 @@ def _check_backend(value):
     except ValueError as error:
         return str(error)
     return None
-
-
-def load_home_file(path, backend_name, zero_option, cable_names):
-    """Return the zero positions stored in ``path`` for this backend, or None if no file.
-
-    :raises ValueError: a file that is not for this backend or these cables (says which)
-    """
-    path = Path(path).expanduser()
-    if not path.is_file():
-        return None
-    try:
-        data = yaml.safe_load(path.read_text()) or {}
-    except (OSError, yaml.YAMLError) as error:
-        raise ValueError('home_file %s: %s' % (path, error)) from None
-    if not isinstance(data, dict) or data.get('backend') != backend_name:
-        raise ValueError('home_file %s was written for backend %r, not %r' % (
-            path, data.get('backend') if isinstance(data, dict) else None, backend_name))
-    if list(data.get('cable_names', [])) != list(cable_names):
-        raise ValueError('home_file %s is for cables %s, not %s' % (
-            path, data.get('cable_names'), list(cable_names)))
-    zeros = data.get(zero_option)
-    if not isinstance(zeros, list) or len(zeros) != len(cable_names):
-        raise ValueError('home_file %s: %s needs %d values' % (path, zero_option,
-                                                               len(cable_names)))
-    return zeros
-
-
-def write_home_file(path, backend_name, zero_option, cable_names, zeros):
-    """Write the home positions atomically (a crash never leaves half a file)."""
-    path = Path(path).expanduser()
-    path.parent.mkdir(parents=True, exist_ok=True)
-    data = {'backend': backend_name, 'cable_names': list(cable_names),
-            zero_option: [z.item() if hasattr(z, 'item') else z for z in zeros],
-            'written': time.strftime('%Y-%m-%dT%H:%M:%S%z')}
-    tmp = path.with_name(path.name + '.tmp')
-    tmp.write_text('# straight pose of the cable actuators, written by cable_driver/set_home\n'
-                   + yaml.safe_dump(data, sort_keys=False))
-    os.replace(tmp, path)
 
 
 class CableDriverNode(Node):

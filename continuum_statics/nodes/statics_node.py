@@ -72,6 +72,7 @@ from continuum_statics.nodes.node_params import (
     tip_wrench_limit_specs,
     tip_wrench_limits,
 )
+from continuum_statics.nodes.qos import LATCHED_QOS, LATEST_SENSOR_QOS
 from continuum_statics.nodes.ros_conversions import (
     BackboneMarkers,
     PoseSequenceEncoder,
@@ -81,14 +82,6 @@ from continuum_statics.nodes.ros_conversions import (
 )
 from continuum_statics.nodes.timers import steady_timer
 
-#: Newest measurement only: best effort, keep last 1 (a slow cycle never builds a backlog).
-LATEST_SENSOR_QOS = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=1,
-                               reliability=ReliabilityPolicy.BEST_EFFORT,
-                               durability=DurabilityPolicy.VOLATILE)
-#: Latched state (backbone, tip_pose, markers): reliable, depth 1, transient local.
-LATCHED_QOS = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=1,
-                         reliability=ReliabilityPolicy.RELIABLE,
-                         durability=DurabilityPolicy.TRANSIENT_LOCAL)
 THROTTLE_S = 2.0
 
 

@@ -49,7 +49,6 @@ from continuum_statics.control.records import Measurement, TipLoad, TipSample, c
 from continuum_statics.core.rotations import quaternion_to_rotation
 from continuum_statics.core.warmup import warm_up
 from continuum_statics.nodes import diagnostics_util as diag
-from continuum_statics.nodes.cable_driver_node import COMMAND_QOS
 from continuum_statics.nodes.dedicated_intake import make_intake
 from continuum_statics.nodes.node_params import (
     ParameterTable,
@@ -60,6 +59,7 @@ from continuum_statics.nodes.node_params import (
     tip_wrench_limit_specs,
     tip_wrench_limits,
 )
+from continuum_statics.nodes.qos import COMMAND_QOS, LATCHED_QOS, LATEST_SENSOR_QOS
 from continuum_statics.nodes.ros_conversions import (
     cable_index,
     float32_value,
@@ -69,7 +69,6 @@ from continuum_statics.nodes.ros_conversions import (
     pose_position,
     tip_load,
 )
-from continuum_statics.nodes.statics_node import LATCHED_QOS, LATEST_SENSOR_QOS
 from continuum_statics.nodes.timers import steady_timer
 
 THROTTLE_S = 2.0

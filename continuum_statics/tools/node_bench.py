@@ -13,8 +13,6 @@ asserted: performance belongs in benchmarks, not in pass/fail tests).
 """
 import argparse
 import os
-import random
-import signal
 import struct
 import subprocess
 import sys
@@ -23,34 +21,8 @@ import time
 
 import numpy as np
 
-from continuum_statics.nodes.node_params import default_robot_file, share_dir
-
-
-def ros_environment():
-    """Loopback discovery, a domain of its own and the quick-discovery profile, unless set."""
-    os.environ.setdefault('ROS_AUTOMATIC_DISCOVERY_RANGE', 'LOCALHOST')
-    os.environ.setdefault('ROS_DOMAIN_ID', str(random.randint(100, 199)))
-    os.environ.setdefault('FASTDDS_DEFAULT_PROFILES_FILE',
-                          str(share_dir() / 'config' / 'fastdds_fast_discovery.xml'))
-
-
-def cpu_seconds(pid):
-    """User + system CPU time of a process, s (Linux /proc)."""
-    with open('/proc/%d/stat' % pid) as stat:
-        fields = stat.read().rsplit(')', 1)[1].split()
-    return (int(fields[11]) + int(fields[12])) / os.sysconf('SC_CLK_TCK')
-
-
-def stop(process, timeout=15.0):
-    """SIGINT, then kill if it does not exit; return the exit code."""
-    if process.poll() is None:
-        process.send_signal(signal.SIGINT)
-        try:
-            process.wait(timeout)
-        except subprocess.TimeoutExpired:
-            process.kill()
-            process.wait()
-    return process.returncode
+from continuum_statics.nodes.node_params import default_robot_file
+from continuum_statics.tools.processes import cpu_seconds, ros_environment, stop
 
 
 def measurement_lengths(robot, count, rate):
@@ -72,7 +44,8 @@ def measurement_lengths(robot, count, rate):
     return lengths
 
 
-def bench_statics(robot_file, rate, duration, warmup=2.0, parameters=()):
+def bench_statics(robot_file, rate, duration, warmup=2.0, parameters=(),
+                  lengths_source=None):
     """Publish cable_states at ``rate`` to a statics process; return the figures as a dict."""
     from diagnostic_msgs.msg import DiagnosticArray
     from nav_msgs.msg import Path
@@ -86,7 +59,7 @@ def bench_statics(robot_file, rate, duration, warmup=2.0, parameters=()):
 
     robot = load_robot(robot_file)
     period_count = int(round(rate * 2.0))  # two seconds of distinct lengths, then repeat
-    lengths = measurement_lengths(robot, period_count, rate)
+    lengths = (lengths_source or measurement_lengths)(robot, period_count, rate)
     namespace = '/bench_statics'
     received = []  # (stamp s, receive time s)
     record = [False]
@@ -208,14 +181,14 @@ def _spin_until_shutdown(executor):
 
 def bench_tip_goal(robot_file, goals=5):
     """Start bringup, call tip_goal for reachable goals and one unreachable; return figures."""
-    from continuum_statics.tools import demo
+    from continuum_statics.tools.goal_client import run_client
 
     namespace = 'bench_goal'
     process = subprocess.Popen(
         [sys.executable, '-m', 'continuum_statics', 'bringup', '--robot', robot_file,
          '--namespace', namespace, '--ros-args', '--log-level', 'warn'])
     try:
-        rows = demo.run_client(robot_file, namespace, goals=goals, tolerance=1e-3,
+        rows = run_client(robot_file, namespace, goals=goals, tolerance=1e-3,
                                print_rows=False, process=process)
     finally:
         stop(process)

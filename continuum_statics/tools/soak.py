@@ -19,7 +19,8 @@ import time
 import numpy as np
 
 from continuum_statics.nodes.node_params import default_robot_file
-from continuum_statics.tools.node_bench import ros_environment, stop
+from continuum_statics.tools.goal_client import random_goals
+from continuum_statics.tools.processes import ros_environment, stop
 
 
 def rss_mb(pid):
@@ -29,19 +30,6 @@ def rss_mb(pid):
             if line.startswith('VmRSS:'):
                 return int(line.split()[1]) / 1024.0
     return float('nan')
-
-
-def random_goals(robot, count, seed):
-    """Tip positions of random shapes whose cable lengths are inside the limits (reachable)."""
-    rng = np.random.default_rng(seed)
-    limits = np.asarray(robot.cable_length_limits, dtype=float)
-    goals = []
-    while len(goals) < count:
-        shape = robot.solve_ivp([*rng.uniform(-3.5, 3.5, 2), 0.0])
-        lengths = robot.cable_lengths(shape)
-        if np.all(lengths >= limits[:, 0] + 1e-4) and np.all(lengths <= limits[:, 1] - 1e-4):
-            goals.append(shape.tip_position.copy())
-    return goals
 
 
 def soak(robot_file, minutes, period, rate, noise, tolerance, seed):
@@ -148,19 +136,14 @@ def statics_rate(robot_file, rate, duration, noise, seed):
     """Statics alone, fed ``rate`` Hz of noisy cable lengths (node_bench's measurement)."""
     from continuum_statics.tools import node_bench
 
-    exact = node_bench.measurement_lengths
     rng = np.random.default_rng(seed)
 
     def noisy(robot, count, rate):
-        lengths = np.asarray(exact(robot, count, rate))
+        lengths = np.asarray(node_bench.measurement_lengths(robot, count, rate))
         return (lengths + rng.normal(0.0, noise, lengths.shape)).tolist()
 
-    node_bench.measurement_lengths = noisy
-    try:
-        return node_bench.bench_statics(robot_file, rate, duration, parameters=[
-            'length_noise_std:=%r' % float(noise)])
-    finally:
-        node_bench.measurement_lengths = exact
+    return node_bench.bench_statics(robot_file, rate, duration, parameters=[
+        'length_noise_std:=%r' % float(noise)], lengths_source=noisy)
 
 
 def _spin(executor):
