@@ -1,0 +1,70 @@
+"""package.xml and the pip requirements agree, with rosdep keys that exist in rosdistro.
+
+``rosdep install --from-paths src`` on a robot computer resolves package.xml; the pip route
+installs requirements.txt. Every runtime requirement must be declared with its rosdep key, and
+every key must be one rosdistro has (``python3-canopen`` is not: ``canopen-pip`` is).
+"""
+import re
+import xml.etree.ElementTree as ElementTree
+
+from conftest import REPO
+
+#: pip requirement -> rosdep key (rosdistro rosdep/python.yaml and base.yaml; ROS packages by name)
+ROSDEP_KEYS = {
+    'numpy': 'python3-numpy',
+    'scipy': 'python3-scipy',
+    'numba': 'python3-numba',
+    'PyYAML': 'python3-yaml',
+    'matplotlib': 'python3-matplotlib',
+    'rosbags': 'python3-rosbags-pip',
+    'dynamixel-sdk': 'dynamixel_sdk',
+    'canopen': 'canopen-pip',
+    'python-can': 'python3-can',
+    'pytest': 'python3-pytest',
+}
+#: Development tools of the pip route only (lint, fuzzing, bag tests): not needed on a robot.
+DEVELOPMENT_ONLY = {'hypothesis', 'ruff', 'mcap', 'mcap-ros2-support'}
+#: ROS wheels that are the middleware, not a package dependency.
+MIDDLEWARE = {'rmw-fastrtps-cpp'}
+#: Keys that are no rosdep key (seen failing `rosdep install`).
+NOT_KEYS = {'python3-canopen', 'python3-rosbags', 'python3-dynamixel-sdk'}
+
+
+def requirements(name='requirements.txt'):
+    names = []
+    for line in (REPO / name).read_text().splitlines():
+        line = line.split('#')[0].strip()
+        if line:
+            names.append(re.split(r'[<>=!~ ;\[]', line, maxsplit=1)[0])
+    return names
+
+
+def manifest_keys():
+    root = ElementTree.parse(REPO / 'package.xml').getroot()
+    return {element.text.strip() for tag in ('depend', 'exec_depend', 'test_depend',
+                                             'build_depend') for element in root.iter(tag)}
+
+
+def test_every_requirement_is_declared_in_package_xml_with_its_rosdep_key():
+    keys = manifest_keys()
+    missing = []
+    for name in requirements():
+        if name.startswith('ros-'):
+            package = name[4:].replace('-', '_')
+            if name[4:] not in MIDDLEWARE and package not in keys:
+                missing.append('%s (ROS package %s)' % (name, package))
+        elif name in DEVELOPMENT_ONLY:
+            continue
+        elif ROSDEP_KEYS.get(name) not in keys:
+            missing.append('%s (rosdep key %s)' % (name, ROSDEP_KEYS.get(name, 'unknown')))
+    assert not missing, 'requirements.txt lines without a package.xml dependency: %s' % missing
+
+
+def test_package_xml_declares_no_key_the_requirements_do_not_have():
+    keys = manifest_keys()
+    assert not keys & NOT_KEYS, keys & NOT_KEYS
+    python_keys = {key for key in keys if key.startswith('python3-') or key.endswith('-pip')
+                   or key == 'dynamixel_sdk'}
+    assert python_keys <= set(ROSDEP_KEYS.values()), python_keys - set(ROSDEP_KEYS.values())
+    declared = {ROSDEP_KEYS[name] for name in requirements() if name in ROSDEP_KEYS}
+    assert python_keys <= declared, python_keys - declared
