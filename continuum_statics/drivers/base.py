@@ -94,6 +94,10 @@ class CableBackend(abc.ABC):
 
     #: Short name of the backend (the ``backend`` parameter value).
     name = 'abstract'
+    #: Whether :meth:`start` (a connection or a reconnection) switches the power stage / torque
+    #: on. The lifecycle driver clears it before configure (connect and read only) and sets it
+    #: on activate, so a reconnection while inactive never powers the actuators.
+    power = True
     #: The backend's options (:class:`BackendOption`), declared by the node as parameters.
     options_spec = ()
 
@@ -106,7 +110,16 @@ class CableBackend(abc.ABC):
 
     @abc.abstractmethod
     def start(self, now):
-        """Connect to the actuators; ``now`` is a monotonic time in s."""
+        """Connect to the actuators and read them (power on if :attr:`power`); now: monotonic s."""
+
+    def enable(self, now):
+        """Power stage / torque on, holding where the actuators are (lifecycle activate)."""
+        self.power = True
+
+    def disable(self, now):
+        """Hold where the actuators are, then power stage / torque off (lifecycle deactivate)."""
+        self.power = False
+        self.hold(now)
 
     @abc.abstractmethod
     def command(self, target_lengths, now):

@@ -244,10 +244,13 @@ class CanopenCableBackend(CableBackend):
         node.sdo[MODE].raw = PROFILE_POSITION
         if self.options['profile_velocity']:
             node.sdo[PROFILE_VELOCITY].raw = int(self.options['profile_velocity'])
-        self._enable(j, node)
+        if self.power:
+            self._enable(j, node)
+        else:
+            self._read_position(j, node, SHUTDOWN)
 
-    def _enable(self, j, node):
-        """Target = actual position, then through the state machine (unless in FAULT)."""
+    def _read_position(self, j, node, controlword):
+        """Target = actual position (no jump); RPDO1 carries ``controlword``; the statusword."""
         position = node.sdo[POSITION_ACTUAL].raw
         self._positions[j] = position
         statusword = node.sdo[STATUSWORD].raw
@@ -255,8 +258,13 @@ class CanopenCableBackend(CableBackend):
         self._wanted[j] = self._sent[j] = position
         self._bit4[j] = False
         rpdo = node.rpdo[1]
-        rpdo[CONTROLWORD].raw = ENABLE_OPERATION
+        rpdo[CONTROLWORD].raw = controlword
         rpdo[TARGET].raw = position
+        return position, statusword
+
+    def _enable(self, j, node):
+        """Target = actual position, then through the state machine (unless in FAULT)."""
+        position, statusword = self._read_position(j, node, ENABLE_OPERATION)
         if statusword & FAULT_BIT:
             return
         node.sdo[TARGET].raw = position
@@ -308,7 +316,9 @@ class CanopenCableBackend(CableBackend):
         """
         ack = bool(self._statuswords[j] & SETPOINT_ACK)
         word = ENABLE_OPERATION | CHANGE_IMMEDIATELY
-        if self._bit4[j]:
+        if not self.power:  # powered off (lifecycle inactive): keep saying Shutdown, no set-point
+            word = SHUTDOWN
+        elif self._bit4[j]:
             if ack:  # acknowledged: clear bit 4
                 self._bit4[j] = False
             else:
@@ -334,6 +344,30 @@ class CanopenCableBackend(CableBackend):
         for j, node in enumerate(self._nodes):
             self._wanted[j] = int(counts[j])
             self._step(j, node)
+
+    def enable(self, now):
+        """Every drive to OPERATION ENABLED at its actual position (lifecycle activate)."""
+        self.power = True
+        if self._network is None:
+            return  # the next (re)connection enables them
+        try:
+            for j, node in enumerate(self._nodes):
+                self._enable(j, node)
+        except (canopen.SdoCommunicationError, can.CanError, OSError) as error:
+            raise self._lost('lost while enabling: %s' % error) from None
+
+    def disable(self, now):
+        """Hold, then Shutdown (READY TO SWITCH ON: power stage off; lifecycle deactivate)."""
+        self.power = False
+        if self._network is None:
+            return
+        try:
+            for j, node in enumerate(self._nodes):
+                self._read_position(j, node, SHUTDOWN)
+                node.sdo[CONTROLWORD].raw = SHUTDOWN
+                self._statuswords[j] = self._wait_state(node, 'READY TO SWITCH ON')
+        except (canopen.SdoCommunicationError, can.CanError, OSError) as error:
+            raise self._lost('lost while disabling: %s' % error) from None
 
     def hold(self, now):
         """Target = the positions last read."""
@@ -380,7 +414,8 @@ class CanopenCableBackend(CableBackend):
             values['state_%d' % self.node_ids[j]] = state
             values['position_%d' % self.node_ids[j]] = int(self._positions[j])
             codes = ', '.join('EMCY ' + emcy_text(e.code) for e in emcy[j])
-            if state != 'OPERATION ENABLED' and self._network is not None:
+            wanted = 'OPERATION ENABLED' if self.power else 'READY TO SWITCH ON'
+            if state != wanted and self._network is not None:
                 problems.append('%s %s%s' % (self._label(j), state.lower(),
                                              ': ' + codes if codes else ''))
             elif codes:

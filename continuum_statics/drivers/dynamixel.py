@@ -230,14 +230,49 @@ class DynamixelCableBackend(CableBackend):
                 reference = int(self.spool.zeros[j])
             self._turns[j] = int(round((reference - raw) / TICKS_PER_REV))
         self._last_ticks[j] = raw + int(self._turns[j]) * TICKS_PER_REV
-        if not torque:
-            self._txrx(j, 'write Goal Position', packet.write4ByteTxRx, ADDR_GOAL_POSITION,
-                       raw & 0xFFFFFFFF)
-            _, error = self._txrx(j, 'torque on', packet.write1ByteTxRx, ADDR_TORQUE_ENABLE, 1)
-            if error & 0x7F:
-                self._torque_refused.add(j)
-            else:
-                self._torque_refused.discard(j)
+        if not torque and self.power:
+            self._torque_on(j, raw)
+        elif torque and not self.power:
+            self._txrx(j, 'torque off', packet.write1ByteTxRx, ADDR_TORQUE_ENABLE, 0)
+
+    def _torque_on(self, j, raw):
+        """Goal Position = Present Position ``raw`` (no jump), then torque on."""
+        packet = self._packet
+        self._txrx(j, 'write Goal Position', packet.write4ByteTxRx, ADDR_GOAL_POSITION,
+                   raw & 0xFFFFFFFF)
+        _, error = self._txrx(j, 'torque on', packet.write1ByteTxRx, ADDR_TORQUE_ENABLE, 1)
+        if error & 0x7F:
+            self._torque_refused.add(j)
+        else:
+            self._torque_refused.discard(j)
+
+    def enable(self, now):
+        """Torque on at the present positions (lifecycle activate)."""
+        self.power = True
+        if self._port is None:
+            return  # the next (re)connection switches it on
+        try:
+            for j in range(len(self.ids)):
+                torque, _ = self._txrx(j, 'read Torque Enable', self._packet.read1ByteTxRx,
+                                       ADDR_TORQUE_ENABLE)
+                if not torque:
+                    raw, _ = self._txrx(j, 'read Present Position', self._packet.read4ByteTxRx,
+                                        132)
+                    self._torque_on(j, _signed32(raw))
+        except self._port_errors as error:
+            raise self._lost('lost while enabling', error) from None
+
+    def disable(self, now):
+        """Hold, then torque off (lifecycle deactivate): the spools can be turned by hand."""
+        self.power = False
+        if self._port is None:
+            return
+        try:
+            self.hold(now)
+            for j in range(len(self.ids)):
+                self._txrx(j, 'torque off', self._packet.write1ByteTxRx, ADDR_TORQUE_ENABLE, 0)
+        except self._port_errors as error:
+            raise self._lost('lost while disabling', error) from None
 
     # -- cycle ----------------------------------------------------------------------------
     def _sync_read(self, address, length):

@@ -29,7 +29,7 @@ import time
 from types import SimpleNamespace
 
 import numpy as np
-from rclpy.node import Node
+from rclpy.lifecycle import LifecycleNode, TransitionCallbackReturn
 from rclpy.qos import qos_profile_sensor_data
 from sensor_msgs.msg import JointState
 from std_srvs.srv import Trigger
@@ -67,8 +67,15 @@ def _check_backend(value):
     return None
 
 
-class CableDriverNode(Node):
-    """Cable actuator bridge: commands in, measured cable lengths out."""
+class CableDriverNode(LifecycleNode):
+    """Cable actuator bridge: commands in, measured cable lengths out; a lifecycle node.
+
+    unconfigured -> configure (open the port or bus, read the positions; cable_states flow, the
+    power stage / torque stays off) -> activate (torque on / operation enabled at the present
+    positions; commands accepted) -> deactivate (hold, torque off; commands refused) -> cleanup
+    (release the port or bus). ``autostart`` (default true) configures and activates at once.
+    A lost connection is retried in any configured state; it never needs a restart.
+    """
 
     EXECUTOR = 'single'
 
@@ -92,6 +99,8 @@ class CableDriverNode(Node):
                       'previous home is off), m', 1e-5, 1.0),
             ParamSpec('home_force', False, '~/set_home takes the current positions as the '
                       'straight pose whatever they read (a first homing, a known-bad home)'),
+            ParamSpec('autostart', True, 'configure and activate at start-up (false: wait for '
+                      'the lifecycle transitions, e.g. from a lifecycle manager)', read_only=True),
             ParamSpec('reconnect_max_interval', 2.0, 'longest wait between two reconnection '
                       'attempts after a lost port or bus, s', 0.1, 60.0),
         ]
@@ -138,7 +147,10 @@ class CableDriverNode(Node):
         self._diagnostics = self.create_publisher(diag.DiagnosticArray, '/diagnostics', 10)
         steady_timer(self, 1.0 / self._params['diagnostics_rate'], self._publish_diagnostics)
         self._loop = None
-        self.backend = None
+        self.backend = None  # created by configure, released by cleanup
+        self._backend_options = options
+        self._active = False
+        self._ros_topics = None  # the command sender lent to a ROS-topic backend
         if not self.cable_names:
             # A passive rod (no cables): say it once, stay up, publish only diagnostics.
             self.get_logger().warning(
@@ -146,12 +158,6 @@ class CableDriverNode(Node):
                 'it stays up and publishes no cable_states' % self.robot.name)
             self._params.on_change = self._on_parameter_change
             return
-
-        self.backend = self._backend_cls(self.cable_names, self._limits,
-                                         self.robot.straight_cable_lengths, **options)
-        if hasattr(self.backend, 'attach_ros'):  # ros2_control: the node lends it topics
-            self._attach_ros_topics()
-        self._connect(time.monotonic())
 
         self._publisher = self.create_publisher(JointState, 'cable_states',
                                                 qos_profile_sensor_data)
@@ -170,24 +176,113 @@ class CableDriverNode(Node):
         self.get_logger().info('cable_driver: backend %s, %d cables (%s), %g Hz' % (
             self._backend_cls.name, len(self.cable_names), ', '.join(self.cable_names),
             self._params['publish_rate']))
+        if self._params['autostart']:
+            self.trigger_configure()
+            self.trigger_activate()
+
+    # -- lifecycle --------------------------------------------------------------------------
+    def on_configure(self, state):
+        """Create the backend, open the port or bus and read (power off)."""
+        if not self.cable_names:
+            return TransitionCallbackReturn.SUCCESS
+        try:
+            backend = self._backend_cls(self.cable_names, self._limits,
+                                        self.robot.straight_cable_lengths,
+                                        **self._backend_options)
+        except Exception as error:  # bad options a parameter check could not see
+            self.get_logger().error('configure failed: %s' % error)
+            return TransitionCallbackReturn.FAILURE
+        backend.power = False
+        with self._lock:
+            self.backend = backend
+            if hasattr(backend, 'attach_ros'):  # ros2_control: the node lends it topics
+                self._attach_ros_topics()
+            self._retry_delay = FIRST_RETRY_S
+            self._connect(time.monotonic())  # a failure is retried by the loop
+        return TransitionCallbackReturn.SUCCESS
+
+    def on_activate(self, state):
+        """Torque on / operation enabled at the present positions; accept commands."""
+        return self._switch_power(True)
+
+    def on_deactivate(self, state):
+        """Refuse commands, hold, torque off / power stage off."""
+        return self._switch_power(False)
+
+    def on_cleanup(self, state):
+        """Release the actuators and the port or bus."""
+        self._release()
+        return TransitionCallbackReturn.SUCCESS
+
+    def on_shutdown(self, state):
+        """Power off and release, from any state."""
+        self._release()
+        return TransitionCallbackReturn.SUCCESS
+
+    def _switch_power(self, on):
+        if self.backend is None:
+            self._active = on
+            return TransitionCallbackReturn.SUCCESS
+        with self._lock:
+            self._active = on
+            self._holding = True
+            now = time.monotonic()
+            try:
+                if self._connected:
+                    (self.backend.enable if on else self.backend.disable)(now)
+                else:
+                    self.backend.power = on  # the reconnection does it
+            except ConnectionLost as error:
+                self._lost(error, now)  # the reconnection does it
+            except Exception as error:
+                self.get_logger().error('%s failed: %s' % ('activate' if on else 'deactivate',
+                                                          error))
+                return TransitionCallbackReturn.FAILURE
+        self.get_logger().info('cable_driver %s' % ('active: torque on, commands accepted' if on
+                                                    else 'inactive: torque off, holding'))
+        return TransitionCallbackReturn.SUCCESS
+
+    def _release(self):
+        with self._lock:
+            backend, self.backend = self.backend, None
+            self._active = False
+            self._connected = False
+            if backend is None:
+                return
+            try:
+                if not self._connection_error:
+                    backend.hold(time.monotonic())
+            except Exception as error:
+                self.get_logger().warning('hold at release failed: %s' % error)
+            try:
+                backend.close()
+            except Exception as error:
+                self.get_logger().error('backend shutdown failed: %s' % error)
 
     def _attach_ros_topics(self):
-        """Give a ROS-topic backend (ros2_control) a command publisher and joint_states."""
-        from std_msgs.msg import Float64MultiArray
+        """Lend a ROS-topic backend (ros2_control) a command publisher and joint_states.
 
-        backend = self.backend
-        publisher = self.create_publisher(Float64MultiArray, backend.command_topic, COMMAND_QOS)
+        Created once; every later configure hands the same topics to the new backend.
+        """
+        if self._ros_topics is None:
+            from std_msgs.msg import Float64MultiArray
 
-        def send(positions):
-            publisher.publish(Float64MultiArray(data=[float(p) for p in positions]))
+            publisher = self.create_publisher(Float64MultiArray, self.backend.command_topic,
+                                              COMMAND_QOS)
 
-        def on_joint_state(msg):
-            backend.on_joint_state(msg.name, msg.position, msg.velocity, msg.effort,
-                                   time.monotonic())
+            def send(positions):
+                publisher.publish(Float64MultiArray(data=[float(p) for p in positions]))
 
-        self.create_subscription(JointState, backend.state_topic, on_joint_state,
-                                 qos_profile_sensor_data)
-        backend.attach_ros(send)
+            def on_joint_state(msg):
+                backend = self.backend
+                if backend is not None:
+                    backend.on_joint_state(msg.name, msg.position, msg.velocity, msg.effort,
+                                           time.monotonic())
+
+            self.create_subscription(JointState, self.backend.state_topic, on_joint_state,
+                                     qos_profile_sensor_data)
+            self._ros_topics = send
+        self.backend.attach_ros(self._ros_topics)
 
     # -- connection -------------------------------------------------------------------------
     def _connect(self, now):
@@ -227,8 +322,11 @@ class CableDriverNode(Node):
             self._loop.rate = value
 
     def _on_option_change(self, name, value):
+        key = name.split('.', 1)[1]
         with self._lock:
-            self.backend.set_option(name.split('.', 1)[1], value)
+            if self.backend is not None:
+                self.backend.set_option(key, value)
+            self._backend_options[key] = value  # for the next configure
 
     # -- commands -----------------------------------------------------------------------------
     def _reject(self, kind, reason):
@@ -238,6 +336,9 @@ class CableDriverNode(Node):
 
     def _refusal(self):
         """Why commands cannot be carried out now, or ''."""
+        if not self._active:
+            return 'cable_driver is %s (lifecycle): activate it to accept commands' % (
+                self._lifecycle_state())
         if not self._connected:
             return 'actuators not connected (%s)' % self._connection_error
         if self._backend_error:
@@ -312,6 +413,8 @@ class CableDriverNode(Node):
         now = time.monotonic()
         timeout = self._params['command_timeout']
         with self._lock:
+            if self.backend is None:  # unconfigured
+                return
             if not self._connected:
                 if now < self._next_attempt or not self._connect(now):
                     return
@@ -420,9 +523,12 @@ class CableDriverNode(Node):
 
     # -- diagnostics --------------------------------------------------------------------------
     def _publish_diagnostics(self):
-        values = {'backend': self._backend_cls.name}
-        if self.backend is None:
+        values = {'backend': self._backend_cls.name, 'lifecycle': self._lifecycle_state()}
+        if not self.cable_names:
             level, message = diag.OK, 'robot has no cables: nothing to drive'
+        elif self.backend is None:
+            level, message = diag.OK, ('unconfigured (lifecycle): configure and activate '
+                                       'cable_driver to drive the cables')
         else:
             # a reconnection can hold the lock for seconds (drive timeouts): never let it stall
             # diagnostics; report the last status read instead
@@ -442,6 +548,8 @@ class CableDriverNode(Node):
                 level, message = max(level, diag.WARN), 'rejected ' + self._problems.last_reason
             elif level == diag.OK and self._rate.total == 0:
                 message = diag.STARTING + 'waiting for the first reading (%s)' % message
+            elif level == diag.OK and not self._active:
+                message = 'inactive (lifecycle): torque off, commands refused (%s)' % message
             elif level == diag.OK and self._holding:
                 message = '%s; holding position (no command)' % message
             values.update({
@@ -466,17 +574,15 @@ class CableDriverNode(Node):
         if getattr(self, '_loop', None) is not None:  # None or unset: __init__ failed early
             self._loop.stop()
         if getattr(self, 'backend', None) is not None:
-            with self._lock:
-                try:
-                    if self._connected:
-                        self.backend.hold(time.monotonic())
-                except Exception as error:
-                    self.get_logger().warning('hold at shutdown failed: %s' % error)
-                try:
-                    self.backend.close()
-                except Exception as error:
-                    self.get_logger().error('backend shutdown failed: %s' % error)
+            self._release()
         return super().destroy_node()
+
+    def _lifecycle_state(self):
+        """'unconfigured', 'inactive' (configured) or 'active'."""
+        if self._active:
+            return 'active'
+        return 'unconfigured' if self.backend is None else 'inactive'
+
 
 
 def main(args=None):
