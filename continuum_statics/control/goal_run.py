@@ -218,6 +218,10 @@ class GoalRun:
         self.moved_onto_model += plan.recover is not None
         return previous
 
+    def adopt(self, state, commanded):
+        """Continue from an equilibrium commanded elsewhere (teleoperation) with no goal."""
+        self.command_state, self.commanded, self.warm = state, np.array(commanded), state
+
     def finish(self, goal, reached, reason):
         """End ``goal`` (idempotent); return True if this call ended it."""
         if goal.done.is_set():

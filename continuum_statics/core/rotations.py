@@ -53,3 +53,14 @@ def rotation_to_quaternion(rotations):
     out = np.empty((flat.shape[0], 4))
     _quaternions(flat, out)
     return out.reshape(m.shape[:-2] + (4,))
+
+
+def rotation_vector_matrix(vector):
+    """Rotation matrix of a rotation vector (axis times angle, rad): Rodrigues' formula."""
+    vector = np.asarray(vector, dtype=float)
+    angle = float(np.linalg.norm(vector))
+    if angle < 1e-12:
+        return np.eye(3)
+    k = vector / angle
+    hat = np.array([[0.0, -k[2], k[1]], [k[2], 0.0, -k[0]], [-k[1], k[0], 0.0]])
+    return np.eye(3) + np.sin(angle) * hat + (1.0 - np.cos(angle)) * hat @ hat

@@ -34,7 +34,7 @@ import sys
 import threading
 import time
 
-from geometry_msgs.msg import PoseStamped, WrenchStamped
+from geometry_msgs.msg import PoseStamped, TwistStamped, WrenchStamped
 from nav_msgs.msg import Path
 from nav_msgs.srv import GetPlan
 import numpy as np
@@ -44,8 +44,15 @@ from rclpy.serialization import deserialize_message
 from sensor_msgs.msg import JointState
 from std_msgs.msg import Header
 
-from continuum_statics.control.goal_run import Goal, GoalRun, RunSettings, stale_state
+from continuum_statics.control.goal_run import (
+    OFF_COMMAND,
+    Goal,
+    GoalRun,
+    RunSettings,
+    stale_state,
+)
 from continuum_statics.control.records import Measurement, TipLoad, TipSample, current_load
+from continuum_statics.control.teleop import TeleopRun, TeleopSettings, Twist
 from continuum_statics.core.rotations import quaternion_to_rotation
 from continuum_statics.core.warmup import warm_up
 from continuum_statics.nodes import diagnostics_util as diag
@@ -117,6 +124,12 @@ class TipControllerNode(Node):
             ParamSpec('tip_average_time', 1.0, 'longest time the tip is averaged after the '
                       'cables settled (noisy measurements: the mean must be known well inside '
                       'the tolerance before the goal is judged), s', 0.0, 60.0),
+            ParamSpec('max_tip_speed', 0.05, 'fastest tip speed of teleoperation (tip_twist), m/s',
+                      1e-4, 1.0),
+            ParamSpec('max_tip_rate', 0.5, 'fastest turn of the tip direction in teleoperation '
+                      '(goal_orientation: direction), rad/s', 1e-3, 10.0),
+            ParamSpec('twist_timeout', 0.5, 'dead-man: teleoperation stops (cables hold) when no '
+                      'tip_twist came for this long, s', 0.01, 10.0),
             ParamSpec('dedicated_intake_thread', True, 'serve tip_pose, backbone, cable_states '
                       'and tip_wrench from a thread of their own instead of the executor',
                       read_only=True),
@@ -133,6 +146,8 @@ class TipControllerNode(Node):
         self._lock = threading.Lock()  # guards the run: the control loop and goal starts
         self._closing = False
         self._run = GoalRun(self.robot, self._run_settings())
+        self._teleop = TeleopRun(self.robot, self._teleop_settings())
+        self._twist = None  # the newest Twist
         self._last_tick = None
         self._tips = deque(maxlen=4000)  # recent TipSamples, for the judgement of a goal
         self._recent_lengths = deque(maxlen=64)  # recent Measurements, for a low-noise mean
@@ -161,6 +176,8 @@ class TipControllerNode(Node):
                          raw=True)
         self._intake.add(WrenchStamped, 'tip_wrench', self._on_tip_wrench, LATEST_SENSOR_QOS)
         self._intake.start()
+        self.create_subscription(TwistStamped, 'tip_twist', self._on_twist, COMMAND_QOS,
+                                 callback_group=self._control_group)
         self.create_subscription(PoseStamped, 'tip_goal_pose', self._on_goal_pose, COMMAND_QOS,
                                  callback_group=self._control_group)
         self.create_service(GetPlan, 'tip_goal', self._on_tip_goal, callback_group=service_group)
@@ -177,11 +194,21 @@ class TipControllerNode(Node):
         params = self._params
         return RunSettings(**{name: params[name] for name in RunSettings.__dataclass_fields__})
 
+    def _teleop_settings(self):
+        params = self._params
+        return TeleopSettings(max_tip_speed=params['max_tip_speed'],
+                              max_tip_rate=params['max_tip_rate'],
+                              twist_timeout=params['twist_timeout'],
+                              max_cable_speed=params['max_cable_speed'])
+
     def _on_parameter_change(self, name, value):
         # called before the table stores the new value
         with self._lock:  # goals reset/cancel the timer under the same lock
             if name in RunSettings.__dataclass_fields__:
                 self._run.settings = dataclasses.replace(self._run.settings, **{name: value})
+            if name in TeleopSettings.__dataclass_fields__:
+                self._teleop.settings = dataclasses.replace(self._teleop.settings,
+                                                            **{name: value})
             elif name == 'control_rate':
                 self.destroy_timer(self._timer)
                 self._timer = steady_timer(self, 1.0 / value, self._on_control,
@@ -297,6 +324,64 @@ class TipControllerNode(Node):
             self.get_logger().error('tip_goal_pose failed: %r' % (error,))
             self._goal_rejected('internal error: %r' % (error,))
 
+    # -- teleoperation ---------------------------------------------------------------------
+    def _on_twist(self, msg):
+        try:
+            frame = msg.header.frame_id
+            if frame not in ('', self.base_frame_id):
+                raise ValueError('frame %r is not the base frame %r' % (frame, self.base_frame_id))
+            linear = np.array([msg.twist.linear.x, msg.twist.linear.y, msg.twist.linear.z])
+            angular = np.array([msg.twist.angular.x, msg.twist.angular.y, msg.twist.angular.z])
+            if not (np.all(np.isfinite(linear)) and np.all(np.isfinite(angular))):
+                raise ValueError('non-finite velocity')
+            if angular.any() and self._params['goal_orientation'] != 'direction':
+                angular = np.zeros(3)  # the tip direction is not controlled
+            self._twist = Twist(linear, angular, time.monotonic())
+            if self._teleop.active or not (linear.any() or angular.any()):
+                return
+            self._start_teleop()
+        except ValueError as error:
+            self._reject('tip_twist', error)
+        except Exception as error:  # never let one message take the node down
+            self.get_logger().error('tip_twist failed: %r' % (error,))
+            self._reject('tip_twist', 'internal error: %r' % (error,))
+
+    def _start_teleop(self):
+        """Take over from any goal and follow the twists from the current equilibrium."""
+        now = time.monotonic()
+        no_lengths = ('no cable_states from cable_driver yet' if self._measurement is None
+                      else self._stale_state(now, need_tip=False))
+        if no_lengths:
+            raise ValueError(no_lengths)
+        with self._lock:
+            goal = self._run.goal
+            if goal is not None and self._run.finish(goal, False, 'pre-empted by teleoperation'):
+                self._report(goal)
+            state, commanded, warm = self._run.snapshot()
+        measured = self._mean_lengths(self._measurement)
+        if state is None or commanded is None or float(
+                np.max(np.abs(measured - commanded))) > OFF_COMMAND:
+            load = self._current_tip_load()
+            state = self.robot.estimate_shape(measured, tip_force=load[:3],
+                                              tip_moment=load[3:], warm_start=warm)
+            commanded = self.robot.cable_lengths(state.shape)
+        with self._lock:
+            self._teleop.start(state, commanded)
+            self._last_tick = now
+            self._timer.reset()
+        self.get_logger().info('teleoperation: following tip_twist (dead-man %.3g s)'
+                               % self._params['twist_timeout'])
+
+    def _end_teleop(self, reason):
+        """Stop teleoperation (under the lock); the goal run starts from where it left off."""
+        teleop = self._teleop
+        if teleop.active:
+            teleop.stop(reason)
+        if teleop.state is not None:
+            self._run.adopt(teleop.state, teleop.commanded)
+            teleop.state = None
+            self.get_logger().info('teleoperation ended: %s' % teleop.reason)
+
     def _goal_rejected(self, error):
         self._counts['rejected'] += 1
         self._last_outcome = 'rejected: %s' % error
@@ -342,6 +427,7 @@ class TipControllerNode(Node):
                                       'onto the model from the measured lengths first' % tip_lost)
         load = self._current_tip_load()
         with self._lock:
+            self._end_teleop('pre-empted by a tip goal')
             snapshot = self._run.snapshot()
         plan = self._run.plan(position, tolerance, direction,
                               self._mean_lengths(self._measurement), load, not tip_lost,
@@ -426,22 +512,36 @@ class TipControllerNode(Node):
     # -- control loop ----------------------------------------------------------------------
     def _on_control(self):
         with self._lock:
-            goal = self._run.goal
-            if goal is None:
-                return
             now = time.monotonic()
             dt = min(max(now - self._last_tick, 0.0), 3.0 / self._params['control_rate'])
             self._last_tick = now
-            commanded = self._run.tick(now, dt, self._measurement, self._tip, self._tips,
-                                       self._current_tip_load())
-            for note in self._run.notes:
-                self._problems.add('ramp', note)
-                self.get_logger().warning(note)
-            self._run.notes.clear()
-            if goal.done.is_set():
-                self._report(goal)
+            if self._teleop.active or self._teleop.state is not None:
+                commanded = self._teleop.tick(now, dt, self._twist, self._current_tip_load())
+                if self._teleop.stopped:
+                    self._problems.add('tip_twist', self._teleop.stopped)
+                if not self._teleop.active:
+                    self._end_teleop(self._teleop.reason)
+                    if self._run.goal is None:
+                        self._timer.cancel()
+            else:
+                commanded = self._control_goal(now, dt)
         if commanded is not None:
             self._publish_command(commanded)
+
+    def _control_goal(self, now, dt):
+        """One tick of the goal run (under the lock); the command to publish or None."""
+        goal = self._run.goal
+        if goal is None:
+            return None
+        commanded = self._run.tick(now, dt, self._measurement, self._tip, self._tips,
+                                   self._current_tip_load())
+        for note in self._run.notes:
+            self._problems.add('ramp', note)
+            self.get_logger().warning(note)
+        self._run.notes.clear()
+        if goal.done.is_set():
+            self._report(goal)
+        return commanded
 
     def _publish_command(self, lengths):
         limits = self._run.limits
@@ -461,6 +561,10 @@ class TipControllerNode(Node):
             goal, phase = run.goal, run.phase.value
             corrections, fraction, moved = run.corrections, run.fraction, run.moved_onto_model
         level, message = diag.OK, 'idle' if goal is None else 'moving to a goal (%s)' % phase
+        if self._teleop.active:
+            message = 'teleoperation (tip_twist)'
+            if self._teleop.stopped:
+                level, message = diag.WARN, 'teleoperation ' + self._teleop.stopped
         missing = self._missing_state()
         if missing:
             message = diag.STARTING + 'waiting for state: ' + missing
