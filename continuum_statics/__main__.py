@@ -11,6 +11,7 @@ commands:
   bringup   start the statics, tip_controller and cable_driver nodes in one process
   statics | tip_controller | cable_driver
             run one node alone, like `ros2 run` (options: --ros-args ...)
+  teleop    drive the tip from the keyboard (tip_twist, in a terminal)
   warmup    compile the kernels into the numba cache (the venv setup does it once)
   demo      bringup with the simulated driver plus a client sending tip goals
   record    record the robot's topics into a rosbag2 directory (MCAP; Ctrl-C to stop)
@@ -40,6 +41,8 @@ def main(argv=None):
         import importlib
         node_main = importlib.import_module('continuum_statics.nodes.%s_node' % command).main
         return node_main([command] + rest)
+    elif command == 'teleop':
+        from continuum_statics.tools.teleop import main as run
     elif command == 'warmup':
         from continuum_statics.core.warmup import main as run
     elif command == 'demo':

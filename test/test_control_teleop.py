@@ -32,11 +32,11 @@ def test_a_constant_twist_moves_the_tip_at_that_velocity_through_equilibria():
     run.start(start, start.cable_lengths)
     velocity = np.array([0.0, 0.01, -0.005])
     _, commands = drive(run, velocity, 1.0)
-    moved = run.state.shape.tip_position - start.shape.tip_position
+    moved = run.state.tip_position - start.shape.tip_position
     np.testing.assert_allclose(moved, velocity * 1.0, atol=2e-4)
     assert not run.stopped
     # every command is an equilibrium of the robot: the model's own lengths at its state
-    np.testing.assert_allclose(ROBOT.cable_lengths(run.state.shape), commands[-1], atol=1e-9)
+    np.testing.assert_allclose(ROBOT.cable_lengths(run.state), commands[-1], atol=1e-9)
     steps = np.abs(np.diff(np.array(commands), axis=0)).max(axis=1)
     assert steps.max() <= 0.02 * DT * 1.05
 
@@ -46,7 +46,7 @@ def test_the_speed_is_capped_and_the_dead_man_stops_it():
     run = TeleopRun(ROBOT, TeleopSettings(max_tip_speed=0.005, twist_timeout=0.3))
     run.start(start, start.cable_lengths)
     t, _ = drive(run, [0.05, 0.0, 0.0], 0.5)  # ten times the cap
-    moved = np.linalg.norm(run.state.shape.tip_position - start.shape.tip_position)
+    moved = np.linalg.norm(run.state.tip_position - start.shape.tip_position)
     assert abs(moved - 0.005 * 0.5) < 2e-4, moved
     old = Twist(np.array([0.05, 0.0, 0.0]), np.zeros(3), t)
     assert run.tick(t + 0.2, DT, old, ZERO) is not None  # within the dead-man time
@@ -66,3 +66,14 @@ def test_the_tip_stops_at_the_edge_of_the_workspace_inside_the_length_limits():
     # still an equilibrium, and still following a twist back inwards
     _, _ = drive(run, [-0.01, 0.0, 0.0], 0.2, start_time=10.0)
     assert not run.stopped
+
+
+def test_the_keyboard_tool_maps_keys_to_velocities():
+    from continuum_statics.tools.teleop import velocity_for
+
+    direction, speed = velocity_for('w', np.zeros(3), 0.01)
+    assert direction.tolist() == [1.0, 0.0, 0.0] and speed == 0.01
+    assert velocity_for('f', direction, speed)[0].tolist() == [0.0, 0.0, -1.0]
+    assert velocity_for('+', direction, speed)[1] > speed
+    assert not velocity_for(' ', direction, speed)[0].any()
+    assert velocity_for('q', direction, speed)[0] is None

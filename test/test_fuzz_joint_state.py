@@ -23,7 +23,7 @@ pytest.importorskip('rclpy')
 from rclpy.serialization import deserialize_message, serialize_message  # noqa: E402
 from sensor_msgs.msg import JointState  # noqa: E402
 
-from continuum_statics.nodes.ros_conversions import parse_joint_state  # noqa: E402
+from continuum_statics.nodes.joint_state_parser import parse_joint_state  # noqa: E402
 
 EXAMPLES = int(os.environ.get('FUZZ_EXAMPLES', '1500'))
 FUZZ = settings(max_examples=EXAMPLES, deadline=None, database=None,

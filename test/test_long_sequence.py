@@ -25,7 +25,7 @@ from rclpy.qos import qos_profile_sensor_data  # noqa: E402
 from sensor_msgs.msg import JointState  # noqa: E402
 
 from continuum_statics import load_robot  # noqa: E402
-from continuum_statics.tools.goal_client import random_goals  # noqa: E402
+from continuum_statics.core.workspace import reachable_tips  # noqa: E402
 
 pytestmark = pytest.mark.ros
 ROBOT_FILE = REPO / 'config' / 'two_section_robot.yaml'
@@ -124,7 +124,7 @@ def test_a_long_sequence_of_normal_use_ends_with_every_goal_reached(layout, tmp_
         wait_until(lambda: client.states.last is not None, 30.0, 'cable_states')
         # 1. goals while the tip load changes (up to 40 % of statics' default limit)
         force_limit = 10.0 * ROBOT.c[0] / ROBOT.length ** 2
-        for goal in random_goals(ROBOT, 4, SEED):
+        for goal in reachable_tips(ROBOT, 4, SEED):
             client.load(rng.uniform(-0.4, 0.4, 3) * force_limit)
             client.goal(goal)  # under load it may be out of reach: answered, not judged
         # 2. the load removed, then one section paid out by 4 mm by hand
@@ -143,7 +143,7 @@ def test_a_long_sequence_of_normal_use_ends_with_every_goal_reached(layout, tmp_
         wait_until(client.tip_quiet, 10.0, 'no tip pose for a second')
         # 3. every goal after that is reached
         errors = []
-        for goal in random_goals(ROBOT, 4, SEED + 1):
+        for goal in reachable_tips(ROBOT, 4, SEED + 1):
             error = client.goal(goal)
             assert error is not None and error <= 1e-3, (goal, error, client.outcome())
             errors.append(error)

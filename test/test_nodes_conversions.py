@@ -23,15 +23,15 @@ from continuum_statics.core.rotations import (  # noqa: E402
 )
 from continuum_statics.nodes.bringup import parse_args  # noqa: E402
 from continuum_statics.nodes.dedicated_intake import IntakeEntry  # noqa: E402
+from continuum_statics.nodes.joint_state_parser import parse_joint_state  # noqa: E402
 from continuum_statics.nodes.marker_geometry import guide_and_cable_points  # noqa: E402
+from continuum_statics.nodes.markers import BackboneMarkers  # noqa: E402
 from continuum_statics.nodes.node_params import ParamSpec, resolve_config_path  # noqa: E402
+from continuum_statics.nodes.pose_encoder import PoseSequenceEncoder  # noqa: E402
 from continuum_statics.nodes.ros_conversions import (  # noqa: E402
-    BackboneMarkers,
-    PoseSequenceEncoder,
     cable_index,
     fill_path,
     goal_position,
-    parse_joint_state,
     set_pose,
     tip_load,
 )
@@ -268,7 +268,7 @@ def test_intake_counts_lost_and_stale_messages():
 
 def test_each_cable_is_drawn_to_its_end_disk_and_the_tube_coloured_by_section():
     from continuum_statics.nodes.marker_geometry import section_layout, section_of
-    from continuum_statics.nodes.ros_conversions import SECTION_COLORS
+    from continuum_statics.nodes.markers import SECTION_COLORS
 
     robot = load_robot(REPO / 'config' / 'two_section_robot.yaml')
     cable_ends, section_ends = section_layout(robot)

@@ -348,3 +348,22 @@ def test_a_goal_before_any_state_waits_for_it_and_the_controller_says_it_is_star
     assert plan.poses, status()
     assert np.linalg.norm(pose_xyz(plan.poses[-1].pose) - goal) <= 1e-3
     wait_until(lambda: status()[0].get('state') == 'ready', 10.0, 'a ready status')
+
+
+def test_a_click_on_the_workspace_markers_is_a_tip_goal(harness):
+    from geometry_msgs.msg import PointStamped
+
+    stack = Stack(harness)
+    workspace = Collector(stack.client, MarkerArray, 'workspace_markers', LATCHED)
+    wait_until(lambda: workspace.last is not None, 10.0, 'the workspace markers')
+    points = workspace.last.markers[0].points
+    assert len(points) == 400
+    clicked = points[7]  # what RViz's Publish Point tool sends for a click on that sphere
+    msg = PointStamped()
+    msg.header.frame_id = 'base_link'
+    msg.point = clicked
+    goal = np.array([clicked.x, clicked.y, clicked.z])
+    publisher = stack.client.create_publisher(PointStamped, 'tip_goal_point', RELIABLE)
+    publish_until(publisher, msg, lambda: stack.values().get('goals_reached') == '1', 20.0,
+                  'the clicked goal reached')
+    assert np.linalg.norm(pose_xyz(stack.tip.last.pose) - goal) <= 1e-3

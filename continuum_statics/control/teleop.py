@@ -2,9 +2,10 @@
 
 The tip Jacobian of paper sec. V.B works inside each warm-started tip-goal solve.
 
-Every control period the tip target advances by v dt (v capped at ``max_tip_speed``) and the
-equilibrium with its tip there is solved from the previous one, so each command is the
-cable-length set of a shape of the robot; a step that would move a cable faster than
+Every control period the tip target advances by v dt (v capped at ``max_tip_speed``) and one
+constrained Newton step (the probe's forward-difference Jacobian, the tip moment balance held)
+moves the solver state there from the previous equilibrium, so each command is the cable-length
+set of a shape of the robot at ~1 ms a step; a step that would move a cable faster than
 ``max_cable_speed`` is shortened. Where the target leaves the reachable set (the workspace
 boundary, a cable at a length limit) the tip stops there and the run says why. With no twist for
 ``twist_timeout`` (the dead-man) the run ends and the cables hold. An angular velocity turns the
@@ -25,7 +26,6 @@ class TeleopSettings:
     max_tip_rate: float = 0.5
     twist_timeout: float = 0.5
     max_cable_speed: float = 0.02
-    step_tolerance: float = 1e-5  # the solve's; a step within 10x of it is taken (m)
 
 
 @dataclass(frozen=True, eq=False)
@@ -45,7 +45,8 @@ class TeleopRun:
         self.settings = settings
         self.limits = np.asarray(robot.cable_length_limits, dtype=float).reshape(-1, 2)
         self.active = False
-        self.state = None  # the equilibrium commanded last
+        self.state = None  # the shape (an equilibrium) commanded last
+        self.x = None  # its solver state
         self.commanded = None  # its cable lengths (m)
         self.target = None  # where the twist has taken the tip so far (m, base frame)
         self.direction = None  # its tip z axis while an angular twist steers it, else None
@@ -54,10 +55,12 @@ class TeleopRun:
 
     def start(self, state, commanded):
         """Start from an equilibrium (an estimate or a solution) and the lengths commanded."""
-        self.state = state
+        shape = getattr(state, 'shape', state)
+        self.x = np.array(shape.state, dtype=float)
+        self.state = shape
         self.commanded = np.clip(np.asarray(commanded, dtype=float), self.limits[:, 0],
                                  self.limits[:, 1])
-        self.target = np.array(state.shape.tip_position, dtype=float)
+        self.target = np.array(shape.tip_position, dtype=float)
         self.direction = None
         self.active, self.stopped, self.reason = True, '', ''
 
@@ -80,41 +83,70 @@ class TeleopRun:
         if not (velocity.any() or rate.any()):
             self.stopped = ''
             return self.commanded
-        fraction = 1.0
+        fraction, why = 1.0, ''
         for _ in range(4):  # shorten the step until no cable moves faster than allowed
-            solution, direction = self._solve(velocity * dt * fraction, rate * dt * fraction,
-                                              load)
-            lengths = np.asarray(solution.cable_lengths, dtype=float)
+            step = self._step(velocity * dt * fraction, rate * dt * fraction, load)
+            if step is None:
+                why = 'the workspace boundary'
+                break
+            x, lengths, tip, direction = step
             change = float(np.max(np.abs(lengths - self.commanded)))
             budget = settings.max_cable_speed * dt
-            if change <= budget * 1.05 or not np.isfinite(change):
+            if change <= budget * 1.05:
                 break
             fraction *= 0.9 * budget / change
-        wanted = float(np.linalg.norm(velocity)) * dt * fraction
-        if not (np.all(np.isfinite(lengths)) and change <= budget * 1.05
-                and solution.error <= max(0.5 * wanted, 10.0 * settings.step_tolerance)):
-            limited = ', '.join(solution.limited_cables)
-            self.stopped = ('stopped at %s: the tip cannot follow the twist further' % (
-                'the length limit of ' + limited if limited else 'the workspace boundary'))
+        else:
+            why = 'the cable speed limit'
+        if step is not None and not why:
+            outside = np.flatnonzero((lengths < self.limits[:, 0]) |
+                                     (lengths > self.limits[:, 1]))
+            wanted = velocity * dt * fraction
+            moved = tip - self.state.tip_position
+            if outside.size:
+                why = 'the length limit of ' + ', '.join(self.robot.cable_names[i]
+                                                        for i in outside)
+            elif velocity.any() and moved @ wanted < 0.5 * (wanted @ wanted):
+                why = 'the workspace boundary'
+        if why:
+            self.stopped = 'stopped at %s: the tip cannot follow the twist further' % why
             return self.commanded
         self.stopped = ''
-        # the target integrates v dt exactly: the solver's small errors do not add up
-        self.state, self.commanded = solution, lengths
-        self.target = self.target + velocity * dt * fraction
-        self.direction = direction
+        # the target integrates v dt exactly, so the linearisation's small errors do not add
+        # up; where the tip could not follow (along a boundary) it restarts from the tip
+        target = self.target + velocity * dt * fraction
+        lag = float(np.linalg.norm(tip - target))
+        self.target = target if lag <= 0.25 * float(np.linalg.norm(wanted)) + 1e-6 else tip
+        self.x, self.commanded, self.direction = x, lengths, direction
+        states = self.robot.integrate_state(x, load[:3])
+        self.state = self.robot.make_shape(x, load[:3], states)
         return self.commanded
 
-    def _solve(self, step, turn, load):
-        """Solve the equilibrium with the tip ``step`` (m) on and its axis turned by ``turn``."""
+    def _step(self, move, turn, load):
+        """One constrained Newton step of the state towards the moved tip (and turned axis).
+
+        Rows: tip position to ``target + move`` and the tip moment balance (equilibrium), plus
+        the tip axis when turning; the least-norm step spreads the motion over the sections.
+        Returns (state, its cable lengths, its tip, direction goal) or None if not finite.
+        """
+        robot = self.robot
+        n = len(robot.cable_names)
+        force, moment = np.asarray(load[:3], dtype=float), np.asarray(load[3:], dtype=float)
+        values, jac, _ = robot.probe(self.x, robot.state_size, force, moment)
+        balance = slice(6 + n, 9 + n)
+        rows = [jac[0:3], jac[balance]]
+        rhs = [self.target + move - values[0:3], -values[balance]]
         direction = self.direction
         if turn.any():
-            axis = direction if direction is not None else self.state.shape.tip_rotation[:, 2]
+            axis = direction if direction is not None else values[3:6]
             direction = rotation_vector_matrix(turn) @ axis
-        solution = self.robot.solve_tip_goal(
-            self.target + step, tip_force=load[:3], tip_moment=load[3:],
-            tolerance=self.settings.step_tolerance, goal_direction=direction,
-            warm_start=self.state)
-        return solution, direction
+            rows.append(jac[3:6] * robot.length)
+            rhs.append((direction - values[3:6]) * robot.length)
+        delta = np.linalg.lstsq(np.vstack(rows), np.concatenate(rhs), rcond=1e-10)[0]
+        x = self.x + delta
+        values, _, _ = robot.probe(x, 0, force, moment)
+        if not np.all(np.isfinite(values)):
+            return None
+        return x, values[6:6 + n].copy(), values[0:3].copy(), direction
 
 
 def _capped(vector, limit):

@@ -38,6 +38,7 @@ from continuum_statics.drivers import BackendStatus, ConnectionLost, backend_cla
 from continuum_statics.drivers.home_file import load_home_file, write_home_file
 from continuum_statics.nodes import diagnostics_util as diag
 from continuum_statics.nodes.dedicated_intake import PeriodicThread
+from continuum_statics.nodes.joint_state_parser import parse_joint_state
 from continuum_statics.nodes.node_params import (
     ParameterTable,
     ParamSpec,
@@ -46,12 +47,7 @@ from continuum_statics.nodes.node_params import (
     robot_file_spec,
 )
 from continuum_statics.nodes.qos import COMMAND_QOS
-from continuum_statics.nodes.ros_conversions import (
-    cable_index,
-    joint_positions,
-    joint_state,
-    parse_joint_state,
-)
+from continuum_statics.nodes.ros_conversions import cable_index, joint_positions, joint_state
 from continuum_statics.nodes.timers import steady_timer
 
 THROTTLE_S = 2.0

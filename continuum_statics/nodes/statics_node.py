@@ -17,7 +17,7 @@ few ms on a loaded 2-core machine lost 5-10 % of a 1 kHz stream.) Without the de
 subscription is depth 1 on the executor.
 
 Backbone and tip pose are published as serialized bytes filled from a template
-(:class:`~continuum_statics.nodes.ros_conversions.PoseSequenceEncoder`): converting a Path
+(:class:`~continuum_statics.nodes.pose_encoder.PoseSequenceEncoder`): converting a Path
 object costs rclpy ~0.2 ms, which matters at 1 kHz.
 
 Two residual thresholds (RMS difference between the measured cable lengths and those of the
@@ -58,11 +58,13 @@ from continuum_statics.core.rotations import rotation_to_quaternion
 from continuum_statics.core.warmup import warm_up
 from continuum_statics.nodes import diagnostics_util as diag
 from continuum_statics.nodes.dedicated_intake import make_intake
+from continuum_statics.nodes.joint_state_parser import parse_joint_state
 from continuum_statics.nodes.marker_geometry import (
     guide_and_cable_points,
     section_layout,
     section_of,
 )
+from continuum_statics.nodes.markers import BackboneMarkers
 from continuum_statics.nodes.node_params import (
     ParameterTable,
     ParamSpec,
@@ -72,14 +74,9 @@ from continuum_statics.nodes.node_params import (
     tip_wrench_limit_specs,
     tip_wrench_limits,
 )
+from continuum_statics.nodes.pose_encoder import PoseSequenceEncoder
 from continuum_statics.nodes.qos import LATCHED_QOS, LATEST_SENSOR_QOS
-from continuum_statics.nodes.ros_conversions import (
-    BackboneMarkers,
-    PoseSequenceEncoder,
-    cable_index,
-    parse_joint_state,
-    tip_load,
-)
+from continuum_statics.nodes.ros_conversions import cable_index, tip_load
 from continuum_statics.nodes.timers import steady_timer
 
 THROTTLE_S = 2.0

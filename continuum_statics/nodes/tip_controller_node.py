@@ -34,7 +34,7 @@ import sys
 import threading
 import time
 
-from geometry_msgs.msg import PoseStamped, TwistStamped, WrenchStamped
+from geometry_msgs.msg import PointStamped, PoseStamped, TwistStamped, WrenchStamped
 from nav_msgs.msg import Path
 from nav_msgs.srv import GetPlan
 import numpy as np
@@ -43,6 +43,7 @@ from rclpy.node import Node
 from rclpy.serialization import deserialize_message
 from sensor_msgs.msg import JointState
 from std_msgs.msg import Header
+from visualization_msgs.msg import MarkerArray
 
 from continuum_statics.control.goal_run import (
     OFF_COMMAND,
@@ -55,8 +56,11 @@ from continuum_statics.control.records import Measurement, TipLoad, TipSample, c
 from continuum_statics.control.teleop import TeleopRun, TeleopSettings, Twist
 from continuum_statics.core.rotations import quaternion_to_rotation
 from continuum_statics.core.warmup import warm_up
+from continuum_statics.core.workspace import reachable_tips
 from continuum_statics.nodes import diagnostics_util as diag
 from continuum_statics.nodes.dedicated_intake import make_intake
+from continuum_statics.nodes.joint_state_parser import parse_joint_state
+from continuum_statics.nodes.markers import workspace_markers
 from continuum_statics.nodes.node_params import (
     ParameterTable,
     ParamSpec,
@@ -72,7 +76,6 @@ from continuum_statics.nodes.ros_conversions import (
     float32_value,
     goal_position,
     joint_state,
-    parse_joint_state,
     pose_position,
     tip_load,
 )
@@ -84,6 +87,8 @@ MIN_TOLERANCE = 1e-6
 #: A goal starts from the mean of the cable lengths measured in this window, s (at rest it
 #: averages the encoder noise; a moving cable lags by at most speed x window).
 MEAN_WINDOW_S = 0.05
+#: Reachable tips drawn as RViz click targets (workspace_markers).
+WORKSPACE_SAMPLES = 400
 
 
 class TipControllerNode(Node):
@@ -178,6 +183,13 @@ class TipControllerNode(Node):
         self._intake.start()
         self.create_subscription(TwistStamped, 'tip_twist', self._on_twist, COMMAND_QOS,
                                  callback_group=self._control_group)
+        # RViz's Publish Point tool: a click on the workspace markers is a 3-D tip goal
+        self.create_subscription(PointStamped, 'tip_goal_point', self._on_goal_point,
+                                 COMMAND_QOS, callback_group=self._control_group)
+        if self.cable_names:
+            workspace = self.create_publisher(MarkerArray, 'workspace_markers', LATCHED_QOS)
+            workspace.publish(workspace_markers(
+                self.base_frame_id, reachable_tips(self.robot, WORKSPACE_SAMPLES, seed=0)))
         self.create_subscription(PoseStamped, 'tip_goal_pose', self._on_goal_pose, COMMAND_QOS,
                                  callback_group=self._control_group)
         self.create_service(GetPlan, 'tip_goal', self._on_tip_goal, callback_group=service_group)
@@ -313,6 +325,12 @@ class TipControllerNode(Node):
                 response.plan = plan
         return response
 
+    def _on_goal_point(self, msg):
+        pose = PoseStamped(header=msg.header)
+        pose.pose.position = msg.point
+        pose.pose.orientation.w = 1.0
+        self._on_goal_pose(pose)
+
     def _on_goal_pose(self, msg):
         try:
             self._start_goal(goal_position(msg, self.base_frame_id),
@@ -425,6 +443,11 @@ class TipControllerNode(Node):
         if tip_lost:
             self.get_logger().warning('goal without a fresh tip pose (%s): moving the cables '
                                       'onto the model from the measured lengths first' % tip_lost)
+        with self._lock:
+            running = self._run.goal
+        if running is not None and running.tolerance == tolerance and np.array_equal(
+                running.position, position) and np.array_equal(running.direction, direction):
+            return running  # the same goal again (a stream repeats it): it goes on
         load = self._current_tip_load()
         with self._lock:
             self._end_teleop('pre-empted by a tip goal')
@@ -466,6 +489,9 @@ class TipControllerNode(Node):
         self._last_outcome = '%s (%.4f, %.4f, %.4f): %s' % (key, *goal.position, goal.reason)
         if goal.reached:
             self.get_logger().info('tip goal reached: %s' % goal.reason)
+        elif key == 'preempted':  # streaming goals pre-empt each other all the time: no warning
+            self.get_logger().info('tip goal (%.4f, %.4f, %.4f) m %s'
+                                   % (*goal.position, goal.reason))
         else:
             self._problems.add('tip_goal', goal.reason)
             self.get_logger().warning('tip goal (%.4f, %.4f, %.4f) m not reached: %s'
@@ -513,10 +539,11 @@ class TipControllerNode(Node):
     def _on_control(self):
         with self._lock:
             now = time.monotonic()
-            dt = min(max(now - self._last_tick, 0.0), 3.0 / self._params['control_rate'])
-            self._last_tick = now
+            elapsed, self._last_tick = max(now - self._last_tick, 0.0), now
             if self._teleop.active or self._teleop.state is not None:
-                commanded = self._teleop.tick(now, dt, self._twist, self._current_tip_load())
+                # a late tick catches up (the cable speed limit still bounds the step)
+                commanded = self._teleop.tick(now, min(elapsed, self._params['twist_timeout']),
+                                              self._twist, self._current_tip_load())
                 if self._teleop.stopped:
                     self._problems.add('tip_twist', self._teleop.stopped)
                 if not self._teleop.active:
@@ -524,7 +551,8 @@ class TipControllerNode(Node):
                     if self._run.goal is None:
                         self._timer.cancel()
             else:
-                commanded = self._control_goal(now, dt)
+                commanded = self._control_goal(
+                    now, min(elapsed, 3.0 / self._params['control_rate']))
         if commanded is not None:
             self._publish_command(commanded)
 
@@ -578,6 +606,7 @@ class TipControllerNode(Node):
         values = {
             'state': 'starting' if missing else 'ready',
             'phase': phase,
+            'teleoperation': self._teleop.active,
             'goals_reached': self._counts['reached'],
             'goals_failed': self._counts['failed'],
             'goals_rejected': self._counts['rejected'],

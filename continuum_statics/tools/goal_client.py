@@ -19,19 +19,6 @@ def tip_goals(robot, count):
     return goals
 
 
-def random_goals(robot, count, seed):
-    """Tip positions of random shapes whose cable lengths are inside the limits (reachable)."""
-    rng = np.random.default_rng(seed)
-    limits = np.asarray(robot.cable_length_limits, dtype=float)
-    goals = []
-    while len(goals) < count:
-        shape = robot.solve_ivp([*rng.uniform(-3.5, 3.5, 2), 0.0])
-        lengths = robot.cable_lengths(shape)
-        if np.all(lengths >= limits[:, 0] + 1e-4) and np.all(lengths <= limits[:, 1] - 1e-4):
-            goals.append(shape.tip_position.copy())
-    return goals
-
-
 def run_client(robot_file, namespace, goals=5, tolerance=1e-3, print_rows=True, process=None,
                timeout=60.0, ready_timeout=600.0):
     """Send the goals through ``<namespace>/tip_goal``; return one dict per goal.

@@ -18,8 +18,8 @@ import time
 
 import numpy as np
 
+from continuum_statics.core.workspace import reachable_tips
 from continuum_statics.nodes.node_params import default_robot_file
-from continuum_statics.tools.goal_client import random_goals
 from continuum_statics.tools.processes import ros_environment, stop
 
 
@@ -76,7 +76,7 @@ def soak(robot_file, minutes, period, rate, noise, tolerance, seed):
         if not client.wait_for_service(timeout_sec=60.0):
             raise RuntimeError('bringup offered no tip_goal service within 60 s')
         end = time.monotonic() + 60.0 * minutes
-        goals = random_goals(robot, int(60.0 * minutes / period) + 2, seed)
+        goals = reachable_tips(robot, int(60.0 * minutes / period) + 2, seed)
         next_send = time.monotonic()
         for index, goal in enumerate(goals):
             if time.monotonic() >= end or process.poll() is not None:
