@@ -9,7 +9,9 @@ PYTHON=${PYTHON:-python3.11}
 VENV=${VENV:-.venv}
 REQUIREMENTS=${REQUIREMENTS:-requirements.txt}
 stamp=$VENV/.installed
-want=$(cat "$REQUIREMENTS" setup.py package.xml | sha256sum | cut -d' ' -f1)
+want=$(cat "$REQUIREMENTS" setup.py package.xml scripts/build_interfaces.sh \
+  continuum_statics_interfaces/CMakeLists.txt continuum_statics_interfaces/package.xml \
+  continuum_statics_interfaces/action/*.action | sha256sum | cut -d' ' -f1)
 if [ -f "$stamp" ] && [ "$(cat "$stamp")" = "$want" ]; then
   exit 0
 fi
@@ -21,6 +23,8 @@ fi
 "$VENV/bin/python" -m pip install --quiet --upgrade pip
 "$VENV/bin/python" -m pip install --quiet -r "$REQUIREMENTS"
 "$VENV/bin/python" -m pip install --quiet --no-deps -e .
+# The MoveTip action (continuum_statics_interfaces) with plain cmake into the venv prefix.
+scripts/build_interfaces.sh "$VENV"
 # Compile the numba kernels once into their cache (__pycache__ in the source tree, or
 # NUMBA_CACHE_DIR): every later process loads them in ~0.1 s instead of compiling for ~20 s.
 "$VENV/bin/python" -m continuum_statics warmup

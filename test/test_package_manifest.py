@@ -39,21 +39,29 @@ def requirements(name='requirements.txt'):
     return names
 
 
-def manifest_keys():
-    root = ElementTree.parse(REPO / 'package.xml').getroot()
+def manifest_keys(path=REPO / 'package.xml'):
+    root = ElementTree.parse(path).getroot()
     return {element.text.strip() for tag in ('depend', 'exec_depend', 'test_depend',
-                                             'build_depend') for element in root.iter(tag)}
+                                             'build_depend', 'buildtool_depend')
+            for element in root.iter(tag)}
+
+
+#: The interfaces package: its build tools come as wheels on the pip route too.
+INTERFACES = REPO / 'continuum_statics_interfaces' / 'package.xml'
+#: Wheels its build needs that its package.xml reaches through ament_cmake / the generators.
+INTERFACES_BUILD = {'ament-cmake-include-directories', 'ament-cmake-ros', 'python-cmake-module',
+                    'ament-package', 'rosidl-core-generators'}
 
 
 def test_every_requirement_is_declared_in_package_xml_with_its_rosdep_key():
-    keys = manifest_keys()
+    keys = manifest_keys() | manifest_keys(INTERFACES)
     missing = []
     for name in requirements():
         if name.startswith('ros-'):
             package = name[4:].replace('-', '_')
-            if name[4:] not in MIDDLEWARE and package not in keys:
+            if name[4:] not in MIDDLEWARE | INTERFACES_BUILD and package not in keys:
                 missing.append('%s (ROS package %s)' % (name, package))
-        elif name in DEVELOPMENT_ONLY:
+        elif name in DEVELOPMENT_ONLY or name == 'catkin_pkg':  # read by the cmake build
             continue
         elif ROSDEP_KEYS.get(name) not in keys:
             missing.append('%s (rosdep key %s)' % (name, ROSDEP_KEYS.get(name, 'unknown')))
@@ -68,3 +76,16 @@ def test_package_xml_declares_no_key_the_requirements_do_not_have():
     assert python_keys <= set(ROSDEP_KEYS.values()), python_keys - set(ROSDEP_KEYS.values())
     declared = {ROSDEP_KEYS[name] for name in requirements() if name in ROSDEP_KEYS}
     assert python_keys <= declared, python_keys - declared
+
+
+def test_the_interfaces_package_is_an_ament_cmake_interface_package_the_node_depends_on():
+    root = ElementTree.parse(INTERFACES).getroot()
+    assert root.findtext('name') == 'continuum_statics_interfaces'
+    assert root.findtext('export/build_type') == 'ament_cmake'
+    assert root.findtext('member_of_group') == 'rosidl_interface_packages'
+    assert 'continuum_statics_interfaces' in manifest_keys()
+    action = (REPO / 'continuum_statics_interfaces' / 'action' / 'MoveTip.action').read_text()
+    assert [part.split('#')[0].split() for part in action.split('---')[0].splitlines()
+            if part.split('#')[0].strip()] == [
+        ['geometry_msgs/PoseStamped', 'target'], ['bool', 'use_direction'],
+        ['float64', 'tolerance']]

@@ -61,6 +61,7 @@ from continuum_statics.nodes import diagnostics_util as diag
 from continuum_statics.nodes.dedicated_intake import make_intake
 from continuum_statics.nodes.joint_state_parser import parse_joint_state
 from continuum_statics.nodes.markers import workspace_markers
+from continuum_statics.nodes.move_tip_action import MoveTipServer, load_interface
 from continuum_statics.nodes.node_params import (
     ParameterTable,
     ParamSpec,
@@ -193,6 +194,11 @@ class TipControllerNode(Node):
         self.create_subscription(PoseStamped, 'tip_goal_pose', self._on_goal_pose, COMMAND_QOS,
                                  callback_group=self._control_group)
         self.create_service(GetPlan, 'tip_goal', self._on_tip_goal, callback_group=service_group)
+        action = load_interface()
+        self._action = None if action is None else MoveTipServer(self, action, service_group)
+        if action is None:
+            self.get_logger().warning('continuum_statics_interfaces is not built: no move_tip '
+                                      'action (scripts/build_interfaces.sh, or colcon build)')
         self._timer = steady_timer(self, 1.0 / self._params['control_rate'], self._on_control,
                                    callback_group=self._control_group)
         self._timer.cancel()  # runs only while a goal does
@@ -299,28 +305,42 @@ class TipControllerNode(Node):
             return self._serve_tip_goal(request, response)
         except Exception as error:  # never let one request take the executor down
             self.get_logger().error('tip_goal failed: %r' % (error,))
-            self._goal_rejected('internal error: %r' % (error,))
+            self.goal_rejected('internal error: %r' % (error,))
             response.plan = Path(header=header)
             return response
 
+    def checked_tolerance(self, tolerance):
+        """Return a goal tolerance (m) if usable; ValueError says why not."""
+        if not (math.isfinite(tolerance) and MIN_TOLERANCE <= tolerance <= self.robot.length):
+            raise ValueError('tolerance must be between %g m and the rod length %g m, got %r'
+                             % (MIN_TOLERANCE, self.robot.length, tolerance))
+        return tolerance
+
+    def latest_tip(self):
+        """Return the newest TipSample (or None)."""
+        return self._tip
+
+    def phase(self):
+        """Return what the controller does now: a goal run's phase or 'teleoperation'."""
+        return 'teleoperation' if self._teleop.active else self._run.phase.value
+
     def _serve_tip_goal(self, request, response):
-        tolerance = float32_value(request.tolerance)  # GetPlan's tolerance is a float32
+        # GetPlan's tolerance is a float32
+        tolerance = float32_value(request.tolerance)
         try:
-            if not (math.isfinite(tolerance) and MIN_TOLERANCE <= tolerance <= self.robot.length):
-                raise ValueError('tolerance must be between %g m and the rod length %g m, got %r'
-                                 % (MIN_TOLERANCE, self.robot.length, tolerance))
-            goal = self._start_goal(goal_position(request.goal, self.base_frame_id), tolerance,
+            tolerance = self.checked_tolerance(tolerance)
+            goal = self.start_goal(goal_position(request.goal, self.base_frame_id), tolerance,
                                     'tip_goal service', self._goal_direction(request.goal))
         except ValueError as error:
-            self._goal_rejected(error)
+            self.goal_rejected(error)
             return response
         limit = time.monotonic() + self._params['goal_timeout'] + 5.0
         while not goal.done.wait(0.05):
             if self._closing or time.monotonic() > limit:
-                self._finish(goal, False, 'shutting down' if self._closing else 'timed out')
+                self.finish_goal(goal, False, 'shutting down' if self._closing else 'timed out')
                 break
         if goal.reached:
-            plan = self._plan_after(goal.tip_stamp)
+            plan = self.plan_after(goal.tip_stamp)
             if plan is not None:
                 response.plan = plan
         return response
@@ -333,14 +353,14 @@ class TipControllerNode(Node):
 
     def _on_goal_pose(self, msg):
         try:
-            self._start_goal(goal_position(msg, self.base_frame_id),
+            self.start_goal(goal_position(msg, self.base_frame_id),
                              self._params['default_tolerance'], 'tip_goal_pose',
                              self._goal_direction(msg))
         except ValueError as error:
-            self._goal_rejected(error)
+            self.goal_rejected(error)
         except Exception as error:  # never let one message take the node down
             self.get_logger().error('tip_goal_pose failed: %r' % (error,))
-            self._goal_rejected('internal error: %r' % (error,))
+            self.goal_rejected('internal error: %r' % (error,))
 
     # -- teleoperation ---------------------------------------------------------------------
     def _on_twist(self, msg):
@@ -400,7 +420,8 @@ class TipControllerNode(Node):
             teleop.state = None
             self.get_logger().info('teleoperation ended: %s' % teleop.reason)
 
-    def _goal_rejected(self, error):
+    def goal_rejected(self, error):
+        """Count and report a goal rejected before it started."""
         self._counts['rejected'] += 1
         self._last_outcome = 'rejected: %s' % error
         self._problems.add('tip_goal', error)
@@ -418,7 +439,7 @@ class TipControllerNode(Node):
                              'unit quaternion (norm %.3g)' % norm)
         return quaternion_to_rotation(quaternion / norm)[:, 2]
 
-    def _start_goal(self, position, tolerance, source, direction=None):
+    def start_goal(self, position, tolerance, source, direction=None):
         """Solve the goal and make it the active one; ValueError says why it is rejected."""
         if not self.cable_names:
             raise ValueError('robot has no cables: %r is a passive rod, nothing to move'
@@ -475,7 +496,8 @@ class TipControllerNode(Node):
                   if newest.received - m.received <= MEAN_WINDOW_S]
         return np.mean(recent, axis=0) if recent else newest.lengths.copy()
 
-    def _finish(self, goal, reached, reason):
+    def finish_goal(self, goal, reached, reason):
+        """End ``goal`` (cancel, shutdown, a caller's timeout) and report it."""
         with self._lock:
             if self._run.finish(goal, reached, reason):
                 self._report(goal)
@@ -508,7 +530,7 @@ class TipControllerNode(Node):
         return stale_state(now, self._measurement, self._tip, self._params['max_state_age'],
                            need_tip)
 
-    def _plan_after(self, tip_stamp, wait=0.5):
+    def plan_after(self, tip_stamp, wait=0.5):
         """Return the newest backbone, waiting briefly for the one of the reached tip pose."""
         limit = time.monotonic() + wait
         while True:
@@ -637,6 +659,8 @@ class TipControllerNode(Node):
     def destroy_node(self):
         """Release waiting service calls, stop the intake thread, then destroy the node."""
         self.release_waiters()
+        if self._action is not None:
+            self._action.destroy()
         self._intake.stop()
         return super().destroy_node()
 
