@@ -12,7 +12,8 @@ PY="$VENV/bin/python"
 # (/opt/python/cp311-cp311/...): point them at this interpreter's headers and numpy's.
 include=$("$PY" -c "import sysconfig; print(sysconfig.get_paths()['include'])")
 numpy_include=$("$PY" -c "import numpy; print(numpy.get_include())")
-grep -l '/opt/python/cp311-cp311' "$VENV"/share/*/cmake/*.cmake 2>/dev/null | while read -r file; do
+{ grep -l '/opt/python/cp311-cp311' "$VENV"/share/*/cmake/*.cmake 2>/dev/null || true; } |
+while read -r file; do
   sed -i -e "s#/opt/python/cp311-cp311/include/python3.11#$include#g" \
          -e "s#/opt/python/cp311-cp311/lib/python3.11/site-packages/numpy/_core/include#$numpy_include#g" \
          "$file"

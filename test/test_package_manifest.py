@@ -50,7 +50,8 @@ def manifest_keys(path=REPO / 'package.xml'):
 INTERFACES = REPO / 'continuum_statics_interfaces' / 'package.xml'
 #: Wheels its build needs that its package.xml reaches through ament_cmake / the generators.
 INTERFACES_BUILD = {'ament-cmake-include-directories', 'ament-cmake-ros', 'python-cmake-module',
-                    'ament-package', 'rosidl-core-generators'}
+                    'ament-package', 'rosidl-core-generators', 'ament-cmake-gmock',
+                    'ament-cmake-gtest', 'ament-cmake-pytest'}
 
 
 def test_every_requirement_is_declared_in_package_xml_with_its_rosdep_key():

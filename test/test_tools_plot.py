@@ -180,3 +180,39 @@ def test_goals_from_the_topic_and_the_controller_diagnostics_count_once(tmp_path
     rec = plot.read_recording(bag)
     assert [g[0] for g in rec.goals] == [0.0, 3.0]
     np.testing.assert_allclose([g[1:] for g in rec.goals], [first, second])
+
+
+def test_the_backbone_at_the_end_of_each_goal_and_goals_from_the_active_goal_topic(tmp_path):
+    """Goals from tip_goal_active; a snapshot is the last backbone before the next goal."""
+    PoseStamped = STORE.types['geometry_msgs/msg/PoseStamped']
+    Pose = STORE.types['geometry_msgs/msg/Pose']
+    Point = STORE.types['geometry_msgs/msg/Point']
+    Quaternion = STORE.types['geometry_msgs/msg/Quaternion']
+
+    def goal(t, x):
+        orientation = Quaternion(x=0.0, y=0.0, z=0.0, w=1.0)
+        return PoseStamped(header=header(t), pose=Pose(position=Point(x=x, y=0.0, z=0.29),
+                                                       orientation=orientation))
+
+    bag = tmp_path / 'bag'
+    with Writer(bag, version=9, storage_plugin=StoragePlugin.MCAP) as writer:
+        active = writer.add_connection('/continuum/tip_goal_active',
+                                       'geometry_msgs/msg/PoseStamped', typestore=STORE)
+        backbone = writer.add_connection('/continuum/backbone', 'nav_msgs/msg/Path',
+                                         typestore=STORE)
+        for i in range(50):  # 5 s of backbones bending further; goals at 0, 2 and 4 s
+            t = i / 10
+            if i in (0, 20, 40):
+                writer.write(active, int((100 + t) * 1e9),
+                             STORE.serialize_cdr(goal(t, 0.01 * i), active.msgtype))
+            writer.write(backbone, int((100 + t) * 1e9),
+                         STORE.serialize_cdr(path(t, 0.1 * i), backbone.msgtype))
+    rec = plot.read_recording(bag)
+    assert [round(g[0], 3) for g in rec.goals] == [0.0, 2.0, 4.0]
+    # the last backbone before 2 s (i = 19), before 4 s (i = 39), and the last one (i = 49)
+    assert [round(t, 3) for t, _ in rec.goal_snapshots] == [1.9, 3.9, 4.9]
+    np.testing.assert_allclose(rec.goal_snapshots[0][1][-1], [0.1 * 19 * 0.09, 0.0, 0.3])
+    result = run_plot(bag, '--output', tmp_path / 'plots')
+    assert result.returncode == 0, result.stderr
+    assert_png(tmp_path / 'plots' / 'backbone.png')
+    assert_png(tmp_path / 'plots' / 'tip_path.png')

@@ -78,6 +78,7 @@ from continuum_statics.nodes.ros_conversions import (
     goal_position,
     joint_state,
     pose_position,
+    set_pose,
     tip_load,
 )
 from continuum_statics.nodes.timers import steady_timer
@@ -191,6 +192,9 @@ class TipControllerNode(Node):
             workspace = self.create_publisher(MarkerArray, 'workspace_markers', LATCHED_QOS)
             workspace.publish(workspace_markers(
                 self.base_frame_id, reachable_tips(self.robot, WORKSPACE_SAMPLES, seed=0)))
+        # every goal taken, from any source, for recordings and plots (latched)
+        self._active_goal_pub = self.create_publisher(PoseStamped, 'tip_goal_active',
+                                                      LATCHED_QOS)
         self.create_subscription(PoseStamped, 'tip_goal_pose', self._on_goal_pose, COMMAND_QOS,
                                  callback_group=self._control_group)
         self.create_service(GetPlan, 'tip_goal', self._on_tip_goal, callback_group=service_group)
@@ -485,6 +489,11 @@ class TipControllerNode(Node):
                 self._report(previous)
             self._last_tick = now
             self._timer.reset()
+        active = PoseStamped()
+        active.header.frame_id = self.base_frame_id
+        active.header.stamp = self.get_clock().now().to_msg()
+        set_pose(active.pose, position, (0.0, 0.0, 0.0, 1.0))
+        self._active_goal_pub.publish(active)
         self.get_logger().info('tip goal (%.4f, %.4f, %.4f) m, tolerance %.2g m from %s%s' % (
             *position, tolerance, source, '' if plan.recover is None
             else ' (cables off the last command: onto the model first)'))

@@ -3,13 +3,16 @@
 Reads a rosbag2 directory (ours or one from ``ros2 bag record``, MCAP or SQLite) or a single
 ``.mcap`` file with the ``rosbags`` library and writes, for what the bag contains:
 
-- ``backbone.png``: backbone snapshots at several instants in 3-D (equal axis scale, base frame)
-- ``tip_path.png``: tip path in 3-D with the goals, and tip coordinates over time
+- ``backbone.png``: the backbone at the end of each goal (the last one before the next goal
+  started), or at several instants of a recording without goals, in 3-D (equal axes, base frame)
+- ``tip_path.png``: tip path in 3-D with the goals, and each tip coordinate over time on an axis
+  of its own, with the goal in force drawn as a step
 - ``cable_lengths.png``: commanded vs measured cable lengths over time
 - ``solver.png``: statics solve time and residual over time (from ``/diagnostics``)
 
 Topics are found by name and type (``.../backbone`` Path, ``.../tip_pose`` PoseStamped,
-``.../tip_goal_pose``, ``.../cable_commands``, ``.../cable_states``, ``/diagnostics``); a figure
+``.../tip_goal_active`` (every goal the controller took, from any source; older bags:
+``.../tip_goal_pose``), ``.../cable_commands``, ``.../cable_states``, ``/diagnostics``); a figure
 whose topics are missing is skipped with a note.
 """
 import argparse
@@ -33,6 +36,7 @@ class Recording:
     start_ns: int = 0
     frame_id: str = ''
     snapshots: list = field(default_factory=list)      # [(t, (N, 3) positions)]
+    goal_snapshots: list = field(default_factory=list)  # [(t, (N, 3) positions)] at goal ends
     tip: list = field(default_factory=list)            # [(t, x, y, z)]
     goals: list = field(default_factory=list)          # [(t, x, y, z)]
     commanded: dict = field(default_factory=dict)      # name -> [(t, length)]
@@ -94,7 +98,8 @@ def _read(reader, count):
     roles = {
         'backbone': _pick(connections, 'backbone', 'nav_msgs/msg/Path'),
         'tip_pose': _pick(connections, 'tip_pose', 'geometry_msgs/msg/PoseStamped'),
-        'goal': _pick(connections, 'tip_goal_pose', 'geometry_msgs/msg/PoseStamped'),
+        'goal': (_pick(connections, 'tip_goal_active', 'geometry_msgs/msg/PoseStamped')
+                 or _pick(connections, 'tip_goal_pose', 'geometry_msgs/msg/PoseStamped')),
         'commands': _pick(connections, 'cable_commands', 'sensor_msgs/msg/JointState'),
         'states': _pick(connections, 'cable_states', 'sensor_msgs/msg/JointState'),
         'diagnostics': _pick(connections, 'diagnostics', 'diagnostic_msgs/msg/DiagnosticArray'),
@@ -142,6 +147,8 @@ def _read(reader, count):
             rec.tip.append((t, *_point(msg.pose.position)))
         elif role == 'goal':
             msg = reader.deserialize(raw, connection.msgtype)
+            if rec.goals and last_backbone is not None:  # the backbone as the last goal ended
+                _snapshot(reader, rec.goal_snapshots, last_backbone)
             last_goal = _point(msg.pose.position)
             rec.goals.append((t, *last_goal))
         elif role in ('commands', 'states'):
@@ -164,6 +171,8 @@ def _read(reader, count):
                             np.abs(np.subtract(goal, last_goal))) > 1e-4):
                         rec.goals.append((t, *goal))
                         last_goal = goal
+    if rec.goals and last_backbone is not None:
+        _snapshot(reader, rec.goal_snapshots, last_backbone)
     if last_backbone is not None and len(rec.snapshots) < count and (
             not rec.snapshots or rec.snapshots[-1][0] < last_backbone[0]):
         t, connection, raw = last_backbone
@@ -242,7 +251,20 @@ def plot_backbones(output, backbones, goals=(), frame_id='', title='Backbone'):
     return output
 
 
+def _snapshot(reader, snapshots, backbone):
+    t, connection, raw = backbone
+    msg = reader.deserialize(raw, connection.msgtype)
+    if msg.poses:
+        snapshots.append((t, np.array([_point(p.pose.position) for p in msg.poses])))
+
+
 def _figure_backbone(rec, output):
+    if rec.goal_snapshots:
+        goals = np.array(rec.goals, dtype=float).reshape(-1, 4)
+        backbones = [('goal %d (t = %.2f s)' % (i + 1, t), positions)
+                     for i, (t, positions) in enumerate(rec.goal_snapshots)]
+        return plot_backbones(output, backbones, goals=goals[:, 1:], frame_id=rec.frame_id,
+                              title='Backbone at the end of each of %d goals' % len(backbones))
     backbones = [('t = %.2f s' % t, positions) for t, positions in rec.snapshots]
     return plot_backbones(output, backbones, frame_id=rec.frame_id,
                           title='Backbone at %d instants' % len(backbones))
@@ -265,17 +287,23 @@ def _figure_tip(rec, output):
     _label_3d(ax, rec.frame_id)
     ax.set_title('Tip path and goals')
     ax.legend(loc='upper left', fontsize=8)
-    ax2 = fig.add_subplot(1, 2, 2)
+    # each coordinate on an axis of its own: millimetre moves stay visible whatever the others
+    end = float(tip[-1, 0]) if len(tip) else 0.0
     for i, (axis, colour) in enumerate(zip('xyz', ('tab:red', 'tab:green', 'tab:blue'))):
-        ax2.plot(tip[:, 0], tip[:, 1 + i] * 1e3, color=colour, label='tip %s' % axis)
-        if len(goals):
-            ax2.plot(goals[:, 0], goals[:, 1 + i] * 1e3, linestyle='none', marker='x',
-                     color=colour, label='goal %s' % axis)
-    ax2.set_xlabel('time [s]')
-    ax2.set_ylabel('tip position [mm]')
-    ax2.set_title('Tip coordinates over time')
-    ax2.grid(True, alpha=0.3)
-    ax2.legend(fontsize=8, ncol=2)
+        sub = fig.add_subplot(3, 2, 2 * i + 2)
+        sub.plot(tip[:, 0], tip[:, 1 + i] * 1e3, color=colour, label='tip %s' % axis)
+        if len(goals):  # the goal in force, from when it came until the next one
+            times = np.append(goals[:, 0], max(end, float(goals[-1, 0])))
+            values = np.append(goals[:, 1 + i], goals[-1, 1 + i]) * 1e3
+            sub.step(times, values, where='post', color='black', linestyle='--', linewidth=1.0,
+                     label='goal %s' % axis)
+        sub.set_ylabel('%s [mm]' % axis)
+        sub.grid(True, alpha=0.3)
+        sub.legend(fontsize=7, loc='upper right')
+        if i == 0:
+            sub.set_title('Tip coordinates over time')
+        if i == 2:
+            sub.set_xlabel('time [s]')
     fig.tight_layout()
     fig.savefig(output, dpi=100)
     plt.close(fig)
