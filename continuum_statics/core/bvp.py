@@ -25,8 +25,8 @@ def linear_guess(robot, tip_force, tip_moment, body_force=None, loads=None, fixe
     body_force = robot.body_force if body_force is None else body_force
     axis = robot.base_rotation[:, 2]
     length = robot.length
-    base_moment = (tip_moment + length * np.cross(axis, tip_force)
-                   + 0.5 * length ** 2 * np.cross(axis, body_force))
+    base_moment = (tip_moment + length * _cross(axis, tip_force)
+                   + 0.5 * length ** 2 * _cross(axis, body_force))
     local = robot.base_rotation.T @ base_moment
     if loads is not None and len(robot.cable_names):
         moments, tensions = robot.loads(loads, fixed)
@@ -34,6 +34,12 @@ def linear_guess(robot, tip_force, tip_moment, body_force=None, loads=None, fixe
         if robot.cable_model == 'distributed':  # tensions act on the cross-section: t (e3 x l)
             local = local + np.cross([0.0, 0.0, 1.0], robot.cable_offsets).T @ tensions
     return local / robot.c
+
+
+def _cross(a, b):
+    """a x b for 3-vectors (np.cross costs ~10 us a call, this ~1 us)."""
+    return np.array([a[1] * b[2] - a[2] * b[1], a[2] * b[0] - a[0] * b[2],
+                     a[0] * b[1] - a[1] * b[0]])
 
 
 def _newton(robot, params, loads, fixed, tip_force, tip_moment):
