@@ -9,6 +9,7 @@ demo: venv
 	scripts/ros_env.sh .venv/bin/python -m continuum_statics demo
 
 test: venv
+	scripts/install_browser.sh
 	scripts/ros_env.sh --private .venv/bin/python -m pytest -q test
 
 # The second route: the same suite on ROS 2 Jazzy wheels (requirements-jazzy.txt, .venv-jazzy).
@@ -16,6 +17,7 @@ venv-jazzy:
 	@VENV=.venv-jazzy REQUIREMENTS=requirements-jazzy.txt scripts/setup_venv.sh
 
 test-jazzy: venv venv-jazzy
+	scripts/install_browser.sh
 	scripts/ros_env.sh --private .venv-jazzy/bin/python -m pytest -q test
 
 bench: venv

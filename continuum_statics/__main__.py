@@ -11,6 +11,7 @@ commands:
   bringup   start the statics, tip_controller and cable_driver nodes in one process
   statics | tip_controller | cable_driver
             run one node alone, like `ros2 run` (options: --ros-args ...)
+  view      the live robot in a web browser (3-D, with a draggable tip goal)
   teleop    drive the tip from the keyboard (tip_twist, in a terminal)
   warmup    compile the kernels into the numba cache (the venv setup does it once)
   demo      bringup with the simulated driver plus a client sending tip goals
@@ -41,6 +42,8 @@ def main(argv=None):
         import importlib
         node_main = importlib.import_module('continuum_statics.nodes.%s_node' % command).main
         return node_main([command] + rest)
+    elif command == 'view':
+        from continuum_statics.tools.view import main as run
     elif command == 'teleop':
         from continuum_statics.tools.teleop import main as run
     elif command == 'warmup':

@@ -23,7 +23,9 @@ ROSDEP_KEYS = {
     'pytest': 'python3-pytest',
 }
 #: Development tools of the pip route only (lint, fuzzing, bag tests): not needed on a robot.
-DEVELOPMENT_ONLY = {'hypothesis', 'ruff', 'mcap', 'mcap-ros2-support'}
+DEVELOPMENT_ONLY = {'hypothesis', 'ruff', 'mcap', 'mcap-ros2-support', 'playwright'}
+#: Optional on a robot computer (no rosdep key exists): `pip install viser` for `view`.
+OPTIONAL_PIP = {'viser'}
 #: ROS wheels that are the middleware, not a package dependency.
 MIDDLEWARE = {'rmw-fastrtps-cpp'}
 #: Keys that are no rosdep key (seen failing `rosdep install`).
@@ -62,7 +64,7 @@ def test_every_requirement_is_declared_in_package_xml_with_its_rosdep_key():
             package = name[4:].replace('-', '_')
             if name[4:] not in MIDDLEWARE | INTERFACES_BUILD and package not in keys:
                 missing.append('%s (ROS package %s)' % (name, package))
-        elif name in DEVELOPMENT_ONLY or name == 'catkin_pkg':  # read by the cmake build
+        elif name in DEVELOPMENT_ONLY | OPTIONAL_PIP or name == 'catkin_pkg':
             continue
         elif ROSDEP_KEYS.get(name) not in keys:
             missing.append('%s (rosdep key %s)' % (name, ROSDEP_KEYS.get(name, 'unknown')))

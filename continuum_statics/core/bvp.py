@@ -37,7 +37,7 @@ def linear_guess(robot, tip_force, tip_moment, body_force=None, loads=None, fixe
 
 
 def _cross(a, b):
-    """a x b for 3-vectors (np.cross costs ~10 us a call, this ~1 us)."""
+    """Return a x b for 3-vectors (np.cross costs ~10 us a call, this ~1 us)."""
     return np.array([a[1] * b[2] - a[2] * b[1], a[2] * b[0] - a[0] * b[2],
                      a[0] * b[1] - a[1] * b[0]])
 
