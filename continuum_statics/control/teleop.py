@@ -15,6 +15,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from continuum_statics.core.layout import ProbeRows
 from continuum_statics.core.rotations import rotation_vector_matrix
 
 
@@ -132,21 +133,21 @@ class TeleopRun:
         n = len(robot.cable_names)
         force, moment = np.asarray(load[:3], dtype=float), np.asarray(load[3:], dtype=float)
         values, jac, _ = robot.probe(self.x, robot.state_size, force, moment)
-        balance = slice(6 + n, 9 + n)
-        rows = [jac[0:3], jac[balance]]
-        rhs = [self.target + move - values[0:3], -values[balance]]
+        probe = ProbeRows(n)
+        rows = [jac[probe.tip], jac[probe.balance]]
+        rhs = [self.target + move - values[probe.tip], -values[probe.balance]]
         direction = self.direction
         if turn.any():
-            axis = direction if direction is not None else values[3:6]
+            axis = direction if direction is not None else values[probe.axis]
             direction = rotation_vector_matrix(turn) @ axis
-            rows.append(jac[3:6] * robot.length)
-            rhs.append((direction - values[3:6]) * robot.length)
+            rows.append(jac[probe.axis] * robot.length)
+            rhs.append((direction - values[probe.axis]) * robot.length)
         delta = np.linalg.lstsq(np.vstack(rows), np.concatenate(rhs), rcond=1e-10)[0]
         x = self.x + delta
         values, _, _ = robot.probe(x, 0, force, moment)
         if not np.all(np.isfinite(values)):
             return None
-        return x, values[6:6 + n].copy(), values[0:3].copy(), direction
+        return x, values[probe.lengths].copy(), values[probe.tip].copy(), direction
 
 
 def _capped(vector, limit):

@@ -10,6 +10,7 @@ each solve warm-started from the previous one.
 import numpy as np
 
 from continuum_statics.core.kernel import pack_params
+from continuum_statics.core.layout import ProbeRows
 
 
 class ConvergenceError(RuntimeError):
@@ -46,7 +47,7 @@ def _newton(robot, params, loads, fixed, tip_force, tip_moment):
     """Shooting on ``loads[:3]`` = u(0) with the rest of the state held; (state, converged)."""
     settings = robot.solver
     n_cables = len(robot.cable_names)
-    balance = slice(6 + n_cables, 9 + n_cables)
+    balance = ProbeRows(n_cables).balance
     state = np.array(loads, dtype=float)
 
     def residual(x):

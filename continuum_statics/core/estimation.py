@@ -14,6 +14,7 @@ import numpy as np
 
 from continuum_statics.core import bvp
 from continuum_statics.core.inputs import as_vector
+from continuum_statics.core.layout import ProbeRows
 from continuum_statics.core.least_squares import constrained_gauss_newton
 from continuum_statics.core.shape import Shape
 from continuum_statics.core.tracking import track
@@ -90,8 +91,8 @@ def estimate_shape(robot, cable_lengths, tip_force=(0.0, 0.0, 0.0), tip_moment=(
 
     if start is None:
         start = robot.passive_state(bvp.linear_guess(robot, tip_force, tip_moment))
-    cables = slice(6, 6 + n_cables)
-    balance = slice(6 + n_cables, 9 + n_cables)
+    rows = ProbeRows(n_cables)
+    cables, balance = rows.lengths, rows.balance
     size = robot.state_size
 
     runs = [0]

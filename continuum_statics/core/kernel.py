@@ -21,7 +21,8 @@ RK4 tableau applied to the twist (v, u) in the Lie algebra with dexp^-1 truncate
 commutator, then (r, R) <- (r, R) exp(Theta). A segment of constant strain (a circular arc or
 helix) is therefore integrated exactly at any step count; M is integrated by the same RK4 stages.
 
-Output node layout (STATE_SIZE = 21): r (3), R row-major (9), v - e3 (3), u (3) (both the left
+Output node layout (:mod:`continuum_statics.core.layout`, 21 values): r (3), R row-major (9),
+v - e3 (3), u (3) (both the left
 limit at the node), M (3) after any point moment at the node. v - e3 is kept rather than v because
 axial strains are ~1e-5. Everything is scalar code over preallocated arrays so numba compiles it
 to tight loops; ``cache=True`` keeps the machine code on disk between processes.
@@ -31,7 +32,8 @@ import math
 import numba
 import numpy as np
 
-STATE_SIZE = 21
+from continuum_statics.core.layout import STATE_SIZE  # the node layout, stated once
+
 POINT_MOMENT, DISTRIBUTED = 0, 1
 STRAIN_ITERATIONS = 8  # Newton steps at most; 3 reach round-off at 30 N on 10 mm holes
 
@@ -553,9 +555,9 @@ def loads_from_state(x, fixed_tensions, model, bases, ranks, bending_stiffness, 
 
 
 @numba.njit(cache=True)
-def probe(s_grid, params, model, tip_force, tip_moment, x, n_free, step, fixed_tensions, layout_i,
-          bases, ranks, section_cables, counts, offsets, guide_nodes, cable_last_guide,
-          cable_end_node, section_end_node):
+def probe(s_grid, params, model, tip_force, tip_moment, x, n_free, step, fixed_tensions,
+          section_state_index, section_bases, section_ranks, section_cables, section_cable_count,
+          cable_offsets, guide_nodes, cable_last_guide, cable_end_node, section_end_node):
     """Model outputs at a solver state and their forward-difference Jacobian.
 
     Integrates ``x`` and ``x + step e_k`` for the first ``n_free`` components in one batch
@@ -563,21 +565,22 @@ def probe(s_grid, params, model, tip_force, tip_moment, x, n_free, step, fixed_t
     values = [tip position (3, m); tip z axis (3); cable lengths (n_cables, m);
     (M_end - tau) L / (E I) (3), the tip moment balance, zero at equilibrium],
     jacobian (rows of values, n_free columns), and the nominal (N, 21) states.
-    ``layout_i`` = [index of the first moment coordinate of each section whose end disk is the
-    tip node (point model: exact columns), or -1].
+    The last ten arguments are the robot's :class:`~continuum_statics.core.layout.SectionArrays`;
+    ``section_state_index`` = [index of the first moment coordinate of each section, or -1]
+    (sections ending at the tip node have exact columns in the point model).
     """
     n_x = x.shape[0]
-    n_cables = offsets.shape[0]
-    n_sections = bases.shape[0]
+    n_cables = cable_offsets.shape[0]
+    n_sections = section_bases.shape[0]
     n_nodes = s_grid.shape[0]
     length = s_grid[n_nodes - 1]
     ei = params[_C]
     exact = np.zeros(n_x, dtype=np.bool_)
     if model == POINT_MOMENT:
         for k in range(n_sections):
-            if section_end_node[k] == n_nodes - 1 and layout_i[k] >= 0:
-                for c in range(ranks[k]):
-                    exact[layout_i[k] + c] = True
+            if section_end_node[k] == n_nodes - 1 and section_state_index[k] >= 0:
+                for c in range(section_ranks[k]):
+                    exact[section_state_index[k] + c] = True
     columns = np.full(n_free + 1, -1, dtype=np.int64)
     n_batch = 1
     for col in range(n_free):
@@ -594,14 +597,15 @@ def probe(s_grid, params, model, tip_force, tip_moment, x, n_free, step, fixed_t
             trial[i] = x[i]
         if columns[b] >= 0:
             trial[columns[b]] += step
-        loads_from_state(trial, fixed_tensions, model, bases, ranks, ei, section_cables,
-                         counts, offsets, moments[b], tensions[b])
+        loads_from_state(trial, fixed_tensions, model, section_bases, section_ranks, ei,
+                         section_cables, section_cable_count, cable_offsets, moments[b],
+                         tensions[b])
         for i in range(3):
             forces[b, i] = tip_force[i]
             bendings[b, i] = trial[i]
     states = integrate_batch(s_grid, params, model, forces, bendings, moments, tensions,
-                             offsets, cable_end_node, section_end_node)
-    lengths = cable_lengths_batch(states, guide_nodes, offsets, cable_last_guide)
+                             cable_offsets, cable_end_node, section_end_node)
+    lengths = cable_lengths_batch(states, guide_nodes, cable_offsets, cable_last_guide)
     rows = 9 + n_cables
     table = np.empty((n_batch, rows))
     scale = length / ei
@@ -622,15 +626,17 @@ def probe(s_grid, params, model, tip_force, tip_moment, x, n_free, step, fixed_t
     # exact columns: a point moment B c E I at the tip only moves M_end by -R(L) B c E I
     tip = states[0, n_nodes - 1]
     for k in range(n_sections):
-        if model != POINT_MOMENT or section_end_node[k] != n_nodes - 1 or layout_i[k] < 0:
+        if (model != POINT_MOMENT or section_end_node[k] != n_nodes - 1
+                or section_state_index[k] < 0):
             continue
-        for c in range(ranks[k]):
-            col = layout_i[k] + c
+        for c in range(section_ranks[k]):
+            col = section_state_index[k] + c
             if col >= n_free:
                 continue
             for i in range(3):
-                g = (tip[3 + 3 * i] * bases[k, 0, c] + tip[4 + 3 * i] * bases[k, 1, c]
-                     + tip[5 + 3 * i] * bases[k, 2, c])
+                g = (tip[3 + 3 * i] * section_bases[k, 0, c]
+                     + tip[4 + 3 * i] * section_bases[k, 1, c]
+                     + tip[5 + 3 * i] * section_bases[k, 2, c])
                 jacobian[6 + n_cables + i, col] = -g * ei * scale
     return values, jacobian, states[0].copy()
 

@@ -25,6 +25,13 @@ from continuum_statics.core.kernel import (
     probe,
     tip_jacobian,
 )
+from continuum_statics.core.layout import (
+    POSITION,
+    ROTATION,
+    STATE_SIZE,
+    ProbeRows,
+    SectionArrays,
+)
 from continuum_statics.core.robot_file import read_robot_description
 from continuum_statics.core.rotations import quaternion_to_rotation
 from continuum_statics.core.shape import Shape
@@ -155,6 +162,7 @@ class Robot:
             self.section_ranks[k] = rank
             self.section_state_index[k] = column if rank else -1
             column += rank
+        self.arrays = SectionArrays(*(getattr(self, name) for name in SectionArrays._fields))
         self.state_size = column
         self.observable_bending = column - 3
         # IVPs in one probe with Jacobians: point moments at the tip have exact columns
@@ -206,19 +214,13 @@ class Robot:
         """
         return probe(self.s_grid, self.params if params is None else params, self.model_code,
                      tip_force, tip_moment, state, n_free, self.bending_step(),
-                     self._fixed(fixed_tensions), self.section_state_index, self.section_bases,
-                     self.section_ranks, self.section_cables, self.section_cable_count,
-                     self.cable_offsets, self.guide_nodes, self.cable_last_guide,
-                     self.cable_end_node, self.section_end_node)
+                     self._fixed(fixed_tensions), *self.arrays)
 
     def kernel_args(self, tip_force, tip_moment, fixed_tensions=None, params=None):
         """Return the model arguments of :func:`kernel.probe` but the state (compiled solvers)."""
         return (self.s_grid, self.params if params is None else params, self.model_code,
                 np.asarray(tip_force, dtype=float), np.asarray(tip_moment, dtype=float),
-                self.bending_step(), self._fixed(fixed_tensions), self.section_state_index,
-                self.section_bases, self.section_ranks, self.section_cables,
-                self.section_cable_count, self.cable_offsets, self.guide_nodes,
-                self.cable_last_guide, self.cable_end_node, self.section_end_node)
+                self.bending_step(), self._fixed(fixed_tensions), *self.arrays)
 
     def make_shape(self, state, tip_force, states, fixed_tensions=None):
         """Wrap kernel states in a :class:`Shape` that remembers its solver state."""
@@ -330,7 +332,7 @@ class Robot:
         """d(cable lengths)/d u(0) with slack cables, (n_cables, 3) in m per 1/m."""
         state = self.passive_state(as_vector(u0, 3, 'u0'))
         _, jac, _ = self.probe(state, 3, as_vector(tip_force, 3, 'tip_force'), np.zeros(3))
-        return jac[6:6 + len(self.cable_names)]
+        return jac[ProbeRows(len(self.cable_names)).lengths]
 
     # -- inverse problems ------------------------------------------------------------------
     def estimate_shape(self, cable_lengths, tip_force=(0.0, 0.0, 0.0),
@@ -355,9 +357,9 @@ class Robot:
     def _straight_shape(self):
         """Return the straight, unloaded rod (for the reference cable lengths)."""
         s = self.s_grid
-        states = np.zeros((len(s), 21))
-        states[:, 0:3] = self.base_position + s[:, None] * self.base_rotation[:, 2]
-        states[:, 3:12] = self.base_rotation.ravel()
+        states = np.zeros((len(s), STATE_SIZE))
+        states[:, POSITION] = self.base_position + s[:, None] * self.base_rotation[:, 2]
+        states[:, ROTATION] = self.base_rotation.ravel()
         state = self.passive_state()
         return self.make_shape(state, np.zeros(3), states)
 

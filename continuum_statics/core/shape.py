@@ -2,6 +2,7 @@
 import numpy as np
 
 from continuum_statics.core.backbone_sampling import BackboneSampler
+from continuum_statics.core.layout import BENDING, POSITION, ROTATION, STRETCH
 from continuum_statics.core.rotations import rotation_to_quaternion
 
 
@@ -36,37 +37,37 @@ class Shape:
     @property
     def positions(self):
         """(N, 3) backbone points r(s), global frame (m)."""
-        return self.states[:, 0:3]
+        return self.states[:, POSITION]
 
     @property
     def rotations(self):
         """(N, 3, 3) orientations R(s), local -> global."""
-        return self.states[:, 3:12].reshape(-1, 3, 3)
+        return self.states[:, ROTATION].reshape(-1, 3, 3)
 
     @property
     def v(self):
         """(N, 3) local shear/stretch strain v (e3 when unstrained)."""
-        return self.states[:, 12:15] + np.array([0.0, 0.0, 1.0])
+        return self.states[:, STRETCH] + np.array([0.0, 0.0, 1.0])
 
     @property
     def u(self):
         """(N, 3) local bending and twist (1/m)."""
-        return self.states[:, 15:18]
+        return self.states[:, BENDING]
 
     @property
     def tip_position(self):
         """Tip position r(L), global frame (m)."""
-        return self.states[-1, 0:3]
+        return self.states[-1, POSITION]
 
     @property
     def tip_rotation(self):
         """Tip orientation R(L)."""
-        return self.states[-1, 3:12].reshape(3, 3)
+        return self.states[-1, ROTATION].reshape(3, 3)
 
     @property
     def n(self):
         """(N, 3) internal force n = R D (v - e3), global frame (N), eq. 6."""
-        local = self.d * self.states[:, 12:15]  # the kernel keeps v - e3 at full precision
+        local = self.d * self.states[:, STRETCH]  # the kernel keeps v - e3 at full precision
         return np.einsum('nij,nj->ni', self.rotations, local)
 
     @property
@@ -77,7 +78,7 @@ class Shape:
     @property
     def tip_moment(self):
         """The rod's internal moment at the tip, m(L) = R C u (global, N m)."""
-        return self.tip_rotation @ (self.c * self.states[-1, 15:18])
+        return self.tip_rotation @ (self.c * self.states[-1, BENDING])
 
     def sample(self, count):
         """Evenly spaced poses along the backbone, base and tip included.

@@ -23,6 +23,7 @@ import numpy as np
 
 from continuum_statics.core import bvp
 from continuum_statics.core.inputs import as_vector
+from continuum_statics.core.layout import ProbeRows
 from continuum_statics.core.least_squares import constrained_gauss_newton
 from continuum_statics.core.shape import Shape
 
@@ -133,8 +134,8 @@ class _Problem:
         self.start = np.array(start, dtype=float)
         self.goal_rows = 3 if direction is None else 5
         n = len(robot.cable_names)
-        self.cables = slice(6, 6 + n)
-        self.balance = slice(6 + n, 9 + n)
+        rows = ProbeRows(n)
+        self.cables, self.balance = rows.lengths, rows.balance
         self.limits = robot.cable_length_limits
         radius = np.max(np.hypot(robot.cable_offsets[:, 0], robot.cable_offsets[:, 1]),
                             initial=1e-3)

@@ -19,20 +19,23 @@ TRACK_ITERATIONS = 6
 @numba.njit(cache=True)
 def _evaluate(model_args, x, measured):
     """Length residual (m), tip balance and states of solver state ``x`` (one IVP)."""
-    (s_grid, params, model, tip_force, tip_moment, step, fixed, layout, bases, ranks,
-     section_cables, counts, offsets, guide_nodes, cable_last_guide, cable_end_node,
-     section_end_node) = model_args
+    (s_grid, params, model, tip_force, tip_moment, step, fixed, section_state_index,
+     section_bases, section_ranks, section_cables, section_cable_count, cable_offsets,
+     guide_nodes, cable_last_guide, cable_end_node, section_end_node) = model_args
     values, _, states = probe(s_grid, params, model, tip_force, tip_moment, x, 0, step, fixed,
-                              layout, bases, ranks, section_cables, counts, offsets, guide_nodes,
-                              cable_last_guide, cable_end_node, section_end_node)
-    n = offsets.shape[0]
+                              section_state_index, section_bases, section_ranks, section_cables,
+                              section_cable_count, cable_offsets, guide_nodes, cable_last_guide,
+                              cable_end_node, section_end_node)
+    n = cable_offsets.shape[0]
+    # rows of probe: core/layout.py ProbeRows (lengths 6:6+n, balance 6+n:9+n)
     return values[6:6 + n] - measured, values[6 + n:9 + n].copy(), states
 
 
 @numba.njit(cache=True)
-def track(s_grid, params, model, tip_force, tip_moment, step, fixed, layout, bases, ranks,
-          section_cables, counts, offsets, guide_nodes, cable_last_guide, cable_end_node,
-          section_end_node, measured, x0, jac0, con_jac0, tolerance, weight):
+def track(s_grid, params, model, tip_force, tip_moment, step, fixed, section_state_index,
+          section_bases, section_ranks, section_cables, section_cable_count, cable_offsets,
+          guide_nodes, cable_last_guide, cable_end_node, section_end_node, measured, x0, jac0,
+          con_jac0, tolerance, weight):
     """Warm-started estimate: (x, residual, balance, states, jac, con_jac, iterations, runs, ok).
 
     The first 17 arguments are those of :func:`kernel.probe` but ``x`` and ``n_free`` (flat:
@@ -42,9 +45,9 @@ def track(s_grid, params, model, tip_force, tip_moment, step, fixed, layout, bas
     :param tolerance: stop when the predicted change of the lengths is below this (m)
     :param weight: tip balance -> length units in the merit function (m)
     """
-    model_args = (s_grid, params, model, tip_force, tip_moment, step, fixed, layout, bases, ranks,
-                  section_cables, counts, offsets, guide_nodes, cable_last_guide,
-                  cable_end_node, section_end_node)
+    model_args = (s_grid, params, model, tip_force, tip_moment, step, fixed, section_state_index,
+                  section_bases, section_ranks, section_cables, section_cable_count,
+                  cable_offsets, guide_nodes, cable_last_guide, cable_end_node, section_end_node)
     x = x0.copy()
     jac = jac0.copy()
     con_jac = con_jac0.copy()
