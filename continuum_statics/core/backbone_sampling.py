@@ -7,7 +7,7 @@ nodes are computed once per (grid, count) and each shape is then sampled in one 
 import numba
 import numpy as np
 
-from continuum_statics.core.rotations import _quaternion
+from continuum_statics.core.rotations import quaternion_into
 
 
 @numba.njit(cache=True)
@@ -16,7 +16,7 @@ def _sample(positions, rotations, lower, upper, weight, nearest, points, quatern
         a, b, f = lower[k], upper[k], weight[k]
         for i in range(3):
             points[k, i] = positions[a, i] + f * (positions[b, i] - positions[a, i])
-        _quaternion(rotations[nearest[k]], quaternions[k])
+        quaternion_into(rotations[nearest[k]], quaternions[k])
 
 
 class BackboneSampler:

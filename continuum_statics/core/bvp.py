@@ -94,7 +94,7 @@ def solve_loaded(robot, loads, fixed, tip_force, tip_moment, start=None):
     :raises ConvergenceError: no convergence, even with load continuation in 64 increments
     """
     loads = np.array(loads, dtype=float)
-    fixed = robot._fixed(fixed)
+    fixed = robot.tensions_or_zero(fixed)
     if start is not None:
         loads[:3] = start[:3]
     else:

@@ -25,7 +25,7 @@ class LeastSquaresResult:
 
 
 @numba.njit(cache=True)
-def _step(res, jac, con, con_jac, damping):
+def constrained_step(res, jac, con, con_jac, damping):
     """Constrained damped Gauss-Newton step and its predicted change of the residual.
 
     The particular step is the minimum-norm solution of the linearised constraints; the rest of
@@ -85,7 +85,7 @@ def constrained_gauss_newton(evaluate, x0, max_iterations, step_tolerance, const
 
     current = merit(res, con)
     for iteration in range(1, max_iterations + 1):
-        step, predicted = _step(res, jac, con, con_jac, damping)
+        step, predicted = constrained_step(res, jac, con, con_jac, damping)
         small = (predicted @ predicted <= step_tolerance ** 2
                  and constraint_weight ** 2 * (con @ con) <= step_tolerance ** 2)
         if small or not np.all(np.isfinite(step)):
@@ -97,7 +97,8 @@ def constrained_gauss_newton(evaluate, x0, max_iterations, step_tolerance, const
             if not (np.isfinite(t_merit) and t_merit < current) and len(t_con):
                 # second-order correction: the step left the curved constraint surface; pull the
                 # trial back onto it before judging it (avoids the Maratos effect's tiny steps)
-                correction, _ = _step(np.zeros(0), np.zeros((0, len(x))), t_con, t_con_jac, 0.0)
+                correction, _ = constrained_step(np.zeros(0), np.zeros((0, len(x))), t_con,
+                                                 t_con_jac, 0.0)
                 if np.all(np.isfinite(correction)):
                     c_trial = trial + correction
                     c_eval = evaluate(c_trial)
@@ -109,7 +110,7 @@ def constrained_gauss_newton(evaluate, x0, max_iterations, step_tolerance, const
                 damping = max(damping / 4.0, 1e-9)
                 break
             damping *= 8.0
-            step, predicted = _step(res, jac, con, con_jac, damping)
+            step, predicted = constrained_step(res, jac, con, con_jac, damping)
         else:
             return result(iteration, False)
         x, res, jac, con, con_jac, evaluation = trial, t_res, t_jac, t_con, t_con_jac, t_eval

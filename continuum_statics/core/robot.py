@@ -185,7 +185,7 @@ class Robot:
 
     def loads(self, state, fixed_tensions=None):
         """Section point moments (S, 3; local, N m) and cable tensions (n_cables, N) of a state."""
-        fixed = self._fixed(fixed_tensions)
+        fixed = self.tensions_or_zero(fixed_tensions)
         moments = np.zeros((len(self.section_ranks), 3))
         tensions = np.zeros(len(self.cable_names))
         loads_from_state(np.asarray(state, dtype=float), fixed, self.model_code,
@@ -193,7 +193,8 @@ class Robot:
                          self.section_cable_count, self.cable_offsets, moments, tensions)
         return moments, tensions
 
-    def _fixed(self, fixed_tensions):
+    def tensions_or_zero(self, fixed_tensions):
+        """Return fixed cable tensions (n_cables,) in N as a float array; zero for None."""
         if fixed_tensions is None:
             return np.zeros(len(self.cable_names))
         return np.asarray(fixed_tensions, dtype=float)
@@ -214,18 +215,18 @@ class Robot:
         """
         return probe(self.s_grid, self.params if params is None else params, self.model_code,
                      tip_force, tip_moment, state, n_free, self.bending_step(),
-                     self._fixed(fixed_tensions), *self.arrays)
+                     self.tensions_or_zero(fixed_tensions), *self.arrays)
 
     def kernel_args(self, tip_force, tip_moment, fixed_tensions=None, params=None):
         """Return the model arguments of :func:`kernel.probe` but the state (compiled solvers)."""
         return (self.s_grid, self.params if params is None else params, self.model_code,
                 np.asarray(tip_force, dtype=float), np.asarray(tip_moment, dtype=float),
-                self.bending_step(), self._fixed(fixed_tensions), *self.arrays)
+                self.bending_step(), self.tensions_or_zero(fixed_tensions), *self.arrays)
 
     def make_shape(self, state, tip_force, states, fixed_tensions=None):
         """Wrap kernel states in a :class:`Shape` that remembers its solver state."""
         return Shape(self.s_grid, states, np.array(state[:3]), tip_force, self.c, self.d,
-                     state=np.array(state, dtype=float), fixed_tensions=self._fixed(
+                     state=np.array(state, dtype=float), fixed_tensions=self.tensions_or_zero(
                          fixed_tensions).copy())
 
     # -- initial- and boundary-value problems -------------------------------------------------

@@ -14,7 +14,7 @@ def quaternion_to_rotation(q):
 
 
 @numba.njit(cache=True)
-def _quaternion(r, out):
+def quaternion_into(r, out):
     """Write the unit quaternion [x, y, z, w], w >= 0, of rotation ``r`` into ``out``.
 
     Shepperd's method: branch on the largest diagonal term so no division loses precision.
@@ -43,7 +43,7 @@ def _quaternion(r, out):
 @numba.njit(cache=True)
 def _quaternions(rotations, out):
     for k in range(rotations.shape[0]):
-        _quaternion(rotations[k], out[k])
+        quaternion_into(rotations[k], out[k])
 
 
 def rotation_to_quaternion(rotations):

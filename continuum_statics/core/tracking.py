@@ -10,7 +10,7 @@ import numba
 import numpy as np
 
 from continuum_statics.core.kernel import probe
-from continuum_statics.core.least_squares import _step
+from continuum_statics.core.least_squares import constrained_step
 
 #: Iterations on reused Jacobians before the caller solves afresh.
 TRACK_ITERATIONS = 6
@@ -59,7 +59,7 @@ def track(s_grid, params, model, tip_force, tip_moment, step, fixed, section_sta
     no_residual = np.zeros(0)
     no_jacobian = np.zeros((0, x.shape[0]))
     for iteration in range(1, TRACK_ITERATIONS + 1):
-        step, predicted = _step(res, jac, con, con_jac, damping)
+        step, predicted = constrained_step(res, jac, con, con_jac, damping)
         if (predicted @ predicted <= tolerance ** 2
                 and weight ** 2 * (con @ con) <= tolerance ** 2):
             return x, res, con, states, jac, con_jac, iteration, runs, True
@@ -73,7 +73,7 @@ def track(s_grid, params, model, tip_force, tip_moment, step, fixed, section_sta
                 # second-order correction by chord iterations back onto the tip balance
                 c_trial, c_con = trial, t_con
                 for _ in range(3):
-                    correction, _ = _step(no_residual, no_jacobian, c_con, con_jac, 0.0)
+                    correction, _ = constrained_step(no_residual, no_jacobian, c_con, con_jac, 0.0)
                     c_trial = c_trial + correction
                     c_res, c_con, c_states = _evaluate(model_args, c_trial, measured)
                     runs += 1
@@ -86,7 +86,7 @@ def track(s_grid, params, model, tip_force, tip_moment, step, fixed, section_sta
                 accepted = True
                 break
             damping *= 8.0
-            step, predicted = _step(res, jac, con, con_jac, damping)
+            step, predicted = constrained_step(res, jac, con, con_jac, damping)
         if not accepted:
             return x, res, con, states, jac, con_jac, iteration, runs, False
         # Broyden: the secant condition J dx = df for both row blocks

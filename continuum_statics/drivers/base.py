@@ -106,7 +106,13 @@ class CableBackend(abc.ABC):
         n_cables = len(self.cable_names)
         self.length_limits = np.array(length_limits, dtype=float).reshape(n_cables, 2)
         self.initial_lengths = np.array(initial_lengths, dtype=float).reshape(n_cables)
-        self.options = dict(options)
+        # every option of :attr:`options_spec`, the defaults where not given (merged here once)
+        defaults = {option.name: option.default for option in self.options_spec}
+        unknown = set(options) - set(defaults)
+        if unknown:
+            raise ValueError('unknown option(s) for the %s backend: %s (known: %s)' % (
+                self.name, ', '.join(sorted(unknown)), ', '.join(sorted(defaults)) or 'none'))
+        self.options = dict(defaults, **options)
 
     @abc.abstractmethod
     def start(self, now):

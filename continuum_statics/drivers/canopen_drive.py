@@ -121,18 +121,13 @@ class CanopenCableBackend(CableBackend):
         BackendOption('disable_on_exit', True, 'shutdown (power stage off) when the driver '
                       'exits'),
     )
-    defaults = {option.name: option.default for option in options_spec}
 
     def __init__(self, cable_names, length_limits, initial_lengths, **options):
         if canopen is None:
             raise ValueError('the canopen backend needs canopen and python-can (pip install '
                              'canopen python-can): %s' % _IMPORT_ERROR)
-        unknown = set(options) - set(self.defaults)
-        if unknown:
-            raise ValueError('unknown option(s) for the canopen backend: %s (known: %s)'
-                             % (', '.join(sorted(unknown)), ', '.join(sorted(self.defaults))))
-        merged = dict(self.defaults, **options)
-        super().__init__(cable_names, length_limits, initial_lengths, **merged)
+        super().__init__(cable_names, length_limits, initial_lengths, **options)
+        merged = self.options
         n = len(self.cable_names)
         self.node_ids = [int(i) for i in per_cable('node_ids', merged['node_ids'], n, True)]
         if len(set(self.node_ids)) != n or not all(1 <= i <= 127 for i in self.node_ids):

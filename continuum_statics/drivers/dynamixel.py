@@ -95,18 +95,13 @@ class DynamixelCableBackend(CableBackend):
         BackendOption('timeout_margin', 0.0, 'added to the SDK status-packet timeout (wire time '
                       '+ 34 ms), s: slow adapters, loaded computers', 0.0, 5.0, read_only=True),
     )
-    defaults = {option.name: option.default for option in options_spec}
 
     def __init__(self, cable_names, length_limits, initial_lengths, **options):
         if sdk is None:
             raise ValueError('the dynamixel backend needs dynamixel-sdk 4.x (pip install '
                              '"dynamixel-sdk>=4,<5"): %s' % _IMPORT_ERROR)
-        unknown = set(options) - set(self.defaults)
-        if unknown:
-            raise ValueError('unknown option(s) for the dynamixel backend: %s (known: %s)'
-                             % (', '.join(sorted(unknown)), ', '.join(sorted(self.defaults))))
-        merged = dict(self.defaults, **options)
-        super().__init__(cable_names, length_limits, initial_lengths, **merged)
+        super().__init__(cable_names, length_limits, initial_lengths, **options)
+        merged = self.options
         n = len(self.cable_names)
         self.ids = [int(i) for i in per_cable('ids', merged['ids'], n, integer=True)]
         if len(set(self.ids)) != n or not all(0 <= i <= 252 for i in self.ids):

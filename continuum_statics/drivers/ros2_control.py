@@ -53,15 +53,10 @@ class Ros2ControlCableBackend(CableBackend):
         BackendOption('state_timeout', 0.5, 'joint_states older than this: connection lost, s',
                       0.01, 60.0),
     )
-    defaults = {option.name: option.default for option in options_spec}
 
     def __init__(self, cable_names, length_limits, initial_lengths, **options):
-        unknown = set(options) - set(self.defaults)
-        if unknown:
-            raise ValueError('unknown option(s) for the ros2_control backend: %s (known: %s)'
-                             % (', '.join(sorted(unknown)), ', '.join(sorted(self.defaults))))
-        merged = dict(self.defaults, **options)
-        super().__init__(cable_names, length_limits, initial_lengths, **merged)
+        super().__init__(cable_names, length_limits, initial_lengths, **options)
+        merged = self.options
         n = len(self.cable_names)
         self.joints = [str(j) for j in merged['joints']]
         if len(self.joints) != n or len(set(self.joints)) != n or '' in self.joints:

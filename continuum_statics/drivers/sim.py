@@ -34,15 +34,10 @@ class SimulatedCableBackend(CableBackend):
         BackendOption('seed', -1, 'noise random seed (negative: not reproducible)',
                       -1, 2 ** 31 - 1, read_only=True),
     )
-    defaults = {option.name: option.default for option in options_spec}
 
     def __init__(self, cable_names, length_limits, initial_lengths, **options):
-        unknown = set(options) - set(self.defaults)
-        if unknown:
-            raise ValueError('unknown option(s) for the sim backend: %s (known: %s)'
-                             % (', '.join(sorted(unknown)), ', '.join(sorted(self.defaults))))
-        merged = dict(self.defaults, **options)
-        super().__init__(cable_names, length_limits, initial_lengths, **merged)
+        super().__init__(cable_names, length_limits, initial_lengths, **options)
+        merged = self.options
         for key in ('time_constant', 'max_speed', 'noise_std'):
             self.set_option(key, merged[key])
         seed = int(merged['seed'])
