@@ -53,6 +53,7 @@ INTERFACES = REPO / 'continuum_statics_interfaces' / 'package.xml'
 #: Wheels its build needs that its package.xml reaches through ament_cmake / the generators.
 INTERFACES_BUILD = {'ament-cmake-include-directories', 'ament-cmake-ros', 'python-cmake-module',
                     'ament-package', 'rosidl-core-generators', 'ament-cmake-gmock',
+                    'ament-cmake-ros-core',
                     'ament-cmake-gtest', 'ament-cmake-pytest'}
 
 
