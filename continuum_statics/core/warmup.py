@@ -20,6 +20,19 @@ import numpy as np
 
 _LOCK = threading.Lock()
 _DONE = False
+#: The kernels Python calls (the others are compiled into them): each must have a signature
+#: after the warm-up (``test/test_warmup.py``).
+ENTRY_POINTS = (
+    'continuum_statics.core.kernel.integrate_batch',
+    'continuum_statics.core.kernel.cable_lengths_batch',
+    'continuum_statics.core.kernel.loads_from_state',
+    'continuum_statics.core.kernel.probe',
+    'continuum_statics.core.kernel.tip_jacobian',
+    'continuum_statics.core.tracking.track',
+    'continuum_statics.core.least_squares.constrained_step',
+    'continuum_statics.core.rotations._quaternions',
+    'continuum_statics.core.backbone_sampling._sample',
+)
 #: Modules whose numba dispatchers the warm-up must cover (see :func:`kernel_signatures`).
 KERNEL_MODULES = (
     'continuum_statics.core.kernel',
