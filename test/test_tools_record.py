@@ -89,6 +89,11 @@ def recording(tmp_path_factory):
         # The streaming goal reaches the controller and the recorder (both reliable).
         spin_until(executor, lambda: goals.get_subscription_count() >= 2, 30.0,
                    'tip_goal_pose subscribers', [bringup, recorder])
+        # the recorder's cable_commands reader discovered too (driver + recorder), or the
+        # half-second ramp can be over before it hears it
+        spin_until(executor, lambda: node.count_subscribers(
+            '/%s/cable_commands' % namespace) >= 2, 30.0, 'cable_commands subscribers',
+                   [bringup, recorder])
         goal = ROBOT.solve_ivp([1.5, -1.0, 0.0]).tip_position
         msg = PoseStamped()
         msg.header.frame_id = 'base_link'
