@@ -1,8 +1,13 @@
 """tip_controller: move the tip to a goal position, closed loop on the measured tip pose.
 
-Goals come from the ``tip_goal`` service (nav_msgs/srv/GetPlan: ``goal.pose.position`` in the base
-frame, ``tolerance`` in m; answered after arrival or failure) and from the ``tip_goal_pose`` topic
-(geometry_msgs/PoseStamped, streaming; ``default_tolerance``). For a goal the node
+Goals come from the ``move_tip`` action (continuum_statics_interfaces/action/MoveTip: feedback,
+cancel; :mod:`~continuum_statics.nodes.move_tip_action`), the ``tip_goal`` service
+(nav_msgs/srv/GetPlan: ``goal.pose.position`` in the base frame, ``tolerance`` in m; answered
+after arrival or failure), the ``tip_goal_pose`` topic (geometry_msgs/PoseStamped, streaming;
+``default_tolerance``) and ``tip_goal_point`` (RViz's Publish Point); ``tip_twist``
+(TwistStamped) drives resolved-rate teleoperation instead (:mod:`continuum_statics.control.
+teleop`). The decisions are :class:`~continuum_statics.control.goal_run.GoalRun`'s; this node
+parses, calls and publishes. For a goal the run
 
 1. estimates the shape from the measured cable lengths and solves the tip goal from it (warm
    start); when the measured lengths are not where the last command put them (a restarted
