@@ -42,10 +42,9 @@ from continuum_statics.nodes.joint_state_parser import parse_joint_state
 from continuum_statics.nodes.node_params import (
     ParameterTable,
     ParamSpec,
-    diagnostics_rate_spec,
     load_robot_file,
-    robot_file_spec,
 )
+from continuum_statics.nodes.parameter_tables import cable_driver_parameters
 from continuum_statics.nodes.qos import COMMAND_QOS
 from continuum_statics.nodes.ros_conversions import cable_index, joint_positions, joint_state
 from continuum_statics.nodes.timers import steady_timer
@@ -54,13 +53,6 @@ THROTTLE_S = 2.0
 #: First reconnection delay after a lost port or bus, s (doubles up to reconnect_max_interval).
 FIRST_RETRY_S = 0.1
 
-
-def _check_backend(value):
-    try:
-        backend_class(value)
-    except ValueError as error:
-        return str(error)
-    return None
 
 
 class CableDriverNode(LifecycleNode):
@@ -77,29 +69,7 @@ class CableDriverNode(LifecycleNode):
 
     def __init__(self, node_name='cable_driver', **kwargs):
         super().__init__(node_name, **kwargs)
-        specs = [
-            robot_file_spec('cable names, length limits'),
-            diagnostics_rate_spec(),
-            ParamSpec('backend', 'sim', 'cable actuator backend: sim, dynamixel, canopen, '
-                      'ros2_control, an entry point of group continuum_statics.cable_backends, '
-                      'or module:Class', read_only=True, check=_check_backend),
-            ParamSpec('publish_rate', 200.0, 'cable_states publish rate, Hz', 1.0, 2000.0),
-            ParamSpec('command_timeout', 0.5, 'hold position when no command arrives for this '
-                      'long, s (0: never)', 0.0, 3600.0),
-            ParamSpec('length_margin', 0.002, 'commands outside the length limits by at most '
-                      'this are clamped, further out rejected, m', 0.0, 0.1),
-            ParamSpec('home_file', '', 'YAML of the actuator positions at the straight pose '
-                      '(written by ~/set_home, loaded at start; empty: none)', read_only=True),
-            ParamSpec('home_tolerance', 0.002, '~/set_home is refused while a cable reads '
-                      'further than this from its straight length (the robot is bent, or the '
-                      'previous home is off), m', 1e-5, 1.0),
-            ParamSpec('home_force', False, '~/set_home takes the current positions as the '
-                      'straight pose whatever they read (a first homing, a known-bad home)'),
-            ParamSpec('autostart', True, 'configure and activate at start-up (false: wait for '
-                      'the lifecycle transitions, e.g. from a lifecycle manager)', read_only=True),
-            ParamSpec('reconnect_max_interval', 2.0, 'longest wait between two reconnection '
-                      'attempts after a lost port or bus, s', 0.1, 60.0),
-        ]
+        specs = cable_driver_parameters()
         self._params = ParameterTable(self, specs)
         self.robot = load_robot_file(self._params['robot_file'])
         self._backend_cls = backend_class(self._params['backend'])

@@ -67,13 +67,10 @@ from continuum_statics.nodes.marker_geometry import (
 from continuum_statics.nodes.markers import BackboneMarkers
 from continuum_statics.nodes.node_params import (
     ParameterTable,
-    ParamSpec,
-    diagnostics_rate_spec,
     load_robot_file,
-    robot_file_spec,
-    tip_wrench_limit_specs,
     tip_wrench_limits,
 )
+from continuum_statics.nodes.parameter_tables import statics_parameters
 from continuum_statics.nodes.pose_encoder import PoseSequenceEncoder
 from continuum_statics.nodes.qos import LATCHED_QOS, LATEST_SENSOR_QOS
 from continuum_statics.nodes.ros_conversions import cable_index, tip_load
@@ -89,45 +86,7 @@ class StaticsNode(Node):
 
     def __init__(self, node_name='statics', **kwargs):
         super().__init__(node_name, **kwargs)
-        specs = [
-            robot_file_spec('rod, base frame, cables, guides'),
-            diagnostics_rate_spec(),
-            ParamSpec('path_samples', 20, 'poses in each backbone Path, base to tip', 2, 500),
-            ParamSpec('marker_rate', 30.0, 'backbone_markers rate, Hz (0: off)', 0.0, 200.0),
-            ParamSpec('tip_wrench_timeout', 1.0, 'a tip_wrench estimate older than this is '
-                      'replaced by zero, s (0: never expires)', 0.0, 3600.0),
-            ParamSpec('warn_residual', 1e-4, 'above this cable-length residual (RMS) the '
-                      'lengths are not exactly a shape: the best fit is published with WARN on '
-                      'diagnostics, m (>= 1e-7: a smaller one would warn on round-off)', 1e-7,
-                      1.0),
-            ParamSpec('max_residual', 2e-3, 'above this residual no shape is near the measured '
-                      'lengths: the input is dropped and the last good shape kept, m (>= 1e-6: '
-                      'a smaller one would drop every real measurement)', 1e-6, 1.0),
-            ParamSpec('length_noise_std', 0.0, 'standard deviation of the measured cable lengths '
-                      '(encoder noise), m: the thresholds are at least 3x (warn) and 10x (drop) '
-                      'this', 0.0, 0.1),
-            ParamSpec('length_limit_margin', 1e-3, 'lengths further than this outside the robot '
-                      "file's length limits are dropped, m", 0.0, 1.0),
-            ParamSpec('max_iterations', 3, 'Gauss-Newton iterations per measurement (0: the '
-                      "robot file's solver.max_iterations): a fit that needs more goes on from "
-                      'this estimate with the next measurement; one that is still far off is '
-                      'finished at once', 0, 1000),
-            ParamSpec('use_measured_tensions', True, 'estimate with cable_states.effort as cable '
-                      'tensions (N) when every one is present, finite, >= 0 and <= max_tension, '
-                      'and the shape they give agrees with the lengths within warn_residual '
-                      '(else the shape follows the lengths, with WARN)'),
-            ParamSpec('max_tension', 0.0, 'measured tensions above this are implausible and '
-                      'rejected, N (0: the tension that bends the rod into a full circle from '
-                      'its outermost hole, 2 pi EI / (L r))', 0.0, 1e6),
-            ParamSpec('tube_diameter', 0.006, 'diameter of the rod drawn in RViz, m', 1e-4, 0.2),
-            ParamSpec('dedicated_intake_thread', True, 'serve cable_states from a thread of its '
-                      'own instead of the executor (~0.3 ms less per message)', read_only=True),
-            ParamSpec('input_queue_depth', 10, 'cable_states queue (dedicated intake thread '
-                      'only; the executor path keeps depth 1): absorbs scheduling stalls', 1, 100,
-                      read_only=True),
-            ParamSpec('max_input_lag', 0.005, 'when the oldest queued cable_states was received '
-                      'longer ago than this, skip to the newest, s', 0.0, 1.0, read_only=True),
-        ] + tip_wrench_limit_specs()
+        specs = statics_parameters()
         self._params = ParameterTable(self, specs)
         self.robot = load_robot_file(self._params['robot_file'], self.get_logger())
         # Compile every kernel now, on this thread, before any input can arrive (numba compiles

@@ -69,13 +69,10 @@ from continuum_statics.nodes.markers import workspace_markers
 from continuum_statics.nodes.move_tip_action import MoveTipServer, load_interface
 from continuum_statics.nodes.node_params import (
     ParameterTable,
-    ParamSpec,
-    diagnostics_rate_spec,
     load_robot_file,
-    robot_file_spec,
-    tip_wrench_limit_specs,
     tip_wrench_limits,
 )
+from continuum_statics.nodes.parameter_tables import tip_controller_parameters
 from continuum_statics.nodes.qos import COMMAND_QOS, LATCHED_QOS, LATEST_SENSOR_QOS
 from continuum_statics.nodes.ros_conversions import (
     cable_index,
@@ -105,47 +102,7 @@ class TipControllerNode(Node):
 
     def __init__(self, node_name='tip_controller', **kwargs):
         super().__init__(node_name, **kwargs)
-        specs = [
-            robot_file_spec('must be the one statics uses'),
-            diagnostics_rate_spec(),
-            ParamSpec('max_cable_speed', 0.02, 'fastest cable speed of a ramp, m/s', 1e-5, 1.0),
-            ParamSpec('goal_orientation', 'ignore', 'ignore: goals are tip positions; direction: '
-                      'the tip z axis also points along the z axis of the goal orientation',
-                      check=lambda v: None if v in ('ignore', 'direction')
-                      else "must be 'ignore' or 'direction'"),
-            ParamSpec('control_rate', 50.0, 'cable_commands rate while a goal runs, Hz', 1.0,
-                      1000.0),
-            ParamSpec('goal_timeout', 10.0, 'a goal not reached after this long fails, s', 0.1,
-                      3600.0),
-            ParamSpec('default_tolerance', 0.001, 'tip position tolerance of tip_goal_pose '
-                      'goals, m', 1e-6, 1.0),
-            ParamSpec('settle_time', 0.2, 'longest wait for the cables to settle after a ramp '
-                      'before the tip error is judged, s', 0.0, 10.0),
-            ParamSpec('settled_cable_error', 1e-6, 'cables count as settled when every measured '
-                      'length is this close to its command, m (the tip moves ~L/r times as '
-                      'much)', 0.0, 0.01),
-            ParamSpec('max_corrections', 10, 'closed-loop corrections per goal before it fails',
-                      0, 1000),
-            ParamSpec('tip_wrench_timeout', 1.0, 'a tip_wrench estimate older than this is '
-                      'replaced by zero, s (0: never expires)', 0.0, 3600.0),
-            ParamSpec('max_state_age', 0.5, 'cable_states and tip_pose older than this mean a '
-                      'dead driver or statics: goals are rejected or fail, s', 0.01, 60.0),
-            ParamSpec('state_wait', 3.0, 'a goal that arrives while cable_states or tip_pose '
-                      'is missing or older than max_state_age (start-up, a restarted driver) '
-                      'waits this long for fresh state before it is rejected, s', 0.0, 60.0),
-            ParamSpec('tip_average_time', 1.0, 'longest time the tip is averaged after the '
-                      'cables settled (noisy measurements: the mean must be known well inside '
-                      'the tolerance before the goal is judged), s', 0.0, 60.0),
-            ParamSpec('max_tip_speed', 0.05, 'fastest tip speed of teleoperation (tip_twist), m/s',
-                      1e-4, 1.0),
-            ParamSpec('max_tip_rate', 0.5, 'fastest turn of the tip direction in teleoperation '
-                      '(goal_orientation: direction), rad/s', 1e-3, 10.0),
-            ParamSpec('twist_timeout', 0.5, 'dead-man: teleoperation stops (cables hold) when no '
-                      'tip_twist came for this long, s', 0.01, 10.0),
-            ParamSpec('dedicated_intake_thread', True, 'serve tip_pose, backbone, cable_states '
-                      'and tip_wrench from a thread of their own instead of the executor',
-                      read_only=True),
-        ] + tip_wrench_limit_specs()
+        specs = tip_controller_parameters()
         self._params = ParameterTable(self, specs)
         self.robot = load_robot_file(self._params['robot_file'])
         # Compile every kernel now, on this thread, before the service is advertised.

@@ -1,0 +1,135 @@
+"""The parameter table of each node: name, default (its type), description with the unit, range.
+
+What a user can tell a node, in one place per node (``ros2 param describe`` shows the same text);
+``config/continuum_robot.params.yaml`` lists every one (a test checks).
+"""
+from continuum_statics.drivers import backend_class
+from continuum_statics.nodes.node_params import (
+    ParamSpec,
+    diagnostics_rate_spec,
+    robot_file_spec,
+    tip_wrench_limit_specs,
+)
+
+
+def _check_backend(value):
+    try:
+        backend_class(value)
+    except ValueError as error:
+        return str(error)
+    return None
+
+
+def statics_parameters():
+    """Return the statics node's ParamSpecs."""
+    return [
+        robot_file_spec('rod, base frame, cables, guides'),
+        diagnostics_rate_spec(),
+        ParamSpec('path_samples', 20, 'poses in each backbone Path, base to tip', 2, 500),
+        ParamSpec('marker_rate', 30.0, 'backbone_markers rate, Hz (0: off)', 0.0, 200.0),
+        ParamSpec('tip_wrench_timeout', 1.0, 'a tip_wrench estimate older than this is '
+                  'replaced by zero, s (0: never expires)', 0.0, 3600.0),
+        ParamSpec('warn_residual', 1e-4, 'above this cable-length residual (RMS) the '
+                  'lengths are not exactly a shape: the best fit is published with WARN on '
+                  'diagnostics, m (>= 1e-7: a smaller one would warn on round-off)', 1e-7,
+                  1.0),
+        ParamSpec('max_residual', 2e-3, 'above this residual no shape is near the measured '
+                  'lengths: the input is dropped and the last good shape kept, m (>= 1e-6: '
+                  'a smaller one would drop every real measurement)', 1e-6, 1.0),
+        ParamSpec('length_noise_std', 0.0, 'standard deviation of the measured cable lengths '
+                  '(encoder noise), m: the thresholds are at least 3x (warn) and 10x (drop) '
+                  'this', 0.0, 0.1),
+        ParamSpec('length_limit_margin', 1e-3, 'lengths further than this outside the robot '
+                  "file's length limits are dropped, m", 0.0, 1.0),
+        ParamSpec('max_iterations', 3, 'Gauss-Newton iterations per measurement (0: the '
+                  "robot file's solver.max_iterations): a fit that needs more goes on from "
+                  'this estimate with the next measurement; one that is still far off is '
+                  'finished at once', 0, 1000),
+        ParamSpec('use_measured_tensions', True, 'estimate with cable_states.effort as cable '
+                  'tensions (N) when every one is present, finite, >= 0 and <= max_tension, '
+                  'and the shape they give agrees with the lengths within warn_residual '
+                  '(else the shape follows the lengths, with WARN)'),
+        ParamSpec('max_tension', 0.0, 'measured tensions above this are implausible and '
+                  'rejected, N (0: the tension that bends the rod into a full circle from '
+                  'its outermost hole, 2 pi EI / (L r))', 0.0, 1e6),
+        ParamSpec('tube_diameter', 0.006, 'diameter of the rod drawn in RViz, m', 1e-4, 0.2),
+        ParamSpec('dedicated_intake_thread', True, 'serve cable_states from a thread of its '
+                  'own instead of the executor (~0.3 ms less per message)', read_only=True),
+        ParamSpec('input_queue_depth', 10, 'cable_states queue (dedicated intake thread '
+                  'only; the executor path keeps depth 1): absorbs scheduling stalls', 1, 100,
+                  read_only=True),
+        ParamSpec('max_input_lag', 0.005, 'when the oldest queued cable_states was received '
+                  'longer ago than this, skip to the newest, s', 0.0, 1.0, read_only=True),
+    ] + tip_wrench_limit_specs()
+
+
+def tip_controller_parameters():
+    """Return the tip_controller node's ParamSpecs."""
+    return [
+        robot_file_spec('must be the one statics uses'),
+        diagnostics_rate_spec(),
+        ParamSpec('max_cable_speed', 0.02, 'fastest cable speed of a ramp, m/s', 1e-5, 1.0),
+        ParamSpec('goal_orientation', 'ignore', 'ignore: goals are tip positions; direction: '
+                  'the tip z axis also points along the z axis of the goal orientation',
+                  check=lambda v: None if v in ('ignore', 'direction')
+                  else "must be 'ignore' or 'direction'"),
+        ParamSpec('control_rate', 50.0, 'cable_commands rate while a goal runs, Hz', 1.0,
+                  1000.0),
+        ParamSpec('goal_timeout', 10.0, 'a goal not reached after this long fails, s', 0.1,
+                  3600.0),
+        ParamSpec('default_tolerance', 0.001, 'tip position tolerance of tip_goal_pose '
+                  'goals, m', 1e-6, 1.0),
+        ParamSpec('settle_time', 0.2, 'longest wait for the cables to settle after a ramp '
+                  'before the tip error is judged, s', 0.0, 10.0),
+        ParamSpec('settled_cable_error', 1e-6, 'cables count as settled when every measured '
+                  'length is this close to its command, m (the tip moves ~L/r times as '
+                  'much)', 0.0, 0.01),
+        ParamSpec('max_corrections', 10, 'closed-loop corrections per goal before it fails',
+                  0, 1000),
+        ParamSpec('tip_wrench_timeout', 1.0, 'a tip_wrench estimate older than this is '
+                  'replaced by zero, s (0: never expires)', 0.0, 3600.0),
+        ParamSpec('max_state_age', 0.5, 'cable_states and tip_pose older than this mean a '
+                  'dead driver or statics: goals are rejected or fail, s', 0.01, 60.0),
+        ParamSpec('state_wait', 3.0, 'a goal that arrives while cable_states or tip_pose '
+                  'is missing or older than max_state_age (start-up, a restarted driver) '
+                  'waits this long for fresh state before it is rejected, s', 0.0, 60.0),
+        ParamSpec('tip_average_time', 1.0, 'longest time the tip is averaged after the '
+                  'cables settled (noisy measurements: the mean must be known well inside '
+                  'the tolerance before the goal is judged), s', 0.0, 60.0),
+        ParamSpec('max_tip_speed', 0.05, 'fastest tip speed of teleoperation (tip_twist), m/s',
+                  1e-4, 1.0),
+        ParamSpec('max_tip_rate', 0.5, 'fastest turn of the tip direction in teleoperation '
+                  '(goal_orientation: direction), rad/s', 1e-3, 10.0),
+        ParamSpec('twist_timeout', 0.5, 'dead-man: teleoperation stops (cables hold) when no '
+                  'tip_twist came for this long, s', 0.01, 10.0),
+        ParamSpec('dedicated_intake_thread', True, 'serve tip_pose, backbone, cable_states '
+                  'and tip_wrench from a thread of their own instead of the executor',
+                  read_only=True),
+    ] + tip_wrench_limit_specs()
+
+
+def cable_driver_parameters():
+    """Return the cable_driver node's ParamSpecs."""
+    return [
+        robot_file_spec('cable names, length limits'),
+        diagnostics_rate_spec(),
+        ParamSpec('backend', 'sim', 'cable actuator backend: sim, dynamixel, canopen, '
+                  'ros2_control, an entry point of group continuum_statics.cable_backends, '
+                  'or module:Class', read_only=True, check=_check_backend),
+        ParamSpec('publish_rate', 200.0, 'cable_states publish rate, Hz', 1.0, 2000.0),
+        ParamSpec('command_timeout', 0.5, 'hold position when no command arrives for this '
+                  'long, s (0: never)', 0.0, 3600.0),
+        ParamSpec('length_margin', 0.002, 'commands outside the length limits by at most '
+                  'this are clamped, further out rejected, m', 0.0, 0.1),
+        ParamSpec('home_file', '', 'YAML of the actuator positions at the straight pose '
+                  '(written by ~/set_home, loaded at start; empty: none)', read_only=True),
+        ParamSpec('home_tolerance', 0.002, '~/set_home is refused while a cable reads '
+                  'further than this from its straight length (the robot is bent, or the '
+                  'previous home is off), m', 1e-5, 1.0),
+        ParamSpec('home_force', False, '~/set_home takes the current positions as the '
+                  'straight pose whatever they read (a first homing, a known-bad home)'),
+        ParamSpec('autostart', True, 'configure and activate at start-up (false: wait for '
+                  'the lifecycle transitions, e.g. from a lifecycle manager)', read_only=True),
+        ParamSpec('reconnect_max_interval', 2.0, 'longest wait between two reconnection '
+                  'attempts after a lost port or bus, s', 0.1, 60.0),
+    ]
