@@ -13,7 +13,7 @@ import math
 
 import numpy as np
 
-from continuum_statics.core import bvp, estimation, tip_goal
+from continuum_statics.core import bvp, estimation, length_statics, tip_goal
 from continuum_statics.core.inputs import as_vector
 from continuum_statics.core.kernel import (
     DISTRIBUTED,
@@ -35,6 +35,7 @@ from continuum_statics.core.layout import (
 from continuum_statics.core.robot_file import read_robot_description
 from continuum_statics.core.rotations import quaternion_to_rotation
 from continuum_statics.core.shape import Shape
+from continuum_statics.core.tendons import Tendons
 
 
 def load_robot(path):
@@ -115,6 +116,10 @@ class Robot:
         self.cable_model = description.cable_model
         self.model_code = DISTRIBUTED if self.cable_model == 'distributed' else POINT_MOMENT
         self.solver = description.solver
+        self.tendons = description.tendons or Tendons.default(len(self.cable_names))
+        # the point a tip tracker follows, in the tip frame (m): calibration and tip_pose_measured
+        self.tip_marker = (np.zeros(3) if description.tip_marker is None
+                           else np.array(description.tip_marker, dtype=float))
         self.c = rod.bending_stiffness
         self.d = rod.shear_stiffness
         # distributed weight rho*A*g*e_g (N/m), the body force f of eqs. 3, 4 and 8
@@ -272,6 +277,15 @@ class Robot:
                                  start)
         return self.make_shape(state, tip_force, self.integrate_state(state, tip_force, tensions),
                                tensions)
+
+    def solve_lengths(self, lengths, tip_force=(0.0, 0.0, 0.0), tip_moment=(0.0, 0.0, 0.0),
+                      warm_start=None):
+        """Equilibrium when the motors hold cable lengths (m): shape, tensions, slack cables.
+
+        The tendon model of the robot file (stiffness, pretension, friction, zero offsets);
+        ``warm_start`` is the previous result of the same sequence. See :mod:`length_statics`.
+        """
+        return length_statics.solve_lengths(self, lengths, tip_force, tip_moment, warm_start)
 
     def equilibrium_between(self, start, goal, fraction, tip_force=(0.0, 0.0, 0.0),
                             tip_moment=(0.0, 0.0, 0.0), warm_start=None):

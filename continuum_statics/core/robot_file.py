@@ -9,9 +9,11 @@ import math
 import numpy as np
 import yaml
 
+from continuum_statics.core.tendons import TENDON_KEYS, Tendons
+
 #: Plausible backbone materials: Young's modulus (Pa) and density (kg/m^3).
 YOUNGS_RANGE = (1e5, 1e13)
-MAX_DENSITY = 3e4
+MAX_DENSITY = 1e5  # above any metal: an effective density may lump the disks onto the backbone
 #: Most integration steps over the rod a robot file may ask for.
 MAX_STEPS = 2000
 
@@ -128,14 +130,16 @@ class RobotDescription:
     sections: tuple = ()
     cable_model: str = 'point_moment'
     warnings: tuple = ()
+    tendons: Tendons = None
+    tip_marker: np.ndarray = None
 
 
 _ROD_KEYS = {'length', 'diameter', 'youngs_modulus', 'poisson_ratio', 'shear_modulus', 'density'}
 _BASE_KEYS = {'frame_id', 'position', 'orientation'}
-_CABLE_KEYS = {'name', 'offset', 'length_limits'}
-_SECTION_KEYS = {'name', 'guides', 'cables'}
+_CABLE_KEYS = {'name', 'offset', 'length_limits', 'zero_offset', *TENDON_KEYS}
+_SECTION_KEYS = {'name', 'guides', 'cables', 'tendons'}
 _TOP_KEYS = {'name', 'description', 'rod', 'base', 'gravity', 'cables', 'guides', 'solver',
-             'sections', 'cable_model'}
+             'sections', 'cable_model', 'tendons', 'tip_marker'}
 
 
 def _frozen(array):
@@ -202,7 +206,8 @@ def _parse_rod(data):
         raise ValueError('rod.youngs_modulus must be in [%g, %g] Pa (soft polymers to steel '
                          'and beyond), got %g' % (*YOUNGS_RANGE, youngs))
     if density > MAX_DENSITY:
-        raise ValueError('rod.density must be <= %g kg/m^3 (denser than any metal), got %g'
+        raise ValueError('rod.density must be <= %g kg/m^3 (even with the disks lumped on the '
+                         'backbone), got %g'
                          % (MAX_DENSITY, density))
     if 'shear_modulus' in rod and 'poisson_ratio' in rod:
         raise ValueError('rod: give either poisson_ratio or shear_modulus, not both')
@@ -251,7 +256,7 @@ def _parse_guides(data, length, prefix='', start=0.0):
     return guides
 
 
-def _parse_cables(data, guides, prefix='', names=None):
+def _parse_cables(data, guides, prefix='', names=None, tendons=None, defaults=None):
     cables = data.get('cables') or []
     if not isinstance(cables, (list, tuple)):
         raise ValueError('%scables must be a list of {name, offset}, got %r' % (prefix, cables))
@@ -282,17 +287,23 @@ def _parse_cables(data, guides, prefix='', names=None):
         names.append(name)
         offsets.append(offset)
         limits.append(lim)
+        if tendons is not None:
+            tendons.append(_parse_tendon(cable, defaults or {}, field))
     if offsets and not np.any(guides > 0.0):
         raise ValueError('%scables need at least one guide at s > 0 (guides is empty)' % prefix)
     return np.reshape(offsets, (-1, 3)), np.reshape(limits, (-1, 2))
 
 
-def _parse_sections(data, length):
-    """Sections from ``sections:`` or from today's top-level ``cables:`` + ``guides:``."""
+def _parse_sections(data, length, tendons, defaults):
+    """Sections from ``sections:`` or from today's top-level ``cables:`` + ``guides:``.
+
+    Appends each cable's tendon parameters to ``tendons`` (``defaults``: the top-level block).
+    """
     if 'sections' not in data:
         guides = _parse_guides(data, length)
         names = []
-        offsets, limits = _parse_cables(data, guides, names=names)
+        offsets, limits = _parse_cables(data, guides, names=names, tendons=tendons,
+                                        defaults=defaults)
         section = Section('section_0', _frozen(guides), tuple(range(len(names))))
         return (section,) if len(guides) or names else (), names, offsets, limits
     if 'cables' in data or 'guides' in data:
@@ -314,7 +325,10 @@ def _parse_sections(data, length):
             raise ValueError('%sguides must list at least one guide disk at s > 0 (its end disk)'
                              % prefix)
         first = len(names)
-        section_offsets, section_limits = _parse_cables(item, guides, prefix, names)
+        section_defaults = dict(defaults)
+        section_defaults.update(_tendon_block(item.get('tendons'), prefix + 'tendons'))
+        section_offsets, section_limits = _parse_cables(item, guides, prefix, names, tendons,
+                                                        section_defaults)
         sections.append(Section(name, _frozen(guides), tuple(range(first, len(names)))))
         offsets.append(section_offsets)
         limits.append(section_limits)
@@ -338,6 +352,63 @@ def _plausibility(rod, offsets, sections):
                 warnings.append('%s: hole radius %g m is outside [rod radius %g m, rod.length '
                                 '/ 4 = %g m]' % (field, radius, rod.diameter / 2.0,
                                                  0.25 * rod.length))
+    return tuple(warnings)
+
+
+def _tendon_block(block, field):
+    """Validated tendon defaults of a ``tendons:`` mapping (empty when absent)."""
+    if block is None:
+        return {}
+    block = _mapping(block, field, set(TENDON_KEYS))
+    return {key: _tendon_value(key, value, '%s.%s' % (field, key))
+            for key, value in block.items()}
+
+
+def _tendon_value(key, value, field):
+    """One tendon parameter, checked: stiffness > 0 (N), pretension >= 0 (N), friction >= 0,
+    tension_limits 0 <= min < max (N), zero_offset (m)."""
+    if key == 'stiffness':
+        return _positive(value, field)
+    if key == 'tension_limits':
+        lim = _vector(value, 2, field)
+        if not 0.0 <= lim[0] < lim[1]:
+            raise ValueError('%s must satisfy 0 <= min < max (N), got %s' % (field, lim.tolist()))
+        return lim
+    value = _number(value, field)
+    if key in ('pretension', 'friction') and value < 0.0:
+        raise ValueError('%s must be >= 0, got %g' % (field, value))
+    return value
+
+
+def _parse_tendon(cable, defaults, field):
+    """A cable's tendon parameters: its own keys over its section's and the file's defaults."""
+    values = dict(defaults)
+    for key in TENDON_KEYS + ('zero_offset',):
+        if key in cable:
+            values[key] = _tendon_value(key, cable[key], '%s.%s' % (field, key))
+    return values
+
+
+def _tendons(rows):
+    """The :class:`Tendons` record of every cable (defaults for what no file entry gives)."""
+    tendons = Tendons.default(len(rows))
+    arrays = {name: np.array(getattr(tendons, name)) for name in tendons.__dataclass_fields__}
+    for j, values in enumerate(rows):
+        for key, value in values.items():
+            arrays[key][j] = value
+    return Tendons(**{key: _frozen(value) for key, value in arrays.items()})
+
+
+def _tendon_warnings(rows, names):
+    """Warnings for tendon values no real robot has (the model still runs)."""
+    warnings = []
+    for name, values in zip(names, rows):
+        if values.get('friction', 0.0) > 1.0:
+            warnings.append('cable %r: friction %g is above 1 (steel on steel is ~0.2)'
+                            % (name, values['friction']))
+        if values.get('pretension', 0.0) > 0.0 and 'stiffness' not in values:
+            warnings.append('cable %r: pretension without stiffness: an inextensible cable\'s '
+                            'tension does not follow from its length' % name)
     return tuple(warnings)
 
 
@@ -369,7 +440,9 @@ def parse_robot_description(data, source='robot file'):
     rod = _parse_rod(data)
     frame_id, position, orientation = _parse_base(data)
     gravity = _vector(_section(data, 'gravity', 'gravity'), 3, 'gravity')
-    sections, names, offsets, limits = _parse_sections(data, rod.length)
+    defaults = _tendon_block(data.get('tendons'), 'tendons')
+    tendon_rows = []
+    sections, names, offsets, limits = _parse_sections(data, rod.length, tendon_rows, defaults)
     model = data.get('cable_model', 'point_moment')
     if model not in CABLE_MODELS:
         raise ValueError('cable_model must be one of %s, got %r'
@@ -381,7 +454,9 @@ def parse_robot_description(data, source='robot file'):
         gravity=_frozen(gravity), cable_names=tuple(names), cable_offsets=_frozen(offsets),
         cable_length_limits=_frozen(limits), guides=_frozen(guides),
         solver=_parse_solver(data), sections=sections, cable_model=model,
-        warnings=_plausibility(rod, offsets, sections))
+        warnings=_plausibility(rod, offsets, sections) + _tendon_warnings(tendon_rows, names),
+        tendons=_tendons(tendon_rows),
+        tip_marker=_frozen(_vector(data.get('tip_marker', [0.0, 0.0, 0.0]), 3, 'tip_marker')))
 
 
 def read_robot_description(path):

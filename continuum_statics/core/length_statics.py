@@ -1,0 +1,334 @@
+"""Displacement-driven forward statics: the motors hold cable lengths, the rod and cables settle.
+
+Unknowns z = [u(0) (3, 1/m); t (n_cables, N), each cable's tension at its end disk]. Equations:
+- the tip moment balance (:func:`kernel.probe` rows ``balance``, three equations), the shooting
+  condition of every solver here (paper sec. III.E);
+- per cable, the complementarity of a cable that cannot push (:mod:`continuum_statics.core.tendons`):
+  t >= 0, g = Lf - sum_i p_i / (1 + T_i / EA) >= 0, t g = 0, where p_i are the straight hole-to-
+  hole spans of its path (eq. 11 with the errata) and T_i their tensions. Written as the
+  semismooth equation min(kappa t, g) = 0 (kappa scales N to m), solved by Newton's method with a
+  backtracking line search on the squared residual and least-norm steps (tensions an inextensible
+  antagonist pair cannot tell apart stay as small as the start allows).
+
+Friction (capstan, Euler-Eytelwein): across a guide hole where the cable's direction turns by the
+wrap angle theta, the tension changes by the factor exp(mu theta), rising toward the motor while
+the motor pulls (the cable slides toward the motor) and falling while it pays out. A cable's last
+direction of motion comes from ``warm_start`` (its free length then and now); segment i then
+carries T_i = t exp(sigma mu sum of the wraps between it and the end disk), sigma = +1 pulled,
+-1 released, 0 unknown (a cold start). Friction thus changes how much a cable stretches for the
+same end tension, so pulling and releasing to the same motor position give different shapes.
+Limits: the holes' friction forces load the rod only through that stretch (the point-moment model
+loads the end disk alone; the distributed model takes the end tension all along the cable), the
+run from the motor to the base disk is straight and folded into EA, and sticking (static friction
+holding any tension in the band) is represented by the last sliding direction.
+"""
+from dataclasses import dataclass
+
+import numpy as np
+
+from continuum_statics.core import bvp
+from continuum_statics.core.inputs import as_vector
+from continuum_statics.core.kernel import POINT_MOMENT
+from continuum_statics.core.layout import POSITION, ROTATION, ProbeRows
+from continuum_statics.core.shape import Shape
+
+#: Free-length change (m) below which a cable is taken as not moving (its friction sign is kept).
+MOTION_THRESHOLD = 1e-7
+#: Cable-row tolerance (m) and balance tolerance (relative) of a converged solve.
+LENGTH_TOLERANCE = 1e-10
+BALANCE_TOLERANCE = 1e-9
+#: End tension (relative to E I / (L r)) at or below which a cable counts as slack.
+SLACK_TENSION = 1e-9
+
+
+@dataclass(frozen=True, eq=False)
+class LengthSolution:
+    """Equilibrium of rod and cables for motor-held lengths (:func:`solve_lengths`).
+
+    :ivar shape: the backbone (``shape.state`` warm-starts other solvers)
+    :ivar tensions: (n,) N at the motor, what a motor's current or a load cell measures
+    :ivar end_tensions: (n,) N at each cable's end disk, what bends the rod
+    :ivar slack: (n,) bool, cables that carry no tension (path no longer than the cable)
+    :ivar converged: balance and complementarity reached their tolerances
+    :ivar message: what limited the solve, empty when nothing did
+    :ivar free_lengths: (n,) m, unstretched lengths Lf (the next solve's motion reference)
+    :ivar motion: (n,) +1 last pulled, -1 last paid out, 0 unknown (friction sign)
+    :ivar iterations: Newton iterations
+    :ivar residual: largest complementarity residual (m)
+    """
+
+    shape: Shape
+    tensions: np.ndarray
+    end_tensions: np.ndarray
+    slack: np.ndarray
+    converged: bool
+    message: str
+    free_lengths: np.ndarray
+    motion: np.ndarray
+    iterations: int = 0
+    residual: float = 0.0
+
+    @property
+    def state(self):
+        """Solver state x of the shape (see :mod:`continuum_statics.core.robot`)."""
+        return self.shape.state
+
+
+class _Problem:
+    """One solve's fixed data and the evaluation of the residual F(z) and its Jacobian."""
+
+    def __init__(self, robot, free_lengths, motion, tip_force, tip_moment):
+        self.robot = robot
+        self.n = len(robot.cable_names)
+        self.rows = ProbeRows(self.n)
+        self.free = free_lengths
+        self.motion = motion
+        self.tip_force, self.tip_moment = tip_force, tip_moment
+        self.compliance = robot.tendons.compliance
+        self.friction = robot.tendons.friction * motion
+        self.with_friction = bool(np.any(self.friction != 0.0))
+        radius = np.hypot(robot.cable_offsets[:, 0], robot.cable_offsets[:, 1])
+        # scales: u(0) L, t / t_ref and lengths / r are O(angle) for bends of O(1 rad)
+        self.radius = float(np.mean(radius)) if self.n else 1.0
+        self.t_ref = robot.c[0] / (robot.length * self.radius)
+        self.kappa = self.radius / self.t_ref  # m per N in min(kappa t, g)
+        self.scale = np.concatenate([np.full(3, 1.0 / robot.length),
+                                     np.full(self.n, self.t_ref)])
+        self.moment_map = _moment_map(robot) if robot.model_code == POINT_MOMENT else None
+
+    def state_of(self, z):
+        """Solver state x and fixed tensions of z (the robot's solver-state convention)."""
+        x = self.robot.passive_state(z[:3])
+        if self.moment_map is not None:
+            x[3:] = self.moment_map @ z[3:]
+            return x, None
+        return x, z[3:].copy()
+
+    def evaluate(self, z):
+        """Residual F (3 + n, scaled), its Jacobian in scaled z, states and cable quantities."""
+        robot, n, rows = self.robot, self.n, self.rows
+        x, fixed = self.state_of(z)
+        if fixed is None:
+            values, jac_x, states = robot.probe(x, robot.state_size, self.tip_force,
+                                                self.tip_moment)
+            jac = np.empty((jac_x.shape[0], 3 + n))
+            jac[:, :3] = jac_x[:, :3]
+            jac[:, 3:] = jac_x[:, 3:] @ self.moment_map
+        else:
+            values, jac_x, states = robot.probe(x, 3, self.tip_force, self.tip_moment, fixed)
+            jac = np.empty((jac_x.shape[0], 3 + n))
+            jac[:, :3] = jac_x
+            step = 1e-7 * self.t_ref
+            for j in range(n):
+                trial = fixed.copy()
+                trial[j] += step
+                shifted, _, _ = robot.probe(x, 0, self.tip_force, self.tip_moment, trial)
+                jac[:, 3 + j] = (shifted - values) / step
+        t = z[3:]
+        paths = values[rows.lengths]
+        consumed, motor, mean = self.consumed(states, paths, t)
+        gap = self.free - consumed
+        # d consumed / dz with the friction profile held (exact without friction)
+        stretch = 1.0 + mean * self.compliance
+        d_consumed = jac[rows.lengths] / stretch[:, None]
+        d_consumed[:, 3:] -= np.diag(paths * self.compliance / stretch ** 2)
+        taut = self.kappa * t >= gap
+        residual = np.concatenate([values[rows.balance],
+                                   np.where(taut, gap, self.kappa * t) / self.radius])
+        jacobian = np.zeros((3 + n, 3 + n))
+        jacobian[:3] = jac[rows.balance]
+        jacobian[3:] = np.where(taut[:, None], -d_consumed,
+                                np.hstack([np.zeros((n, 3)), self.kappa * np.eye(n)]))
+        jacobian[3:] /= self.radius
+        return residual, jacobian * self.scale, (x, fixed, states, motor, gap, taut)
+
+    def consumed(self, states, paths, t):
+        """Free length each cable's path takes (m), motor-side tension (N), mean tension (N)."""
+        if not self.with_friction:
+            return paths / (1.0 + t * self.compliance), t.copy(), t.copy()
+        consumed, motor, mean = np.empty(self.n), np.empty(self.n), np.empty(self.n)
+        for j in range(self.n):
+            spans, wraps = hole_path(self.robot, states, j)
+            # wraps[i]: turn at hole i (0 = base disk); span i runs from hole i to hole i + 1
+            beyond = np.concatenate([np.cumsum(wraps[:0:-1])[::-1], [0.0]])
+            tension = t[j] * np.exp(self.friction[j] * beyond)
+            consumed[j] = np.sum(spans / (1.0 + tension * self.compliance[j]))
+            motor[j] = t[j] * np.exp(self.friction[j] * np.sum(wraps))
+            mean[j] = np.sum(spans * tension) / max(np.sum(spans), 1e-300)
+        return consumed, motor, mean
+
+
+def hole_path(robot, states, cable):
+    """Spans (m) between a cable's consecutive holes and its wrap angle (rad) at each hole.
+
+    The holes are at the base disk (node 0) and every guide up to the cable's end disk; the wrap
+    at the base disk is measured from the base axis (the cable arrives from its motor along it),
+    the end disk has none (the cable ends there).
+    """
+    nodes = robot.guide_nodes[:robot.cable_last_guide[cable] + 1]
+    positions = states[nodes][:, POSITION]
+    rotations = states[nodes][:, ROTATION].reshape(-1, 3, 3)
+    holes = positions + rotations @ robot.cable_offsets[cable]
+    segments = np.diff(holes, axis=0)
+    spans = np.linalg.norm(segments, axis=1)
+    directions = np.vstack([robot.base_rotation[:, 2], segments / spans[:, None]])
+    cosines = np.clip(np.sum(directions[:-1] * directions[1:], axis=1), -1.0, 1.0)
+    return spans, np.arccos(cosines)
+
+
+def _moment_map(robot):
+    """(state_size - 3, n) matrix: end tensions (N) -> section moment coordinates (1/m).
+
+    The point moment of section k is sum_j t_j (e3 x l_j) over its cables (local frame), whose
+    coordinates in the section's basis B_k, divided by E I, are the solver state's.
+    """
+    n = len(robot.cable_names)
+    table = np.zeros((robot.state_size - 3, n))
+    for k, section in enumerate(robot.sections):
+        first, rank = robot.section_state_index[k], robot.section_ranks[k]
+        if first < 0:
+            continue
+        basis = robot.section_bases[k][:, :rank]
+        for j in section.cable_indices:
+            arm = np.cross([0.0, 0.0, 1.0], robot.cable_offsets[j])
+            table[first - 3:first - 3 + rank, j] = basis.T @ arm / robot.c[0]
+    return table
+
+
+def motion_since(robot, free_lengths, warm_start):
+    """Each cable's friction sign: +1 pulled since ``warm_start``, -1 paid out, else its last."""
+    previous = getattr(warm_start, 'free_lengths', None)
+    last = getattr(warm_start, 'motion', None)
+    n = len(robot.cable_names)
+    motion = np.zeros(n) if last is None or len(last) != n else np.array(last, dtype=float)
+    if previous is not None and len(previous) == n:
+        change = free_lengths - previous
+        motion[change < -MOTION_THRESHOLD] = 1.0
+        motion[change > MOTION_THRESHOLD] = -1.0
+    return motion
+
+
+def solve_lengths(robot, lengths, tip_force=(0.0, 0.0, 0.0), tip_moment=(0.0, 0.0, 0.0),
+                  warm_start=None):
+    """Equilibrium when the motors hold cable ``lengths`` (m, motor side, cable_names order).
+
+    ``tip_force`` (N) and ``tip_moment`` (N m) in the base frame; ``warm_start`` the previous
+    :class:`LengthSolution` of the same sequence (its state starts the solve and its free lengths
+    give each cable's direction of motion for friction). Never raises for a failed solve: then
+    ``converged`` is False and ``message`` says why; bad arguments raise ``ValueError``.
+    """
+    n = len(robot.cable_names)
+    lengths = as_vector(lengths, n, 'lengths')
+    tip_force = as_vector(tip_force, 3, 'tip_force')
+    tip_moment = as_vector(tip_moment, 3, 'tip_moment')
+    free = robot.tendons.free_lengths(lengths, robot.straight_cable_lengths)
+    if np.any(free <= 0.0):
+        raise ValueError('lengths give non-positive free lengths for cables %s'
+                         % [name for name, f in zip(robot.cable_names, free) if f <= 0.0])
+    motion = motion_since(robot, free, warm_start)
+    problem = _Problem(robot, free, motion, tip_force, tip_moment)
+    starts = []
+    warm = _warm_z(robot, warm_start)
+    if warm is not None:
+        starts.append(warm)
+    starts.append(np.concatenate([bvp.linear_guess(robot, tip_force, tip_moment), np.zeros(n)]))
+    total = 0
+    for z0 in starts:
+        z, ok, iterations, info = _newton(problem, z0)
+        total += iterations
+        if ok:
+            return _solution(robot, problem, z, info, True, total, '')
+    z, ok, iterations, info = _continuation(robot, problem, starts[-1])
+    total += iterations
+    message = '' if ok else ('no equilibrium found for these lengths (cable residual %.3g m '
+                             'after load continuation)' % _cable_residual(info))
+    return _solution(robot, problem, z, info, ok, total, message)
+
+
+def _warm_z(robot, warm_start):
+    """Unknowns z of a previous result (u(0) and end tensions), or None."""
+    shape = getattr(warm_start, 'shape', warm_start)
+    state = getattr(shape, 'state', None)
+    if state is None or len(state) != robot.state_size or not np.all(np.isfinite(state)):
+        return None
+    tensions = getattr(warm_start, 'end_tensions', None)
+    if tensions is None or len(tensions) != len(robot.cable_names):
+        tensions = np.zeros(len(robot.cable_names))
+    return np.concatenate([state[:3], tensions])
+
+
+def _newton(problem, z0, max_iterations=None):
+    """Semismooth Newton with backtracking; returns (z, converged, iterations, info)."""
+    robot = problem.robot
+    max_iterations = max_iterations or robot.solver.max_iterations
+    z = np.array(z0, dtype=float)
+    res, jac, info = problem.evaluate(z)
+    for iteration in range(max_iterations):
+        if _done(problem, res):
+            return z, True, iteration, info
+        error = float(res @ res)
+        if not np.isfinite(error):
+            break
+        step = -np.linalg.lstsq(jac, res, rcond=1e-12)[0] * problem.scale
+        alpha = 1.0
+        for _ in range(16):
+            trial = z + alpha * step
+            trial_res, trial_jac, trial_info = problem.evaluate(trial)
+            trial_error = float(trial_res @ trial_res)
+            if trial_error <= (1.0 - 1e-4 * alpha) * error or _done(problem, trial_res):
+                break
+            alpha *= 0.5
+        else:
+            return z, False, iteration + 1, info
+        z, res, jac, info = trial, trial_res, trial_jac, trial_info
+    return z, _done(problem, res), max_iterations, info
+
+
+def _continuation(robot, problem, z0):
+    """Move the free lengths from the passive rod's paths to the asked ones in increments."""
+    target = problem.free
+    passive = np.array(z0, dtype=float)
+    passive[3:] = 0.0
+    _, _, info = problem.evaluate(passive)
+    start_free = target - info[4] + 1e-6 * robot.length  # paths of the passive rod, just slack
+    z, ok, total = passive, False, 0
+    for increments in (4, 16, 64):
+        z = passive
+        for k in range(1, increments + 1):
+            fraction = k / increments
+            problem.free = (1.0 - fraction) * start_free + fraction * target
+            z, ok, iterations, info = _newton(problem, z)
+            total += iterations
+            if not ok:
+                break
+        if ok:
+            break
+    problem.free = target
+    _, _, info = problem.evaluate(z)
+    return z, ok, total, info
+
+
+def _done(problem, res):
+    return (np.max(np.abs(res[:3]), initial=0.0) <= BALANCE_TOLERANCE
+            and np.max(np.abs(res[3:]), initial=0.0) * problem.radius <= LENGTH_TOLERANCE)
+
+
+def _cable_residual(info):
+    gap, taut = info[4], info[5]
+    return float(np.max(np.abs(np.where(taut, gap, 0.0)), initial=0.0))
+
+
+def _solution(robot, problem, z, info, converged, iterations, message):
+    x, fixed, states, motor, gap, taut = info
+    tensions = np.maximum(z[3:], 0.0)
+    shape = robot.make_shape(x, problem.tip_force, states, fixed)
+    notes = [message] if message else []
+    limits = robot.tendons.tension_limits
+    over = [name for name, t, high in zip(robot.cable_names, motor, limits[:, 1]) if t > high]
+    if over:
+        notes.append('tension above tension_limits for cables %s' % ', '.join(over))
+    return LengthSolution(shape=shape, tensions=np.maximum(motor, 0.0), end_tensions=tensions,
+                          slack=tensions <= SLACK_TENSION * problem.t_ref, converged=bool(converged), message='; '.join(notes),
+                          free_lengths=problem.free.copy(), motion=problem.motion.copy(),
+                          iterations=iterations,
+                          residual=_cable_residual(info))
