@@ -14,6 +14,10 @@ A state machine (:class:`Phase`) the tip_controller node ticks at its control ra
    is inside the tolerance, at most ``tip_average_time``): reached, or correct the goal by the
    remaining error (``target += goal - mean_tip``) and ramp again, up to ``max_corrections``.
 
+Every command of a model state is its motor-side lengths with real tendons
+(:func:`tendon_commands.command_for`: the stretch of the tensions the shape needs, antagonists
+at ``min_tension``); a goal that needs more tension than ``tension_limits`` allow is rejected.
+
 Not thread-safe: the node calls it under its own lock. No ROS: tested without DDS.
 """
 from dataclasses import dataclass, field
@@ -22,6 +26,8 @@ import math
 import threading
 
 import numpy as np
+
+from continuum_statics.core.tendon_commands import command_for
 
 #: Measured lengths further than this from the last command (m) are not where the controller put
 #: them: a goal then starts from the estimate of the measurement and moves onto it first.
@@ -50,6 +56,7 @@ class RunSettings:
     max_corrections: int = 10
     tip_average_time: float = 1.0
     max_state_age: float = 0.5
+    min_tension: float = 0.0
 
 
 @dataclass(eq=False)
@@ -172,7 +179,11 @@ class GoalRun:
         else:
             start = robot.estimate_shape(measured, tip_force=load[:3], tip_moment=load[3:],
                                          warm_start=warm)
-            recover = np.clip(robot.cable_lengths(start.shape), low, high)
+            # onto the commands of that shape: slack cables taken up, antagonists at min_tension
+            try:
+                recover = self.command(start)
+            except ValueError:  # the shape needs more than the tension limits: stay
+                recover = np.clip(measured, low, high)
             # the ramp starts where the cables are, but never commands outside the limits
             commanded = np.clip(measured, low, high)
         solution = robot.solve_tip_goal(position, tip_force=load[:3], tip_moment=load[3:],
@@ -196,7 +207,19 @@ class GoalRun:
                                  '; cables at a length limit: ' + limited if limited else ''))
         if not np.all(np.isfinite(solution.cable_lengths)):
             raise ValueError('the solver returned non-finite cable lengths')
+        try:
+            self.command(solution)
+        except ValueError as error:
+            raise ValueError('goal (%.4f, %.4f, %.4f) m %s' % (*position, error)) from None
         return Plan(start, solution, np.array(load, dtype=float), commanded, recover)
+
+    def command(self, result):
+        """Motor-side lengths (m) holding a model result's shape, inside the length limits.
+
+        :raises ValueError: the shape needs more tension than ``tension_limits`` allow
+        """
+        lengths = command_for(self.robot, result.shape, self.settings.min_tension).lengths
+        return np.clip(lengths, self.limits[:, 0], self.limits[:, 1])
 
     def begin(self, goal, plan, now):
         """Make ``goal`` the running one; return the goal it pre-empts (finished) or None."""
@@ -235,8 +258,7 @@ class GoalRun:
 
     def _start_path(self, start, solution, load):
         self._path = (start, solution, load)
-        self._target = np.clip(np.asarray(solution.cable_lengths, dtype=float),
-                               self.limits[:, 0], self.limits[:, 1])
+        self._target = self.command(solution)
         self._fraction = 0.0
         self._fraction_step = min(self._fraction_step * 4.0, 0.25)
         self._straight = False
@@ -313,10 +335,13 @@ class GoalRun:
                 state = self.robot.equilibrium_between(
                     start, solution, fraction, tip_force=load[:3], tip_moment=load[3:],
                     warm_start=self.command_state)
-                lengths = np.clip(np.asarray(state.cable_lengths, dtype=float),
-                                  self.limits[:, 0], self.limits[:, 1])
-            change = float(np.max(np.abs(lengths - self.commanded)))
-            usable = (state is solution or state.converged) and np.all(np.isfinite(lengths))
+                try:
+                    lengths = self.command(state)
+                except ValueError:  # over a tension limit part of the way: not usable
+                    lengths = np.full(len(self.limits), math.nan)
+            finite = np.all(np.isfinite(lengths))
+            change = float(np.max(np.abs(lengths - self.commanded))) if finite else math.inf
+            usable = (state is solution or state.converged) and finite
             if usable and change <= budget * 1.05:
                 self._fraction, self.commanded, self.command_state = fraction, lengths, state
                 # lengths are smooth in the fraction: aim the next step at the budget
@@ -382,6 +407,11 @@ class GoalRun:
             return
         if not np.all(np.isfinite(solution.cable_lengths)):
             self.finish(goal, False, 'correction gave non-finite cable lengths')
+            return
+        try:
+            self.command(solution)
+        except ValueError as error:
+            self.finish(goal, False, 'correction %s' % error)
             return
         self.corrections += 1
         self.warm = solution

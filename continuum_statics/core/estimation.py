@@ -7,12 +7,20 @@ Cables cannot twist the rod and can only bend it about axes their holes span, so
 bending stays at the passive equilibrium instead of being fixed by an arbitrary regulariser.
 With measured tensions the shape is the forward statics of those tensions (the lengths then only
 measure how well model and measurement agree).
+
+Real tendons (:mod:`continuum_statics.core.tendons`): a robot file with a tendon model (stiffness,
+pretension, friction or zero offsets) is estimated by the displacement-driven statics
+(:func:`length_statics.solve_lengths`), which also gives each cable's tension and which are
+slack. Ideal cables keep the least-squares fit above; when it misses the lengths by more than
+:data:`SLACK_RESIDUAL` (a paid-out cable no taut shape explains) the same statics is tried, and
+its shape is taken when it explains the lengths with some cables slack.
 """
+import dataclasses
 from dataclasses import dataclass
 
 import numpy as np
 
-from continuum_statics.core import bvp
+from continuum_statics.core import bvp, length_statics
 from continuum_statics.core.inputs import as_vector
 from continuum_statics.core.layout import ProbeRows
 from continuum_statics.core.least_squares import constrained_gauss_newton
@@ -21,6 +29,8 @@ from continuum_statics.core.tracking import track
 
 #: RMS length residual (m) above which an estimate says in its message that it is a best fit.
 BEST_FIT_NOTE = 1e-6
+#: RMS length residual (m) of the least-squares fit above which ideal cables are tried as slack.
+SLACK_RESIDUAL = 2e-5
 
 
 @dataclass(frozen=True, eq=False)
@@ -36,6 +46,7 @@ class ShapeEstimate:
     :ivar message: what limited the estimate, empty when nothing did
     :ivar jacobians: the solver's Jacobians at the estimate, reused by the next warm start
     :ivar model_runs: IVPs integrated (the cost of the estimate)
+    :ivar tendons: the :class:`length_statics.LengthSolution` when the tendon model gave the shape
     """
 
     shape: Shape
@@ -47,6 +58,17 @@ class ShapeEstimate:
     message: str
     jacobians: tuple = None
     model_runs: int = 0
+    tendons: object = None
+
+    @property
+    def tensions(self):
+        """(n,) model tensions at the motors (N), or None when the fit did not use tendons."""
+        return None if self.tendons is None else self.tendons.tensions
+
+    @property
+    def slack(self):
+        """(n,) bool, cables carrying no tension, or None when the fit did not use tendons."""
+        return None if self.tendons is None else self.tendons.slack
 
     @property
     def state(self):
@@ -55,13 +77,14 @@ class ShapeEstimate:
 
 
 def estimate_shape(robot, cable_lengths, tip_force=(0.0, 0.0, 0.0), tip_moment=(0.0, 0.0, 0.0),
-                   tensions=None, start=None, jacobians=None):
+                   tensions=None, start=None, jacobians=None, previous=None):
     """Estimate the shape from measured cable lengths (m, ``robot.cable_names`` order).
 
     ``tip_force`` (N) and ``tip_moment`` (N m) are the external tip load in the base frame.
     ``tensions`` (N, >= 0) when measured; ``start`` a solver state (the previous estimate when
     tracking; default the small-deflection passive solution) and ``jacobians`` the previous
-    estimate's, to be reused (one model run per iteration instead of 1 + len(state)).
+    estimate's, to be reused (one model run per iteration instead of 1 + len(state));
+    ``previous`` the previous result itself (the tendon model's warm start and friction history).
     """
     n_cables = len(robot.cable_names)
     measured = as_vector(cable_lengths, n_cables, 'cable_lengths')
@@ -89,6 +112,10 @@ def estimate_shape(robot, cable_lengths, tip_force=(0.0, 0.0, 0.0), tip_moment=(
         notes.insert(0, 'shape from the measured tensions')
         return _result(shape, converged, residual, 0, observable, notes)
 
+    slack_before = getattr(previous, 'slack', None)
+    if not robot.tendons.is_ideal or (slack_before is not None and np.any(slack_before)):
+        return _tendon_estimate(robot, measured, tip_force, tip_moment, previous, observable,
+                                notes)
     if start is None:
         start = robot.passive_state(bvp.linear_guess(robot, tip_force, tip_moment))
     rows = ProbeRows(n_cables)
@@ -101,7 +128,7 @@ def estimate_shape(robot, cable_lengths, tip_force=(0.0, 0.0, 0.0), tip_moment=(
             *robot.kernel_args(tip_force, tip_moment), measured, start, jacobians[0],
             jacobians[1], robot.solver.estimate_tolerance, robot.length)
         runs[0] = used
-        if ok:
+        if ok and _rms(res) <= SLACK_RESIDUAL:
             return _finish(robot, x, tip_force, states, res, True, iterations, observable,
                            notes, (jac, con_jac), used)
         start = x  # keep the progress; go on with fresh Jacobians
@@ -114,6 +141,11 @@ def estimate_shape(robot, cable_lengths, tip_force=(0.0, 0.0, 0.0), tip_moment=(
     result = constrained_gauss_newton(
         evaluate, start, robot.solver.max_iterations, robot.solver.estimate_tolerance,
         constraint_weight=robot.length)
+    if _rms(result.residual) > SLACK_RESIDUAL and n_cables:
+        slack = _tendon_estimate(robot, measured, tip_force, tip_moment, previous, observable,
+                                 list(notes))
+        if slack.converged and slack.residual < _rms(result.residual):
+            return slack
     return _finish(robot, result.x, tip_force, result.evaluation, result.residual,
                    result.stationary, result.iterations, observable, notes, result.jacobians,
                    runs[0])
@@ -129,6 +161,20 @@ def _finish(robot, x, tip_force, states, length_residual, stationary, iterations
         notes.insert(0, 'best fit: the lengths fit no shape to RMS %.3g m' % residual)
     shape = robot.make_shape(x, tip_force, states)
     return _result(shape, stationary, residual, iterations, observable, notes, jacobians, runs)
+
+
+def _tendon_estimate(robot, measured, tip_force, tip_moment, previous, observable, notes):
+    """Return the estimate of the displacement-driven statics (slack, stretch, friction)."""
+    warm = getattr(previous, 'tendons', None) or previous
+    solution = length_statics.solve_lengths(robot, measured, tip_force, tip_moment, warm)
+    if solution.message:
+        notes.insert(0, solution.message)
+    if np.any(solution.slack):
+        notes.append('slack: %s' % ', '.join(
+            name for name, slack in zip(robot.cable_names, solution.slack) if slack))
+    estimate = _result(solution.shape, solution.converged, solution.residual,
+                       solution.iterations, observable, notes)
+    return dataclasses.replace(estimate, tendons=solution)
 
 
 def _rms(values):

@@ -3,9 +3,10 @@
 Unknowns z = [u(0) (3, 1/m); t (n_cables, N), each cable's tension at its end disk]. Equations:
 - the tip moment balance (:func:`kernel.probe` rows ``balance``, three equations), the shooting
   condition of every solver here (paper sec. III.E);
-- per cable, the complementarity of a cable that cannot push (:mod:`continuum_statics.core.tendons`):
-  t >= 0, g = Lf - sum_i p_i / (1 + T_i / EA) >= 0, t g = 0, where p_i are the straight hole-to-
-  hole spans of its path (eq. 11 with the errata) and T_i their tensions. Written as the
+- per cable, the complementarity of a cable that cannot push
+  (:mod:`continuum_statics.core.tendons`): t >= 0, g = Lf - sum_i p_i / (1 + T_i / EA) >= 0,
+  t g = 0, where p_i are the straight hole-to-hole spans of its path (eq. 11 with the errata)
+  and T_i their tensions. Written as the
   semismooth equation min(kappa t, g) = 0 (kappa scales N to m), solved by Newton's method with a
   backtracking line search on the squared residual and least-norm steps (tensions an inextensible
   antagonist pair cannot tell apart stay as small as the start allows).
@@ -328,7 +329,7 @@ def _solution(robot, problem, z, info, converged, iterations, message):
     if over:
         notes.append('tension above tension_limits for cables %s' % ', '.join(over))
     return LengthSolution(shape=shape, tensions=np.maximum(motor, 0.0), end_tensions=tensions,
-                          slack=tensions <= SLACK_TENSION * problem.t_ref, converged=bool(converged), message='; '.join(notes),
+                          slack=tensions <= SLACK_TENSION * problem.t_ref,
+                          converged=bool(converged), message='; '.join(notes),
                           free_lengths=problem.free.copy(), motion=problem.motion.copy(),
-                          iterations=iterations,
-                          residual=_cable_residual(info))
+                          iterations=iterations, residual=_cable_residual(info))

@@ -359,7 +359,8 @@ class Robot:
                                                             self.state_size):
             jacobians = None
         return estimation.estimate_shape(self, cable_lengths, tip_force, tip_moment, tensions,
-                                         _warm_or_guess(self, warm_start, u0_guess), jacobians)
+                                         _warm_or_guess(self, warm_start, u0_guess), jacobians,
+                                         warm_start)
 
     def solve_tip_goal(self, goal_position, tip_force=(0.0, 0.0, 0.0), tolerance=None,
                        goal_direction=None, warm_start=None, tip_moment=(0.0, 0.0, 0.0),

@@ -356,7 +356,7 @@ def _plausibility(rod, offsets, sections):
 
 
 def _tendon_block(block, field):
-    """Validated tendon defaults of a ``tendons:`` mapping (empty when absent)."""
+    """Return the validated tendon defaults of a ``tendons:`` mapping (empty when absent)."""
     if block is None:
         return {}
     block = _mapping(block, field, set(TENDON_KEYS))
@@ -365,8 +365,11 @@ def _tendon_block(block, field):
 
 
 def _tendon_value(key, value, field):
-    """One tendon parameter, checked: stiffness > 0 (N), pretension >= 0 (N), friction >= 0,
-    tension_limits 0 <= min < max (N), zero_offset (m)."""
+    """Return one tendon parameter, checked.
+
+    stiffness > 0 (N), pretension >= 0 (N), friction >= 0, tension_limits 0 <= min < max (N),
+    zero_offset (m).
+    """
     if key == 'stiffness':
         return _positive(value, field)
     if key == 'tension_limits':
@@ -381,7 +384,7 @@ def _tendon_value(key, value, field):
 
 
 def _parse_tendon(cable, defaults, field):
-    """A cable's tendon parameters: its own keys over its section's and the file's defaults."""
+    """Return a cable's tendon parameters: its own keys over its section's and file's defaults."""
     values = dict(defaults)
     for key in TENDON_KEYS + ('zero_offset',):
         if key in cable:
@@ -390,7 +393,7 @@ def _parse_tendon(cable, defaults, field):
 
 
 def _tendons(rows):
-    """The :class:`Tendons` record of every cable (defaults for what no file entry gives)."""
+    """Return the :class:`Tendons` of every cable (defaults for what no file entry gives)."""
     tendons = Tendons.default(len(rows))
     arrays = {name: np.array(getattr(tendons, name)) for name in tendons.__dataclass_fields__}
     for j, values in enumerate(rows):
@@ -407,7 +410,7 @@ def _tendon_warnings(rows, names):
             warnings.append('cable %r: friction %g is above 1 (steel on steel is ~0.2)'
                             % (name, values['friction']))
         if values.get('pretension', 0.0) > 0.0 and 'stiffness' not in values:
-            warnings.append('cable %r: pretension without stiffness: an inextensible cable\'s '
+            warnings.append("cable %r: pretension without stiffness: an inextensible cable's "
                             'tension does not follow from its length' % name)
     return tuple(warnings)
 

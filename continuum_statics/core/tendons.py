@@ -50,6 +50,12 @@ class Tendons:
         return 1.0 / self.stiffness
 
     @property
+    def is_ideal(self):
+        """Inextensible, frictionless, no pretension or zero offset: lengths are paths."""
+        return bool(np.all(np.isinf(self.stiffness)) and not np.any(self.pretension)
+                    and not np.any(self.friction) and not np.any(self.zero_offset))
+
+    @property
     def has_friction(self):
         """Whether any cable rubs on its guides."""
         return bool(np.any(self.friction > 0.0))

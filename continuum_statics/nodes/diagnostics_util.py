@@ -131,3 +131,14 @@ def publish_starting(node, publisher, hardware_id, waiting_for):
     publisher.publish(diagnostic_array(
         node.get_clock().now().to_msg(), node.get_fully_qualified_name().lstrip('/'),
         hardware_id, OK, STARTING + waiting_for, {'state': 'starting'}))
+
+
+def tendon_values(names, tensions, slack):
+    """Diagnostic values of the tendon model: which cables are slack, model tensions (N).
+
+    ``tensions``/``slack`` are the estimate's (None when the shape came from ideal taut cables).
+    """
+    if tensions is None or slack is None:
+        return {'slack_cables': 'none', 'tension_estimates_n': 'not estimated (taut ideal cables)'}
+    return {'slack_cables': ', '.join(n for n, s in zip(names, slack) if s) or 'none',
+            'tension_estimates_n': ', '.join('%s %.4g' % (n, t) for n, t in zip(names, tensions))}

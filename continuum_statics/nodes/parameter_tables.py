@@ -86,6 +86,12 @@ def tip_controller_parameters():
                   'much)', 0.0, 0.01),
         ParamSpec('max_corrections', 10, 'closed-loop corrections per goal before it fails',
                   0, 1000),
+        ParamSpec('min_tension', 0.0, 'every cable is commanded at least this tension, so '
+                  'antagonists stay taut (the tendon stiffness of the robot file turns it '
+                  'into length), N (0: slack antagonists, as ideal cables)', 0.0, 1e4),
+        ParamSpec('use_measured_tip', True, 'judge and correct goals on tip_pose_measured '
+                  '(a tracker, registered by calibrate) while it is fresh, else on the '
+                  'tip_pose of the model'),
         ParamSpec('tip_wrench_timeout', 1.0, 'a tip_wrench estimate older than this is '
                   'replaced by zero, s (0: never expires)', 0.0, 3600.0),
         ParamSpec('max_state_age', 0.5, 'cable_states and tip_pose older than this mean a '

@@ -273,7 +273,9 @@ class StaticsNode(Node):
         self._capped += result.capped
         self._last.update(residual=result.residual, iterations=result.estimate.iterations,
                           converged=result.converged, message=result.message,
-                          time=time.monotonic(), tensions=result.tensions_used)
+                          time=time.monotonic(), tensions=result.tensions_used,
+                          model_tensions=result.estimate.tensions,
+                          slack=result.estimate.slack)
         self._residuals.add(result.residual)
         if not (result.estimate.converged or result.capped):
             self._not_converged += 1
@@ -444,6 +446,8 @@ class StaticsNode(Node):
         }
         if self._tip_position is not None:
             values['tip_position_m'] = '%.5f %.5f %.5f' % tuple(self._tip_position)
+        values.update(diag.tendon_values(self.cable_names, last.get('model_tensions'),
+                                    last.get('slack')))
         values.update(self._problems.values())
         self._diagnostics.publish(diag.diagnostic_array(
             self.get_clock().now().to_msg(), self.get_fully_qualified_name().lstrip('/'),

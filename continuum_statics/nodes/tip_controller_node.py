@@ -18,7 +18,8 @@ parses, calls and publishes. For a goal the run
    state solved), so every command is the cable-length set of an equilibrium of the robot, never
    a straight line in cable space (a section has two bending freedoms, its cables more); the
    fraction steps are chosen so that no cable moves faster than ``max_cable_speed``,
-3. watches ``tip_pose`` once the cables have settled and judges the tip on the mean of the
+3. watches ``tip_pose`` (or ``tip_pose_measured``, a registered tracker, while it is fresh and
+   ``use_measured_tip``) once the cables have settled and judges the tip on the mean of the
    samples since then (enough of them that the noise of the mean is well inside the tolerance,
    at most ``tip_average_time``); when it is off it corrects the goal by the remaining error
    (integral correction: ``target += goal - mean_tip``, re-solved and ramped the same way)
@@ -57,7 +58,14 @@ from continuum_statics.control.goal_run import (
     RunSettings,
     stale_state,
 )
-from continuum_statics.control.records import Measurement, TipLoad, TipSample, current_load
+from continuum_statics.control.records import (
+    Measurement,
+    TipLoad,
+    TipSample,
+    current_load,
+    judged_tips,
+    tracked_tip,
+)
 from continuum_statics.control.teleop import TeleopRun, TeleopSettings, Twist
 from continuum_statics.core.rotations import quaternion_to_rotation
 from continuum_statics.core.warmup import warm_up
@@ -122,6 +130,10 @@ class TipControllerNode(Node):
         self._recent_lengths = deque(maxlen=64)  # recent Measurements, for a low-noise mean
         self._measurement = None  # newest Measurement (one assignment: always consistent)
         self._tip = None  # newest TipSample
+        self._tip_rotation = None  # the model tip's rotation (3, 3) of the newest tip_pose
+        self._measured_tips = deque(maxlen=4000)  # recent tracker TipSamples (tip, not marker)
+        self._measured_tip = None
+        self._tip_source = 'tip_pose'
         self._name_bytes = None
         self._index = None
         self._backbone = None  # (stamp ns, serialized Path) of the newest backbone
@@ -139,6 +151,9 @@ class TipControllerNode(Node):
         self._intake = make_intake(self, self._params['dedicated_intake_thread'],
                                    'tip_controller_intake')
         self._intake.add(PoseStamped, 'tip_pose', self._on_tip_pose, LATCHED_QOS)
+        # an external tracker (motion capture, EM) registered to the base by calibrate
+        self._intake.add(PoseStamped, 'tip_pose_measured', self._on_tip_pose_measured,
+                         LATEST_SENSOR_QOS)
         # Kept as bytes: only the backbone that answers a goal is ever decoded.
         self._intake.add(Path, 'backbone', self._on_backbone, LATCHED_QOS, raw=True)
         self._intake.add(JointState, 'cable_states', self._on_cable_states, LATEST_SENSOR_QOS,
@@ -218,6 +233,24 @@ class TipControllerNode(Node):
         stamp = msg.header.stamp.sec * 1_000_000_000 + msg.header.stamp.nanosec
         self._tip = TipSample(position, stamp, time.monotonic())
         self._tips.append(self._tip)
+        q = msg.pose.orientation
+        self._tip_rotation = quaternion_to_rotation(np.array([q.x, q.y, q.z, q.w]))
+
+    def _on_tip_pose_measured(self, msg):
+        if msg.header.frame_id != self.base_frame_id:
+            self._reject('tip_pose_measured', 'frame %r is not the base frame %r (register the '
+                         'tracker with calibrate)' % (msg.header.frame_id, self.base_frame_id))
+            return
+        position = pose_position(msg.pose)
+        if not np.all(np.isfinite(position)):
+            self._reject('tip_pose_measured', 'non-finite position')
+            return
+        if self._tip_rotation is None:
+            return  # the marker's offset needs the model's tip frame: wait for tip_pose
+        stamp = msg.header.stamp.sec * 1_000_000_000 + msg.header.stamp.nanosec
+        tip = tracked_tip(position, self._tip_rotation, self.robot.tip_marker)
+        self._measured_tip = TipSample(tip, stamp, time.monotonic())
+        self._measured_tips.append(self._measured_tip)
 
     def _on_backbone(self, data):
         # Only the stamp is read here (decoding every Path costs ~0.2 ms); the whole message
@@ -554,7 +587,10 @@ class TipControllerNode(Node):
         goal = self._run.goal
         if goal is None:
             return None
-        commanded = self._run.tick(now, dt, self._measurement, self._tip, self._tips,
+        tip, tips, self._tip_source = judged_tips(
+            now, self._measured_tip, self._measured_tips, self._tip, self._tips,
+            self._params['max_state_age'], self._params['use_measured_tip'])
+        commanded = self._run.tick(now, dt, self._measurement, tip, tips,
                                    self._current_tip_load())
         for note in self._run.notes:
             self._problems.add('ramp', note)
@@ -607,6 +643,8 @@ class TipControllerNode(Node):
             'moved_onto_model_total': moved,
             'last_outcome': self._last_outcome,
             'have_tip_pose': self._tip is not None,
+            'tip_source': self._tip_source,
+            'have_tip_pose_measured': self._measured_tip is not None,
             'have_cable_states': self._measurement is not None,
         }
         if goal is not None:

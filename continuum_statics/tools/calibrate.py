@@ -19,6 +19,11 @@ the tip position errors over the chosen parameters:
 
 The calibrated robot file is the input file with the fitted values replaced and a header
 comment saying what was fitted from which data.
+
+Recorded runs (a CSV with a ``timestamp`` column or a column map, or a rosbag2 recording) are
+fitted by :mod:`continuum_statics.tools.run_calibration` instead: the run is replayed through
+``Robot.solve_lengths`` and the registration, hole patterns, zero offsets and tendon parameters
+are fitted.
 """
 import argparse
 import csv
@@ -26,6 +31,7 @@ import dataclasses
 import datetime
 import json
 import math
+import os
 import sys
 
 import numpy as np
@@ -34,6 +40,8 @@ from scipy.spatial.transform import Rotation
 import yaml
 
 from continuum_statics import ConvergenceError, Robot, load_robot
+from continuum_statics.tools import run_calibration
+from continuum_statics.tools.recorded_run import add_column_arguments, column_map_from_args
 
 FORCE_COLUMNS = ('tip_force_x', 'tip_force_y', 'tip_force_z')
 MOMENT_COLUMNS = ('tip_moment_x', 'tip_moment_y', 'tip_moment_z')
@@ -347,24 +355,63 @@ def write_robot_file(output, document, values, robot, summary):
         stream.write(text)
 
 
+def is_recorded_run(path, column_map):
+    """Tell whether ``path`` holds a recorded run.
+
+    A bag, a column map, or a CSV with timestamps and no tip-load columns is one.
+    """
+    if column_map.cables or os.path.isdir(path) or str(path).endswith('.mcap'):
+        return True
+    try:
+        with open(path, newline='', encoding='utf-8') as stream:
+            for line in stream:
+                if line.strip() and not line.lstrip().startswith('#'):
+                    header = [name.strip() for name in line.split(',')]
+                    return 'timestamp' in header and FORCE_COLUMNS[0] not in header
+    except (OSError, UnicodeDecodeError):
+        return False
+    return False
+
+
 def main(argv=None):
     """Run the calibration; returns the exit code."""
     parser = argparse.ArgumentParser(
         prog='python -m continuum_statics calibrate',
-        description='Fit robot-file parameters to measured tip positions under known tip loads '
-                    '(least squares with bounds); writes the calibrated robot file.')
+        description='Fit robot-file parameters to measured tip positions (least squares with '
+                    'bounds): under known tip loads, or along a recorded run of cable lengths '
+                    '(replayed through solve_lengths); writes the calibrated robot file.')
     parser.add_argument('--robot', required=True, help='robot file to start from (YAML)')
     parser.add_argument('--data', required=True,
                         help='CSV: tip_force_x,tip_force_y,tip_force_z,tip_x,tip_y,tip_z '
-                             '(N, m, base frame), optional tip_moment_x..z, cable lengths')
+                             '(N, m, base frame), optional tip_moment_x..z, cable lengths; or a '
+                             'recorded run: CSV (timestamp, one length column per cable, tip '
+                             'columns; see the column options) or a rosbag2 directory')
     parser.add_argument('--fit', action='extend', nargs='+', metavar='PARAM', default=None,
-                        help='parameter(s) to fit: %s (default youngs_modulus)'
-                             % ', '.join(PARAMETERS))
+                        help='parameter(s) to fit: %s (default youngs_modulus); recorded runs: '
+                             '%s (default %s)' % (', '.join(PARAMETERS),
+                                                  ', '.join(run_calibration.RUN_PARAMETERS),
+                                                  ' '.join(run_calibration.DEFAULT_FIT)))
     parser.add_argument('--output', '-o', default=None,
                         help='calibrated robot file to write (default: none, report only)')
+    parser.add_argument('--validate', default=None, metavar='FILE',
+                        help='recorded runs: held-out run to report the errors on (never fitted)')
+    parser.add_argument('--tip-topic', default='tip_pose_measured',
+                        help='recorded runs in a bag: the measured tip topic (PoseStamped)')
+    parser.add_argument('--max-evaluations', type=int, default=40,
+                        help='recorded runs: most model evaluations of the fit (default 40)')
     parser.add_argument('--json', action='store_true', help='print one JSON object')
+    add_column_arguments(parser)
     args = parser.parse_args(list(sys.argv[1:] if argv is None else argv))
     try:
+        column_map = column_map_from_args(args)
+        if is_recorded_run(args.data, column_map):
+            log = (lambda text: print(text, file=sys.stderr)) if args.json else print
+            summary = run_calibration.calibrate_run(
+                args.robot, args.data, args.fit or list(run_calibration.DEFAULT_FIT),
+                column_map, args.output, args.validate, args.tip_topic, log,
+                args.max_evaluations)
+            print(json.dumps(summary) if args.json else _run_report(summary))
+            return 0
         summary = calibrate(args.robot, args.data, args.fit or ['youngs_modulus'], args.output)
     except ValueError as error:
         print('error: %s' % error, file=sys.stderr)
@@ -386,6 +433,27 @@ def main(argv=None):
     if args.output:
         print('wrote %s' % args.output)
     return 0
+
+
+def _run_report(summary):
+    """Plain-text report of a recorded-run calibration."""
+    lines = ['fitted (%s, %d evaluations, %.0f s):' % (
+        summary['optimizer']['message'], summary['optimizer']['evaluations'],
+        summary['seconds'])]
+    for name, values in summary['fitted'].items():
+        lines.append('  %-17s %s' % (name, ' '.join('%.5g' % v for v in values)))
+    lines.append('tip RMS: file as given %.2f mm -> fitted %.2f mm (%.2f mm mean-offset '
+                 'aligned), max %.2f mm; %d rows did not converge' % (
+                     summary['rms_before'] * 1e3, summary['rms_after'] * 1e3,
+                     summary['rms_aligned_after'] * 1e3, summary['max_after'] * 1e3,
+                     summary['unconverged_rows']))
+    if 'validate_rms' in summary:
+        lines.append('held out %s: RMS %.2f mm (%.2f mm aligned), max %.2f mm' % (
+            summary['validate'], summary['validate_rms'] * 1e3,
+            summary['validate_rms_aligned'] * 1e3, summary['validate_max'] * 1e3))
+    if summary['output']:
+        lines.append('wrote %s' % summary['output'])
+    return '\n'.join(lines)
 
 
 if __name__ == '__main__':
