@@ -321,15 +321,16 @@ def _cable_residual(info):
 
 def _solution(robot, problem, z, info, converged, iterations, message):
     x, fixed, states, motor, gap, taut = info
-    tensions = np.maximum(z[3:], 0.0)
+    slack = z[3:] <= SLACK_TENSION * problem.t_ref
+    tensions = np.where(slack, 0.0, z[3:])  # a slack cable carries exactly nothing
     shape = robot.make_shape(x, problem.tip_force, states, fixed)
     notes = [message] if message else []
     limits = robot.tendons.tension_limits
     over = [name for name, t, high in zip(robot.cable_names, motor, limits[:, 1]) if t > high]
     if over:
         notes.append('tension above tension_limits for cables %s' % ', '.join(over))
-    return LengthSolution(shape=shape, tensions=np.maximum(motor, 0.0), end_tensions=tensions,
-                          slack=tensions <= SLACK_TENSION * problem.t_ref,
+    return LengthSolution(shape=shape, tensions=np.where(slack, 0.0, motor),
+                          end_tensions=tensions, slack=slack,
                           converged=bool(converged), message='; '.join(notes),
                           free_lengths=problem.free.copy(), motion=problem.motion.copy(),
                           iterations=iterations, residual=_cable_residual(info))

@@ -1,4 +1,11 @@
-"""Simulated cable actuators: a first-order lag with a speed limit, length limits and noise."""
+"""Simulated cable actuators: a first-order lag with a speed limit, length limits and noise.
+
+Given the robot, the simulated cables are its real tendons too: each reading solves the robot's
+displacement-driven statics (:meth:`Robot.solve_lengths`: slack, stretch, pretension, friction by
+direction of motion) at the motors' lengths and reports the motor-side tensions, as a driver
+with current sensing or load cells would. Robots with ideal cables (no tendons block) report
+no tensions, as before.
+"""
 import math
 
 import numpy as np
@@ -35,8 +42,14 @@ class SimulatedCableBackend(CableBackend):
                       -1, 2 ** 31 - 1, read_only=True),
     )
 
-    def __init__(self, cable_names, length_limits, initial_lengths, **options):
+    #: the node passes ``robot=`` (its :class:`Robot`) to backends that set this
+    wants_robot = True
+
+    def __init__(self, cable_names, length_limits, initial_lengths, robot=None, **options):
         super().__init__(cable_names, length_limits, initial_lengths, **options)
+        # the tendon model, when the robot file has one (ideal cables report no tension)
+        self._robot = robot if robot is not None and not robot.tendons.is_ideal else None
+        self._statics = None  # the last solve_lengths result: friction history, warm start
         merged = self.options
         for key in ('time_constant', 'max_speed', 'noise_std'):
             self.set_option(key, merged[key])
@@ -83,12 +96,24 @@ class SimulatedCableBackend(CableBackend):
         self._targets = self._lengths.copy()
 
     def read(self, now):
-        """Advance to ``now`` and return the (noisy) lengths, the speeds and no tensions."""
+        """Advance to ``now``; return the (noisy) lengths, the speeds and the model tensions."""
         self._advance(now)
         lengths = self._lengths
+        tensions = self._tensions(lengths)
         if self.noise_std > 0.0:
             lengths = lengths + self._rng.normal(0.0, self.noise_std, lengths.shape)
-        return CableReading(lengths=lengths.copy(), velocities=self._velocities.copy())
+        return CableReading(lengths=lengths.copy(), velocities=self._velocities.copy(),
+                            tensions=tensions)
+
+    def _tensions(self, lengths):
+        """Motor-side tensions (N) of the tendon model at the true lengths, or None."""
+        if self._robot is None:
+            return None
+        solution = self._robot.solve_lengths(lengths, warm_start=self._statics)
+        if not solution.converged:  # keep the last good history; report nothing made up
+            return None
+        self._statics = solution
+        return solution.tensions.copy()
 
     def status(self):
         """Report the largest distance between a cable and its target."""

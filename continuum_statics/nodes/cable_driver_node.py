@@ -152,9 +152,11 @@ class CableDriverNode(LifecycleNode):
         if not self.cable_names:
             return TransitionCallbackReturn.SUCCESS
         try:
+            extra = {'robot': self.robot} if getattr(self._backend_cls, 'wants_robot',
+                                                     False) else {}
             backend = self._backend_cls(self.cable_names, self._limits,
                                         self.robot.straight_cable_lengths,
-                                        **self._backend_options)
+                                        **self._backend_options, **extra)
         except Exception as error:  # bad options a parameter check could not see
             self.get_logger().error('configure failed: %s' % error)
             return TransitionCallbackReturn.FAILURE

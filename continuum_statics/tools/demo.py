@@ -1,6 +1,7 @@
 """``python -m continuum_statics demo`` (``make demo``): bringup plus a tip-goal client.
 
-Starts ``bringup`` (statics, tip_controller, simulated cable_driver) as a subprocess; this process
+Starts ``bringup`` (statics, tip_controller, simulated cable_driver; by default the tendon robot
+with real tendons, which the simulated cables simulate) as a subprocess; this process
 is the client: it sends reachable tip goals (tips of shapes the robot can take) and one goal 2 m
 away through the ``tip_goal`` service (nav_msgs/srv/GetPlan), prints goal, reached tip, error and
 time for each, and a final line of figures. It also draws the backbone of every answered plan
@@ -19,9 +20,13 @@ import sys
 
 import numpy as np
 
-from continuum_statics.nodes.node_params import default_robot_file
+from continuum_statics.nodes.node_params import share_dir
 from continuum_statics.tools.goal_client import GOAL_BENDINGS, run_client
 from continuum_statics.tools.processes import ros_environment, stop
+
+#: The demo's robot: config/tendon_robot.yaml with real tendons, which the simulated driver
+#: simulates (slack, stretch, pretension, guide friction, tension limits).
+DEMO_ROBOT = 'tendon_robot_real_tendons.yaml'
 
 
 def write_plot(output, robot_file, reached):
@@ -42,7 +47,9 @@ def main(argv=None):
     """Run the demo; returns the exit code."""
     parser = argparse.ArgumentParser(prog='python -m continuum_statics demo',
                                      description=__doc__.splitlines()[0])
-    parser.add_argument('--robot', default=default_robot_file(), help='robot description YAML')
+    parser.add_argument('--robot', default=str(share_dir() / 'config' / DEMO_ROBOT),
+                        help='robot description YAML (default: the tendon robot with real '
+                             'tendons: stretch, pretension, friction, tension limits)')
     parser.add_argument('--namespace', default='continuum', help='bringup namespace')
     parser.add_argument('--goals', type=int, default=5, help='reachable goals (max %d)'
                         % len(GOAL_BENDINGS))

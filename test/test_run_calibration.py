@@ -1,0 +1,111 @@
+"""Calibration from recorded runs: recovers known parameters of synthetic runs; the real v6 data.
+
+Synthetic truth: a run made by replaying single-tendon pulls and releases through a robot with
+known hole-pattern rotations, zero offsets, tendon stiffness and friction, seen by a tracker in
+a known (unknown to the fit) frame, plus noise. The fit starts from the nominal robot file.
+"""
+import dataclasses
+import json
+
+from conftest import REPO
+import numpy as np
+import pytest
+from scipy.spatial.transform import Rotation
+
+from continuum_statics import load_robot
+from continuum_statics.core.tendons import Tendons
+from continuum_statics.tools import calibrate, run_calibration
+from continuum_statics.tools.recorded_run import RecordedRun
+
+V6 = REPO / 'config' / 'ftdcr_v6_robot.yaml'
+DATA = REPO / 'test' / 'data' / 'ftdcr_v6'
+
+
+def pulls(robot, depth=0.004, steps=4, payout=0.5):
+    """Motor lengths of each cable pulled by ``depth`` m and released, the others paid out."""
+    rows = []
+    straight = robot.straight_cable_lengths
+    for j in range(len(robot.cable_names)):
+        for k in list(range(1, steps + 1)) + list(range(steps - 1, -1, -1)):
+            d = depth * k / steps
+            lengths = straight + payout * d
+            lengths[j] = straight[j] - d
+            rows.append(lengths)
+    return np.array(rows)
+
+
+def truth_robot(robot):
+    turned = run_calibration._turned(robot.description.cable_offsets,
+                                     np.repeat([0.0, 0.15, -0.1], 3))
+    tendons = dataclasses.replace(
+        Tendons.default(9), stiffness=np.repeat([300.0, 500.0, 800.0], 3),
+        friction=np.full(9, 0.08),
+        zero_offset=np.array([2, -1, 0, 1, 3, -2, 0, -1, 2], dtype=float) * 1e-4)
+    return robot.__class__(dataclasses.replace(robot.description, cable_offsets=turned,
+                                               tendons=tendons))
+
+
+def synthetic_run(robot, noise=5e-5, seed=3):
+    lengths = pulls(robot)
+    run = RecordedRun(times=np.arange(len(lengths), dtype=float), labels=('',) * len(lengths),
+                      lengths=lengths, tips=np.zeros((len(lengths), 3)), source='synthetic')
+    points, failed = run_calibration.replay(truth_robot(robot), run)
+    assert not failed.any()
+    rotation = Rotation.from_rotvec([0.2, -0.3, 0.25]).as_matrix()
+    tips = points @ rotation.T + np.array([0.01, -0.02, 0.03])
+    tips += np.random.default_rng(seed).normal(0.0, noise, tips.shape)
+    return dataclasses.replace(run, tips=tips), rotation
+
+
+def test_fit_recovers_the_parameters_of_a_synthetic_run():
+    robot = load_robot(V6)
+    run, rotation = synthetic_run(robot)
+    model = run_calibration.RunModel(robot, ['registration', 'section_rotation', 'cable_zero',
+                                             'stiffness', 'friction'], run)
+    lines = []
+    x, result = run_calibration.fit(model, log=lines.append, workers=2)
+    values = model.values(x)
+    errors, _ = run_calibration.errors_of(model, x, run)
+    assert run_calibration.rms(errors) < 1.5e-4  # noise 0.05 mm per axis: 0.087 mm RMS
+    assert np.allclose(values['section_rotation'], [0.15, -0.1], atol=0.01)
+    assert np.allclose(values['friction'], 0.08, atol=0.02)
+    assert np.allclose(values['stiffness'], [300.0, 500.0, 800.0], rtol=0.25)
+    assert np.allclose(model.rotation, rotation, atol=0.01)
+    assert np.allclose(values['cable_zero'] * 1e4, [2, -1, 0, 1, 3, -2, 0, -1, 2], atol=0.5)
+    assert len(lines) >= 2 and 'RMS' in lines[-1]  # progress, a line per evaluation
+
+
+def test_calibrate_command_on_a_recorded_csv_writes_a_robot_file_that_reproduces_the_fit(
+        tmp_path, capsys):
+    robot = load_robot(V6)
+    run, _ = synthetic_run(robot)
+    csv = tmp_path / 'run.csv'
+    header = ['timestamp'] + ['%s_mm' % n for n in robot.cable_names] + ['tip_x', 'tip_y',
+                                                                          'tip_z']
+    rows = np.column_stack([run.times, (robot.straight_cable_lengths - run.lengths) * 1e3,
+                            run.tips * 1e3])
+    np.savetxt(csv, rows, delimiter=',', header=','.join(header), comments='')
+    output = tmp_path / 'calibrated.yaml'
+    code = calibrate.main([
+        '--robot', str(V6), '--data', str(csv), '--validate', str(csv), '--json',
+        '--fit', 'registration', 'section_rotation', 'stiffness', 'friction',
+        '--max-evaluations', '6',
+        '--cable-columns', ','.join(header[1:10]), '--cable-kind', 'displacement',
+        '--cable-scale', '0.001', '--tip-scale', '0.001', '--output', str(output)])
+    assert code == 0
+    summary = json.loads(capsys.readouterr().out)
+    assert summary['rms_after'] < 0.5 * summary['rms_before']  # zero offsets not fitted
+    assert summary['validate_rms'] == pytest.approx(summary['rms_after'], rel=1e-6)
+    assert summary['rms_aligned_after'] <= summary['rms_after']
+    # the written file, replayed in its own (tracker) frame, gives the fitted errors
+    written = load_robot(output)
+    points, failed = run_calibration.replay(written, run)
+    assert not failed.any()
+    assert run_calibration.rms(points - run.tips) == pytest.approx(summary['rms_after'],
+                                                                    rel=1e-3)
+
+
+def test_unknown_fit_names_are_refused(tmp_path):
+    with pytest.raises(ValueError, match='unknown parameter.*fittable: registration'):
+        run_calibration.calibrate_run(V6, DATA / 'tendon_pull_subset.csv', ['elasticity'],
+                                      None)
