@@ -35,6 +35,8 @@ from continuum_statics.core.shape import Shape
 
 #: Free-length change (m) below which a cable is taken as not moving (its friction sign is kept).
 MOTION_THRESHOLD = 1e-7
+#: Chord steps on a warm start's Jacobian before a fresh Newton solve.
+CHORD_ITERATIONS = 6
 #: Cable-row tolerance (m) and balance tolerance (relative) of a converged solve.
 LENGTH_TOLERANCE = 1e-10
 BALANCE_TOLERANCE = 1e-9
@@ -68,6 +70,7 @@ class LengthSolution:
     motion: np.ndarray
     iterations: int = 0
     residual: float = 0.0
+    jacobian_parts: tuple = None  # the last Newton Jacobian's pieces: chord steps when warm
 
     @property
     def state(self):
@@ -105,11 +108,18 @@ class _Problem:
             return x, None
         return x, z[3:].copy()
 
-    def evaluate(self, z):
-        """Residual F (3 + n, scaled), its Jacobian in scaled z, states and cable quantities."""
+    def evaluate(self, z, parts=None):
+        """Residual F (3 + n, scaled), its Jacobian in scaled z, states and cable quantities.
+
+        With ``parts`` (the Jacobian's pieces of an earlier evaluation, a chord step) only the
+        nominal IVP is run and those pieces make the Jacobian; returns (F, J, info, parts).
+        """
         robot, n, rows = self.robot, self.n, self.rows
         x, fixed = self.state_of(z)
-        if fixed is None:
+        if parts is not None:
+            values, _, states = robot.probe(x, 0, self.tip_force, self.tip_moment, fixed)
+            jac = None
+        elif fixed is None:
             values, jac_x, states = robot.probe(x, robot.state_size, self.tip_force,
                                                 self.tip_moment)
             jac = np.empty((jac_x.shape[0], 3 + n))
@@ -129,19 +139,27 @@ class _Problem:
         paths = values[rows.lengths]
         consumed, motor, mean = self.consumed(states, paths, t)
         gap = self.free - consumed
-        # d consumed / dz with the friction profile held (exact without friction)
-        stretch = 1.0 + mean * self.compliance
-        d_consumed = jac[rows.lengths] / stretch[:, None]
-        d_consumed[:, 3:] -= np.diag(paths * self.compliance / stretch ** 2)
+        if jac is not None:
+            # d consumed / dz with the friction profile held (exact without friction)
+            stretch = 1.0 + mean * self.compliance
+            d_consumed = jac[rows.lengths] / stretch[:, None]
+            d_consumed[:, 3:] -= np.diag(paths * self.compliance / stretch ** 2)
+            parts = (jac[rows.balance], d_consumed)
         taut = self.kappa * t >= gap
         residual = np.concatenate([values[rows.balance],
                                    np.where(taut, gap, self.kappa * t) / self.radius])
+        return residual, self.jacobian(parts, taut), (x, fixed, states, motor, gap, taut), parts
+
+    def jacobian(self, parts, taut):
+        """Jacobian in scaled z of the residual, for the cables' branches ``taut``."""
+        n = self.n
+        balance, d_consumed = parts
         jacobian = np.zeros((3 + n, 3 + n))
-        jacobian[:3] = jac[rows.balance]
+        jacobian[:3] = balance
         jacobian[3:] = np.where(taut[:, None], -d_consumed,
                                 np.hstack([np.zeros((n, 3)), self.kappa * np.eye(n)]))
         jacobian[3:] /= self.radius
-        return residual, jacobian * self.scale, (x, fixed, states, motor, gap, taut)
+        return jacobian * self.scale
 
     def consumed(self, states, paths, t):
         """Free length each cable's path takes (m), motor-side tension (N), mean tension (N)."""
@@ -234,16 +252,23 @@ def solve_lengths(robot, lengths, tip_force=(0.0, 0.0, 0.0), tip_moment=(0.0, 0.
         starts.append(warm)
     starts.append(np.concatenate([bvp.linear_guess(robot, tip_force, tip_moment), np.zeros(n)]))
     total = 0
-    for z0 in starts:
-        z, ok, iterations, info = _newton(problem, z0)
+    parts = getattr(warm_start, 'jacobian_parts', None)
+    if warm is not None and parts is not None and parts[0].shape == (3, 3 + n):
+        z, ok, iterations, info = _chord(problem, warm, parts)
         total += iterations
         if ok:
-            return _solution(robot, problem, z, info, True, total, '')
-    z, ok, iterations, info = _continuation(robot, problem, starts[-1])
+            return _solution(robot, problem, z, info, True, total, '', parts)
+        starts[0] = z  # keep the progress
+    for z0 in starts:
+        z, ok, iterations, info, parts = _newton(problem, z0)
+        total += iterations
+        if ok:
+            return _solution(robot, problem, z, info, True, total, '', parts)
+    z, ok, iterations, info, parts = _continuation(robot, problem, starts[-1])
     total += iterations
     message = '' if ok else ('no equilibrium found for these lengths (cable residual %.3g m '
                              'after load continuation)' % _cable_residual(info))
-    return _solution(robot, problem, z, info, ok, total, message)
+    return _solution(robot, problem, z, info, ok, total, message, parts)
 
 
 def _warm_z(robot, warm_start):
@@ -258,15 +283,36 @@ def _warm_z(robot, warm_start):
     return np.concatenate([state[:3], tensions])
 
 
+def _chord(problem, z0, parts):
+    """Chord steps on the previous solve's Jacobian (one IVP each); (z, ok, iterations, info).
+
+    A tracking sequence moves little between calls, so the old Jacobian (with each cable's
+    branch of now) still contracts the error; it gives up as soon as a step gains less than half.
+    """
+    z = np.array(z0, dtype=float)
+    res, jac, info, _ = problem.evaluate(z, parts)
+    error = float(res @ res)
+    for iteration in range(CHORD_ITERATIONS):
+        if _done(problem, res):
+            return z, True, iteration, info
+        step = -np.linalg.lstsq(jac, res, rcond=1e-12)[0] * problem.scale
+        trial_res, trial_jac, trial_info, _ = problem.evaluate(z + step, parts)
+        trial_error = float(trial_res @ trial_res)
+        if not trial_error <= 0.25 * error:
+            return z, False, iteration + 1, info
+        z, res, jac, info, error = z + step, trial_res, trial_jac, trial_info, trial_error
+    return z, _done(problem, res), CHORD_ITERATIONS, info
+
+
 def _newton(problem, z0, max_iterations=None):
-    """Semismooth Newton with backtracking; returns (z, converged, iterations, info)."""
+    """Semismooth Newton with backtracking; (z, converged, iterations, info, parts)."""
     robot = problem.robot
     max_iterations = max_iterations or robot.solver.max_iterations
     z = np.array(z0, dtype=float)
-    res, jac, info = problem.evaluate(z)
+    res, jac, info, parts = problem.evaluate(z)
     for iteration in range(max_iterations):
         if _done(problem, res):
-            return z, True, iteration, info
+            return z, True, iteration, info, parts
         error = float(res @ res)
         if not np.isfinite(error):
             break
@@ -274,15 +320,15 @@ def _newton(problem, z0, max_iterations=None):
         alpha = 1.0
         for _ in range(16):
             trial = z + alpha * step
-            trial_res, trial_jac, trial_info = problem.evaluate(trial)
+            trial_res, trial_jac, trial_info, trial_parts = problem.evaluate(trial)
             trial_error = float(trial_res @ trial_res)
             if trial_error <= (1.0 - 1e-4 * alpha) * error or _done(problem, trial_res):
                 break
             alpha *= 0.5
         else:
-            return z, False, iteration + 1, info
-        z, res, jac, info = trial, trial_res, trial_jac, trial_info
-    return z, _done(problem, res), max_iterations, info
+            return z, False, iteration + 1, info, parts
+        z, res, jac, info, parts = trial, trial_res, trial_jac, trial_info, trial_parts
+    return z, _done(problem, res), max_iterations, info, parts
 
 
 def _continuation(robot, problem, z0):
@@ -290,7 +336,7 @@ def _continuation(robot, problem, z0):
     target = problem.free
     passive = np.array(z0, dtype=float)
     passive[3:] = 0.0
-    _, _, info = problem.evaluate(passive)
+    _, _, info, _ = problem.evaluate(passive)
     start_free = target - info[4] + 1e-6 * robot.length  # paths of the passive rod, just slack
     z, ok, total = passive, False, 0
     for increments in (4, 16, 64):
@@ -298,15 +344,15 @@ def _continuation(robot, problem, z0):
         for k in range(1, increments + 1):
             fraction = k / increments
             problem.free = (1.0 - fraction) * start_free + fraction * target
-            z, ok, iterations, info = _newton(problem, z)
+            z, ok, iterations, info, _ = _newton(problem, z)
             total += iterations
             if not ok:
                 break
         if ok:
             break
     problem.free = target
-    _, _, info = problem.evaluate(z)
-    return z, ok, total, info
+    _, _, info, parts = problem.evaluate(z)
+    return z, ok, total, info, parts
 
 
 def _done(problem, res):
@@ -319,7 +365,7 @@ def _cable_residual(info):
     return float(np.max(np.abs(np.where(taut, gap, 0.0)), initial=0.0))
 
 
-def _solution(robot, problem, z, info, converged, iterations, message):
+def _solution(robot, problem, z, info, converged, iterations, message, parts=None):
     x, fixed, states, motor, gap, taut = info
     slack = z[3:] <= SLACK_TENSION * problem.t_ref
     tensions = np.where(slack, 0.0, z[3:])  # a slack cable carries exactly nothing
@@ -333,4 +379,5 @@ def _solution(robot, problem, z, info, converged, iterations, message):
                           end_tensions=tensions, slack=slack,
                           converged=bool(converged), message='; '.join(notes),
                           free_lengths=problem.free.copy(), motion=problem.motion.copy(),
-                          iterations=iterations, residual=_cable_residual(info))
+                          iterations=iterations, residual=_cable_residual(info),
+                          jacobian_parts=parts)
