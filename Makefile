@@ -1,6 +1,6 @@
 # The two commands of README.md: `make demo` (main job) and `make test` (whole suite).
 # Both create .venv on first use and reuse it afterwards.
-.PHONY: venv venv-jazzy demo test test-jazzy bench bench-nodes bench-drivers lint clean fuzz soak
+.PHONY: venv venv-jazzy demo test test-jazzy bench bench-nodes bench-drivers bench-tendons lint clean fuzz soak
 
 venv:
 	@scripts/setup_venv.sh
@@ -22,6 +22,7 @@ test-jazzy: venv venv-jazzy
 
 bench: venv
 	scripts/ros_env.sh .venv/bin/python -m continuum_statics bench
+	.venv/bin/python -m continuum_statics.tools.bench_tendons
 
 bench-nodes: venv
 	scripts/ros_env.sh --private .venv/bin/python -m continuum_statics bench --nodes
@@ -47,3 +48,7 @@ lint: venv
 
 clean:
 	rm -rf .venv .venv-jazzy build install log *.egg-info
+
+# Real tendons: solve_lengths warm/cold beside SciPy; with the v6 calibration (several minutes).
+bench-tendons: venv
+	.venv/bin/python -m continuum_statics.tools.bench_tendons --calibration

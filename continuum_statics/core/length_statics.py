@@ -30,8 +30,9 @@ import numpy as np
 from continuum_statics.core import bvp
 from continuum_statics.core.inputs import as_vector
 from continuum_statics.core.kernel import POINT_MOMENT
-from continuum_statics.core.layout import POSITION, ROTATION, ProbeRows
+from continuum_statics.core.layout import ProbeRows
 from continuum_statics.core.shape import Shape
+from continuum_statics.core.tendon_kernel import path_stretch
 
 #: Free-length change (m) below which a cable is taken as not moving (its friction sign is kept).
 MOTION_THRESHOLD = 1e-7
@@ -91,6 +92,7 @@ class _Problem:
         self.compliance = robot.tendons.compliance
         self.friction = robot.tendons.friction * motion
         self.with_friction = bool(np.any(self.friction != 0.0))
+        self.base_axis = np.ascontiguousarray(robot.base_rotation[:, 2])
         radius = np.hypot(robot.cable_offsets[:, 0], robot.cable_offsets[:, 1])
         # scales: u(0) L, t / t_ref and lengths / r are O(angle) for bends of O(1 rad)
         self.radius = float(np.mean(radius)) if self.n else 1.0
@@ -166,33 +168,11 @@ class _Problem:
         if not self.with_friction:
             return paths / (1.0 + t * self.compliance), t.copy(), t.copy()
         consumed, motor, mean = np.empty(self.n), np.empty(self.n), np.empty(self.n)
-        for j in range(self.n):
-            spans, wraps = hole_path(self.robot, states, j)
-            # wraps[i]: turn at hole i (0 = base disk); span i runs from hole i to hole i + 1
-            beyond = np.concatenate([np.cumsum(wraps[:0:-1])[::-1], [0.0]])
-            tension = t[j] * np.exp(self.friction[j] * beyond)
-            consumed[j] = np.sum(spans / (1.0 + tension * self.compliance[j]))
-            motor[j] = t[j] * np.exp(self.friction[j] * np.sum(wraps))
-            mean[j] = np.sum(spans * tension) / max(np.sum(spans), 1e-300)
+        robot = self.robot
+        path_stretch(states, robot.guide_nodes, robot.cable_last_guide, robot.cable_offsets,
+                     self.base_axis, np.ascontiguousarray(t), self.friction, self.compliance,
+                     consumed, motor, mean)
         return consumed, motor, mean
-
-
-def hole_path(robot, states, cable):
-    """Spans (m) between a cable's consecutive holes and its wrap angle (rad) at each hole.
-
-    The holes are at the base disk (node 0) and every guide up to the cable's end disk; the wrap
-    at the base disk is measured from the base axis (the cable arrives from its motor along it),
-    the end disk has none (the cable ends there).
-    """
-    nodes = robot.guide_nodes[:robot.cable_last_guide[cable] + 1]
-    positions = states[nodes][:, POSITION]
-    rotations = states[nodes][:, ROTATION].reshape(-1, 3, 3)
-    holes = positions + rotations @ robot.cable_offsets[cable]
-    segments = np.diff(holes, axis=0)
-    spans = np.linalg.norm(segments, axis=1)
-    directions = np.vstack([robot.base_rotation[:, 2], segments / spans[:, None]])
-    cosines = np.clip(np.sum(directions[:-1] * directions[1:], axis=1), -1.0, 1.0)
-    return spans, np.arccos(cosines)
 
 
 def _moment_map(robot):

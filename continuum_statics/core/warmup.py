@@ -32,6 +32,8 @@ ENTRY_POINTS = (
     'continuum_statics.core.least_squares.constrained_step',
     'continuum_statics.core.rotations._quaternions',
     'continuum_statics.core.backbone_sampling._sample',
+    'continuum_statics.core.tendon_kernel.path_stretch',
+    'continuum_statics.core.kernel._section_tensions',
 )
 #: Modules whose numba dispatchers the warm-up must cover (see :func:`kernel_signatures`).
 KERNEL_MODULES = (
@@ -40,6 +42,7 @@ KERNEL_MODULES = (
     'continuum_statics.core.least_squares',
     'continuum_statics.core.rotations',
     'continuum_statics.core.backbone_sampling',
+    'continuum_statics.core.tendon_kernel',
 )
 
 
@@ -124,6 +127,25 @@ def _exercise(robot):
     robot.solve_tip_goal(bent.tip_position, goal_direction=bent.tip_rotation[:, 2])
     robot.equilibrium_between(estimate, goal, 0.5, tip_force=load[:3], tip_moment=load[3:],
                               warm_start=estimate)
+    _exercise_tendons(robot, lengths, goal)
+
+
+def _exercise_tendons(robot, lengths, goal):
+    """Real tendons: solve_lengths (friction, chord steps), commands with min_tension."""
+    import dataclasses
+
+    from continuum_statics.core.robot import Robot
+    from continuum_statics.core.tendon_commands import command_for
+    from continuum_statics.core.tendons import Tendons
+
+    n = len(robot.cable_names)
+    real = Robot(dataclasses.replace(robot.description, tendons=dataclasses.replace(
+        Tendons.default(n), stiffness=np.full(n, 1e3), friction=np.full(n, 0.05))))
+    for each in (robot, real):
+        first = each.solve_lengths(lengths - 1e-4)
+        each.solve_lengths(lengths - 2e-4, warm_start=first)
+        each.estimate_shape(lengths, warm_start=first)
+        command_for(each, goal.shape, min_tension=0.1)
 
 
 def kernel_signatures():

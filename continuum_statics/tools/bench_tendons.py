@@ -1,0 +1,134 @@
+"""``python -m continuum_statics.tools.bench_tendons``: figures of the real-tendon statics.
+
+``solve_lengths`` on the 3-section 9-cable robot (ideal cables, and with stretch, pretension and
+friction), cold (from nothing) and warm (a tracking sequence: each call warm-started by the
+previous result), beside a plain SciPy baseline of the same equations in the same run
+(``scipy.optimize.root``, Levenberg-Marquardt with SciPy's own finite differences, on the same
+residual). With ``--calibration``: the recorded-run calibration of the FTDCR v6 robot on its
+training file (wall time, both cores) and the train and held-out tip RMS before and after, with
+and without friction. Figures, not assertions.
+"""
+import argparse
+import dataclasses
+import json
+import time
+
+import numpy as np
+from scipy.optimize import root
+
+from continuum_statics import load_robot
+from continuum_statics.core import length_statics
+from continuum_statics.core.robot import Robot
+from continuum_statics.core.tendons import Tendons
+from continuum_statics.tools.bench import _config, _row
+from continuum_statics.tools.recorded_run import ColumnMap
+
+V6_DATA = _config('ftdcr_v6_robot.yaml').parents[1] / 'test' / 'data' / 'ftdcr_v6'
+V6_COLUMNS = ColumnMap(cables=('servo_1_mm', 'servo_20_mm', 'servo_23_mm', 'servo_9_mm',
+                               'servo_6_mm', 'servo_11_mm', 'servo_24_mm', 'servo_2_mm',
+                               'servo_3_mm'),
+                       kind='displacement', scale=1e-3, tip_scale=1e-3)
+
+
+def with_tendons(robot, stiffness=2000.0, pretension=2.0, friction=0.05):
+    """Return the robot with real tendons (N, N, 1) on every cable."""
+    n = len(robot.cable_names)
+    tendons = dataclasses.replace(Tendons.default(n), stiffness=np.full(n, stiffness),
+                                  pretension=np.full(n, pretension),
+                                  friction=np.full(n, friction))
+    return Robot(dataclasses.replace(robot.description, tendons=tendons))
+
+
+def tracking_sequence(robot, count, seed=0):
+    """Motor lengths of a smooth random tension walk (what a node sees at 1 kHz or so)."""
+    rng = np.random.default_rng(seed)
+    n = len(robot.cable_names)
+    tensions = np.abs(rng.normal(0.0, 1.0, n))
+    ideal = Robot(dataclasses.replace(robot.description, tendons=Tendons.default(n)))
+    rows = []
+    for _ in range(count):
+        tensions = np.maximum(tensions + rng.normal(0.0, 0.02, n), 0.0)
+        rows.append(ideal.cable_lengths(ideal.solve_tensions(tensions)))
+    return np.array(rows)
+
+
+def scipy_baseline(robot, lengths):
+    """Solve the same equilibrium by scipy.optimize.root (LM, SciPy finite differences), cold."""
+    n = len(robot.cable_names)
+    free = robot.tendons.free_lengths(lengths, robot.straight_cable_lengths)
+    problem = length_statics._Problem(robot, free, np.zeros(n), np.zeros(3), np.zeros(3))
+    z0 = np.zeros(3 + n)
+    result = root(lambda z: problem.evaluate(z * problem.scale)[0], z0 / problem.scale,
+                  method='lm', options={'xtol': 1e-12})
+    return result
+
+
+def bench_solve_lengths(robot, label, count=200):
+    """Print warm, cold and SciPy-baseline times of solve_lengths on a tracking sequence."""
+    print('\n%s: %d cables, %d sections, %s model' % (label, len(robot.cable_names),
+                                                     len(robot.sections), robot.cable_model))
+    rows = tracking_sequence(robot, count)
+    warm_times, previous = [], robot.solve_lengths(rows[0])
+    failures = 0
+    for lengths in rows[1:]:
+        start = time.perf_counter()
+        previous = robot.solve_lengths(lengths, warm_start=previous)
+        warm_times.append(time.perf_counter() - start)
+        failures += not previous.converged
+    cold_times = []
+    for lengths in rows[::10]:
+        start = time.perf_counter()
+        failures += not robot.solve_lengths(lengths).converged
+        cold_times.append(time.perf_counter() - start)
+    scipy_times, scipy_fail = [], 0
+    for lengths in rows[::40]:
+        start = time.perf_counter()
+        scipy_fail += not scipy_baseline(robot, lengths).success
+        scipy_times.append(time.perf_counter() - start)
+    _row('solve_lengths warm (tracking)', np.array(warm_times))
+    _row('solve_lengths cold', np.array(cold_times))
+    _row('SciPy root (LM) cold, same residual', np.array(scipy_times))
+    print('  not converged: solve_lengths %d of %d, SciPy %d of %d'
+          % (failures, len(warm_times) + len(cold_times), scipy_fail, len(scipy_times)))
+
+
+def bench_calibration():
+    """Print the v6 calibration's wall time and tip errors, without and with friction."""
+    from continuum_statics.tools.run_calibration import calibrate_run
+
+    robot_file = _config('ftdcr_v6_robot.yaml')
+    for fit in (('registration', 'section_rotation', 'cable_angle', 'cable_zero', 'stiffness'),
+                ('registration', 'section_rotation', 'cable_angle', 'cable_zero', 'stiffness',
+                 'friction')):
+        start = time.perf_counter()
+        summary = calibrate_run(robot_file, V6_DATA / 'train.csv', list(fit), V6_COLUMNS,
+                                validate=V6_DATA / 'val.csv', log=lambda line: None)
+        print('\nv6 calibration (%s): %.0f s wall, %d evaluations' % (
+            ', '.join(fit), time.perf_counter() - start, summary['optimizer']['evaluations']))
+        print('  train RMS: file as given %.1f mm -> %.2f mm (%.2f mm aligned)' % (
+            summary['rms_before'] * 1e3, summary['rms_after'] * 1e3,
+            summary['rms_aligned_after'] * 1e3))
+        print('  held-out RMS: %.2f mm (%.2f mm aligned)' % (
+            summary['validate_rms'] * 1e3, summary['validate_rms_aligned'] * 1e3))
+        print('  fitted: %s' % json.dumps({k: np.round(v, 4).tolist()
+                                             for k, v in summary['fitted'].items()}))
+
+
+def main(argv=None):
+    """Run the benchmark; returns 0."""
+    parser = argparse.ArgumentParser(prog='python -m continuum_statics.tools.bench_tendons')
+    parser.add_argument('--calibration', action='store_true',
+                        help='also calibrate the v6 robot on its recorded runs (minutes)')
+    args = parser.parse_args(argv)
+    print('continuum_statics real-tendon benchmark')
+    three = load_robot(_config('three_section_robot.yaml'))
+    bench_solve_lengths(three, 'three_section_9c, ideal cables')
+    bench_solve_lengths(with_tendons(three), 'three_section_9c, EA 2 kN, 2 N pretension, '
+                                             'mu 0.05')
+    if args.calibration:
+        bench_calibration()
+    return 0
+
+
+if __name__ == '__main__':
+    raise SystemExit(main())
