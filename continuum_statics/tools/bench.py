@@ -215,8 +215,10 @@ def _kernel_rows(robot, u0, force, ivp, repeat):
     old = _row('old classical RK4 kernel (reference)', timings(
         lambda: rk4_reference.integrate_batch(robot.s_grid, robot.params, force[None],
                                               u0[None]), repeat))
-    print('  SE(3) RKMK4 / old classical RK4: kernel %.2fx, solve_ivp %.2fx'
-          % (bare / old, ivp / old))
+    old_ivp = _row('old classical RK4 shape (reference)', timings(
+        lambda: rk4_reference.solve_ivp(robot, u0, force), repeat))
+    print('  SE(3) RKMK4 / old classical RK4: kernel %.2fx, shape solve %.2fx'
+          % (bare / old, ivp / old_ivp))
 
 
 def bench_robot(path, repeat):

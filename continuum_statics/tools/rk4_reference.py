@@ -7,7 +7,9 @@ classical-RK4 figure, in the same run"): RK4 on the 18 components r, R, v - e3, 
 import numba
 import numpy as np
 
+from continuum_statics.core.inputs import as_vector
 from continuum_statics.core.kernel import _C, _C_INV, _D, _D_INV, _F_BODY, _R0, _ROT0
+from continuum_statics.core.shape import Shape
 
 STATE_SIZE = 18
 
@@ -136,3 +138,11 @@ def integrate_batch(s_grid, params, tip_forces, base_bendings):
                 y_next[i] = y[i] + h / 6.0 * (k1[i] + 2.0 * (k2[i] + k3[i]) + k4[i])
             _orthonormalise(y_next)
     return states
+
+
+def solve_ivp(robot, u0, tip_force):
+    """Shape as the old ``Robot.solve_ivp`` made it: checked inputs, kernel, Shape."""
+    u0 = as_vector(u0, 3, 'u0')
+    tip_force = as_vector(tip_force, 3, 'tip_force')
+    states = integrate_batch(robot.s_grid, robot.params, tip_force[None], u0[None])
+    return Shape(robot.s_grid, states[0], u0, tip_force, robot.c, robot.d)
