@@ -17,10 +17,11 @@ from continuum_statics.core.inputs import as_vector
 from continuum_statics.core.layout import ProbeRows
 from continuum_statics.core.least_squares import constrained_gauss_newton
 from continuum_statics.core.shape import Shape
-from continuum_statics.core.tracking import track
+from continuum_statics.core.tracking import TRACK_ITERATIONS, track
 
 #: RMS length residual (m) above which an estimate says in its message that it is a best fit.
 BEST_FIT_NOTE = 1e-6
+_NO_JACOBIAN = np.zeros((0, 0))  # tells track to use finite-difference Jacobians
 
 
 @dataclass(frozen=True, eq=False)
@@ -96,15 +97,25 @@ def estimate_shape(robot, cable_lengths, tip_force=(0.0, 0.0, 0.0), tip_moment=(
     size = robot.state_size
 
     runs = [0]
+    args = robot.kernel_args(tip_force, tip_moment)
     if jacobians is not None:  # tracking: the previous Jacobians, Broyden-updated, compiled
         x, res, _, states, jac, con_jac, iterations, used, ok = track(
-            *robot.kernel_args(tip_force, tip_moment), measured, start, jacobians[0],
-            jacobians[1], robot.solver.estimate_tolerance, robot.length)
+            *args, measured, start, jacobians[0], jacobians[1],
+            robot.solver.estimate_tolerance, robot.length, TRACK_ITERATIONS)
         runs[0] = used
         if ok:
             return _finish(robot, x, tip_force, states, res, True, iterations, observable,
                            notes, (jac, con_jac), used)
         start = x  # keep the progress; go on with fresh Jacobians
+    else:  # cold: the same compiled loop with finite-difference Jacobians at every evaluation
+        x, res, _, states, jac, con_jac, iterations, used, ok = track(
+            *args, measured, start, _NO_JACOBIAN, _NO_JACOBIAN,
+            robot.solver.estimate_tolerance, robot.length, robot.solver.max_iterations)
+        runs[0] = used * robot.probe_runs
+        if ok:
+            return _finish(robot, x, tip_force, states, res, True, iterations, observable,
+                           notes, (jac, con_jac), runs[0])
+        start = x  # keep the progress; go on in Python (longer line search)
 
     def evaluate(x):
         runs[0] += robot.probe_runs
