@@ -34,12 +34,23 @@ def test_lengths_of_a_shape_are_published_and_warm_start_the_next():
 
 def test_lengths_no_shape_fits_are_dropped_and_a_small_misfit_is_a_best_fit():
     lengths = ROBOT.straight_cable_lengths.copy()
-    lengths += 0.004  # every cable paid out: no rod shape has these lengths
+    lengths -= 0.004  # every cable pulled in: no rod shape has these lengths, taut or slack
     result = tracker().update(lengths, None, ZERO, THRESHOLDS, 100.0)
     assert 'fit no shape' in result.rejection and result.residual > 2e-3
-    lengths = ROBOT.straight_cable_lengths + 2e-4
+    lengths = ROBOT.straight_cable_lengths - 2e-4
     result = tracker().update(lengths, None, ZERO, THRESHOLDS, 100.0)
     assert result.rejection == '' and result.best_fit and 'best fit' in result.message
+
+
+def test_every_cable_paid_out_is_the_passive_rod_with_slack_cables():
+    # real robots under displacement control: the cables go slack and the rod hangs passive
+    lengths = ROBOT.straight_cable_lengths + 0.004
+    result = tracker().update(lengths, None, ZERO, THRESHOLDS, 100.0)
+    assert result.rejection == '' and not result.best_fit
+    assert result.estimate.slack.all() and np.all(result.estimate.tensions == 0.0)
+    passive = ROBOT.solve_bvp()
+    np.testing.assert_allclose(result.estimate.shape.tip_position, passive.tip_position,
+                               atol=1e-9)
 
 
 def test_lengths_outside_the_limits_and_implausible_tensions_are_rejected_unsolved():

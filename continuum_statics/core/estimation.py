@@ -25,12 +25,13 @@ from continuum_statics.core.inputs import as_vector
 from continuum_statics.core.layout import ProbeRows
 from continuum_statics.core.least_squares import constrained_gauss_newton
 from continuum_statics.core.shape import Shape
-from continuum_statics.core.tracking import track
+from continuum_statics.core.tracking import TRACK_ITERATIONS, track
 
 #: RMS length residual (m) above which an estimate says in its message that it is a best fit.
 BEST_FIT_NOTE = 1e-6
 #: RMS length residual (m) of the least-squares fit above which ideal cables are tried as slack.
 SLACK_RESIDUAL = 2e-5
+_NO_JACOBIAN = np.zeros((0, 0))  # tells track to use finite-difference Jacobians
 
 
 @dataclass(frozen=True, eq=False)
@@ -112,10 +113,18 @@ def estimate_shape(robot, cable_lengths, tip_force=(0.0, 0.0, 0.0), tip_moment=(
         notes.insert(0, 'shape from the measured tensions')
         return _result(shape, converged, residual, 0, observable, notes)
 
-    slack_before = getattr(previous, 'slack', None)
-    if not robot.tendons.is_ideal or (slack_before is not None and np.any(slack_before)):
+    if not robot.tendons.is_ideal:
         return _tendon_estimate(robot, measured, tip_force, tip_moment, previous, observable,
                                 notes)
+    slack_before = getattr(previous, 'slack', None)
+    if slack_before is not None and np.any(slack_before):
+        # still slack, most likely: the tendon model first, kept only when it explains the
+        # lengths (ideal cables that all end up shorter than any shape allows have no
+        # equilibrium: then the least-squares fit below, as without slack)
+        slack = _tendon_estimate(robot, measured, tip_force, tip_moment, previous, observable,
+                                 list(notes))
+        if slack.converged:
+            return slack
     if start is None:
         start = robot.passive_state(bvp.linear_guess(robot, tip_force, tip_moment))
     rows = ProbeRows(n_cables)
@@ -123,15 +132,27 @@ def estimate_shape(robot, cable_lengths, tip_force=(0.0, 0.0, 0.0), tip_moment=(
     size = robot.state_size
 
     runs = [0]
+    args = robot.kernel_args(tip_force, tip_moment)
     if jacobians is not None:  # tracking: the previous Jacobians, Broyden-updated, compiled
         x, res, _, states, jac, con_jac, iterations, used, ok = track(
-            *robot.kernel_args(tip_force, tip_moment), measured, start, jacobians[0],
-            jacobians[1], robot.solver.estimate_tolerance, robot.length)
+            *args, measured, start, jacobians[0], jacobians[1],
+            robot.solver.estimate_tolerance, robot.length, TRACK_ITERATIONS)
         runs[0] = used
         if ok and _rms(res) <= SLACK_RESIDUAL:
             return _finish(robot, x, tip_force, states, res, True, iterations, observable,
                            notes, (jac, con_jac), used)
         start = x  # keep the progress; go on with fresh Jacobians
+    else:  # cold: the same compiled loop with finite-difference Jacobians at every evaluation
+        x, res, _, states, jac, con_jac, iterations, used, ok = track(
+            *args, measured, start, _NO_JACOBIAN, _NO_JACOBIAN,
+            robot.solver.estimate_tolerance, robot.length, robot.solver.max_iterations)
+        runs[0] = used * robot.probe_runs
+        if ok:
+            slack = _slack_estimate(robot, measured, tip_force, tip_moment, previous,
+                                    observable, notes, _rms(res))
+            return slack or _finish(robot, x, tip_force, states, res, True, iterations,
+                                    observable, notes, (jac, con_jac), runs[0])
+        start = x  # keep the progress; go on in Python (longer line search)
 
     def evaluate(x):
         runs[0] += robot.probe_runs
@@ -141,11 +162,10 @@ def estimate_shape(robot, cable_lengths, tip_force=(0.0, 0.0, 0.0), tip_moment=(
     result = constrained_gauss_newton(
         evaluate, start, robot.solver.max_iterations, robot.solver.estimate_tolerance,
         constraint_weight=robot.length)
-    if _rms(result.residual) > SLACK_RESIDUAL and n_cables:
-        slack = _tendon_estimate(robot, measured, tip_force, tip_moment, previous, observable,
-                                 list(notes))
-        if slack.converged and slack.residual < _rms(result.residual):
-            return slack
+    slack = _slack_estimate(robot, measured, tip_force, tip_moment, previous, observable,
+                            notes, _rms(result.residual))
+    if slack is not None:
+        return slack
     return _finish(robot, result.x, tip_force, result.evaluation, result.residual,
                    result.stationary, result.iterations, observable, notes, result.jacobians,
                    runs[0])
@@ -161,6 +181,20 @@ def _finish(robot, x, tip_force, states, length_residual, stationary, iterations
         notes.insert(0, 'best fit: the lengths fit no shape to RMS %.3g m' % residual)
     shape = robot.make_shape(x, tip_force, states)
     return _result(shape, stationary, residual, iterations, observable, notes, jacobians, runs)
+
+
+def _slack_estimate(robot, measured, tip_force, tip_moment, previous, observable, notes,
+                    residual):
+    """Return the tendon model's estimate when it explains lengths least squares missed.
+
+    Returns None when the least-squares fit was within :data:`SLACK_RESIDUAL` or the tendon
+    model did no better (lengths no taut-or-slack shape has either: noise, a wrong file).
+    """
+    if residual <= SLACK_RESIDUAL or not len(measured):
+        return None
+    slack = _tendon_estimate(robot, measured, tip_force, tip_moment, previous, observable,
+                             list(notes))
+    return slack if slack.converged and slack.residual < residual else None
 
 
 def _tendon_estimate(robot, measured, tip_force, tip_moment, previous, observable, notes):

@@ -175,6 +175,9 @@ class Robot:
         exact = sum(int(r) for r, n in zip(self.section_ranks, self.section_end_node)
                     if n == tip) if self.model_code == POINT_MOMENT else 0
         self.probe_runs = 1 + column - exact
+        # the loads of a passive state, batch of one (the kernel only reads them)
+        self._no_moments = np.zeros((1, n_sections, 3))
+        self._no_tensions = np.zeros((1, n_cables))
 
     def with_solver(self, **settings):
         """Copy of this robot with some solver settings replaced (e.g. ``steps=200``)."""
@@ -243,8 +246,15 @@ class Robot:
         """
         u0 = as_vector(u0, 3, 'u0')
         tip_force = as_vector(tip_force, 3, 'tip_force')
-        state = self.passive_state(u0)
-        return self.make_shape(state, tip_force, self.integrate_state(state, tip_force))
+        # the passive state's loads are zero: no loads_from_state call (a per-call fast path)
+        states = integrate_batch(self.s_grid, self.params, self.model_code, tip_force[None],
+                                 u0[None], self._no_moments, self._no_tensions,
+                                 self.cable_offsets, self.cable_end_node,
+                                 self.section_end_node)[0]
+        state = np.zeros(self.state_size)
+        state[:3] = u0
+        return Shape(self.s_grid, states, u0, tip_force, self.c, self.d, state=state,
+                     fixed_tensions=np.zeros(len(self.cable_names)))
 
     def solve_bvp(self, tip_force=(0.0, 0.0, 0.0), tip_moment=(0.0, 0.0, 0.0), u0_guess=None):
         """Shape of the rod with slack cables under a tip force F (N) and moment (N m), global.

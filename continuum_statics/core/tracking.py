@@ -1,10 +1,13 @@
-"""Compiled tracking step of the shape estimator: the warm-started solve a node runs every cycle.
+"""Compiled solves of the shape estimator: the warm-started one a node runs every cycle, and cold.
 
 The same constrained Gauss-Newton as :func:`least_squares.constrained_gauss_newton` (lengths in
 the least-squares sense, the tip moment balance exactly, second-order correction), but on the
 Jacobians of the previous estimate, corrected by Broyden updates instead of recomputed: one model
 run per iteration, and no Python between them. It gives up (``ok`` False) after a few iterations
-or a failed step, and the caller then solves afresh with finite-difference Jacobians.
+or a failed step, and the caller then solves afresh with finite-difference Jacobians. The cold
+estimate runs the same loop with finite-difference Jacobians at every evaluation (one compiled
+call instead of a Python loop over the kernels), and falls back to
+:func:`least_squares.constrained_gauss_newton` from where it stopped if it gives up.
 """
 import numba
 import numpy as np
@@ -17,48 +20,57 @@ TRACK_ITERATIONS = 6
 
 
 @numba.njit(cache=True)
-def _evaluate(model_args, x, measured):
-    """Length residual (m), tip balance and states of solver state ``x`` (one IVP)."""
+def _evaluate(model_args, x, measured, n_free):
+    """Length residual (m), tip balance, states and their Jacobians (``n_free`` columns)."""
     (s_grid, params, model, tip_force, tip_moment, step, fixed, section_state_index,
      section_bases, section_ranks, section_cables, section_cable_count, cable_offsets,
      guide_nodes, cable_last_guide, cable_end_node, section_end_node) = model_args
-    values, _, states = probe(s_grid, params, model, tip_force, tip_moment, x, 0, step, fixed,
-                              section_state_index, section_bases, section_ranks, section_cables,
-                              section_cable_count, cable_offsets, guide_nodes, cable_last_guide,
-                              cable_end_node, section_end_node)
+    values, jacobian, states = probe(s_grid, params, model, tip_force, tip_moment, x, n_free,
+                                     step, fixed, section_state_index, section_bases,
+                                     section_ranks, section_cables, section_cable_count,
+                                     cable_offsets, guide_nodes, cable_last_guide,
+                                     cable_end_node, section_end_node)
     n = cable_offsets.shape[0]
     # rows of probe: core/layout.py ProbeRows (lengths 6:6+n, balance 6+n:9+n)
-    return values[6:6 + n] - measured, values[6 + n:9 + n].copy(), states
+    return (values[6:6 + n] - measured, values[6 + n:9 + n].copy(), states,
+            np.ascontiguousarray(jacobian[6:6 + n]), np.ascontiguousarray(jacobian[6 + n:9 + n]))
 
 
 @numba.njit(cache=True)
 def track(s_grid, params, model, tip_force, tip_moment, step, fixed, section_state_index,
           section_bases, section_ranks, section_cables, section_cable_count, cable_offsets,
           guide_nodes, cable_last_guide, cable_end_node, section_end_node, measured, x0, jac0,
-          con_jac0, tolerance, weight):
-    """Warm-started estimate: (x, residual, balance, states, jac, con_jac, iterations, runs, ok).
+          con_jac0, tolerance, weight, max_iterations):
+    """Estimate from ``x0``: (x, residual, balance, states, jac, con_jac, iterations, runs, ok).
 
-    The first 17 arguments are those of :func:`kernel.probe` but ``x`` and ``n_free`` (flat:
-    a tuple argument would cost numba's dispatcher ~80 us per call to type).
+    ``runs`` counts model evaluations. The first 17 arguments are those of :func:`kernel.probe`
+    but ``x`` and ``n_free`` (flat: a tuple argument would cost numba's dispatcher ~80 us per
+    call to type).
     :param measured: (n_cables,) measured lengths (m)
-    :param x0: start state; ``jac0``, ``con_jac0`` its Jacobians (lengths, balance)
+    :param x0: start state; ``jac0``, ``con_jac0`` its Jacobians (lengths, balance), Broyden-
+        updated (one IVP per evaluation); empty (0 rows): finite-difference Jacobians at every
+        evaluation instead (the cold estimate, ``probe_runs`` IVPs per evaluation)
     :param tolerance: stop when the predicted change of the lengths is below this (m)
     :param weight: tip balance -> length units in the merit function (m)
+    :param max_iterations: iterations before giving up (``ok`` False)
     """
     model_args = (s_grid, params, model, tip_force, tip_moment, step, fixed, section_state_index,
                   section_bases, section_ranks, section_cables, section_cable_count,
                   cable_offsets, guide_nodes, cable_last_guide, cable_end_node, section_end_node)
+    fresh = jac0.shape[0] == 0 and con_jac0.shape[0] == 0
+    n_free = x0.shape[0] if fresh else 0
     x = x0.copy()
-    jac = jac0.copy()
-    con_jac = con_jac0.copy()
-    res, con, states = _evaluate(model_args, x, measured)
+    res, con, states, jac, con_jac = _evaluate(model_args, x, measured, n_free)
+    if not fresh:
+        jac = jac0.copy()
+        con_jac = con_jac0.copy()
     runs = 1
     penalty = (1e3 * weight) ** 2
     current = res @ res + penalty * (con @ con)
     damping = 1e-6
     no_residual = np.zeros(0)
     no_jacobian = np.zeros((0, x.shape[0]))
-    for iteration in range(1, TRACK_ITERATIONS + 1):
+    for iteration in range(1, max_iterations + 1):
         step, predicted = constrained_step(res, jac, con, con_jac, damping)
         if (predicted @ predicted <= tolerance ** 2
                 and weight ** 2 * (con @ con) <= tolerance ** 2):
@@ -66,21 +78,25 @@ def track(s_grid, params, model, tip_force, tip_moment, step, fixed, section_sta
         accepted = False
         for _ in range(6):
             trial = x + step
-            t_res, t_con, t_states = _evaluate(model_args, trial, measured)
+            t_res, t_con, t_states, t_jac, t_con_jac = _evaluate(model_args, trial, measured,
+                                                                 n_free)
             runs += 1
             t_merit = t_res @ t_res + penalty * (t_con @ t_con)
             if not (np.isfinite(t_merit) and t_merit < current):
                 # second-order correction by chord iterations back onto the tip balance
-                c_trial, c_con = trial, t_con
+                c_trial, c_con, c_con_jac = trial, t_con, t_con_jac if fresh else con_jac
                 for _ in range(3):
-                    correction, _ = constrained_step(no_residual, no_jacobian, c_con, con_jac, 0.0)
+                    correction, _ = constrained_step(no_residual, no_jacobian, c_con, c_con_jac,
+                                                     0.0)
                     c_trial = c_trial + correction
-                    c_res, c_con, c_states = _evaluate(model_args, c_trial, measured)
+                    c_res, c_con, c_states, c_jac, c_jac_con = _evaluate(model_args, c_trial,
+                                                                         measured, n_free)
                     runs += 1
                     c_merit = c_res @ c_res + penalty * (c_con @ c_con)
                     if np.isfinite(c_merit) and c_merit < current:
                         trial, t_res, t_con, t_states, t_merit = (c_trial, c_res, c_con,
                                                                    c_states, c_merit)
+                        t_jac, t_con_jac = c_jac, c_jac_con
                         break
             if np.isfinite(t_merit) and t_merit < current:
                 accepted = True
@@ -89,11 +105,13 @@ def track(s_grid, params, model, tip_force, tip_moment, step, fixed, section_sta
             step, predicted = constrained_step(res, jac, con, con_jac, damping)
         if not accepted:
             return x, res, con, states, jac, con_jac, iteration, runs, False
-        # Broyden: the secant condition J dx = df for both row blocks
-        dx = trial - x
-        scale = 1.0 / (dx @ dx)
-        jac += np.outer(t_res - res - jac @ dx, dx) * scale
-        con_jac += np.outer(t_con - con - con_jac @ dx, dx) * scale
+        if fresh:
+            jac, con_jac = t_jac, t_con_jac
+        else:  # Broyden: the secant condition J dx = df for both row blocks
+            dx = trial - x
+            scale = 1.0 / (dx @ dx)
+            jac += np.outer(t_res - res - jac @ dx, dx) * scale
+            con_jac += np.outer(t_con - con - con_jac @ dx, dx) * scale
         x, res, con, states, current = trial, t_res, t_con, t_states, t_merit
         damping = max(damping / 4.0, 1e-9)
-    return x, res, con, states, jac, con_jac, TRACK_ITERATIONS, runs, False
+    return x, res, con, states, jac, con_jac, max_iterations, runs, False

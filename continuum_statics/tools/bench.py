@@ -2,11 +2,13 @@
 
 Prints, for the 2- and 3-section robots: the IVP under cable tensions, a plain SciPy
 ``solve_ivp`` of the same equations (RK45 at the paper's tolerances and at 1e-8), a cold tension
-solve, a warm estimate after a 1 mm cable change and a cold tip goal. For the paper's rod and the
-tendon robot: median and p90 time of a shape solve (IVP),
-the 6x6 Jacobian, a warm-started shape estimate after a 1 mm cable change and a cold tip-goal
-solve 5 cm away; the tip error against a converged reference; a plain SciPy ``solve_ivp``
-baseline (RK45, rtol 1e-3, atol 1e-6, the paper's setting) on the same problem in the same run;
+solve, a warm estimate after a 1 mm cable change, a cold tip goal and the slowest of eight cold
+tip goals. For the paper's rod and the tendon robot: median and p90 time of a shape solve (IVP),
+for the 24-step paper rod also the bare kernel call, the Python overhead per call (solve_ivp
+minus the kernel call) and the old classical-RK4 kernel (:mod:`rk4_reference`) in the same run;
+the 6x6 Jacobian, a warm-started and a cold shape estimate and a cold tip-goal solve 5 cm
+away; the tip error against a converged reference; a plain SciPy ``solve_ivp`` baseline (RK45,
+rtol 1e-3, atol 1e-6, the paper's setting) on the same problem in the same run;
 and the import + first-call time of fresh processes with and without the numba cache.
 Figures, not assertions: nothing here fails on a slow machine.
 """
@@ -187,6 +189,36 @@ def bench_sections(path, repeat):
                 warmup=2))
     print('  tip goal: converged %s, error %.1e m, %d iterations'
           % (sol.converged, sol.error, sol.iterations))
+    # the slowest of several cold tip goals (random reachable goals, no warm start)
+    slowest, worst = 0.0, None
+    for _ in range(8):
+        goal = robot.solve_tensions(rng.uniform(0.0, 6.0, len(tensions)), force).tip_position
+        median = np.median(timings(lambda: robot.solve_tip_goal(goal, force),
+                                   max(3, repeat // 400), warmup=1))
+        if median > slowest:
+            slowest, worst = median, robot.solve_tip_goal(goal, force)
+    print('  slowest of 8 cold tip goals: median %9.1f us (%d iterations, converged %s)'
+          % (slowest * 1e6, worst.iterations, worst.converged))
+
+
+def _kernel_rows(robot, u0, force, ivp, repeat):
+    """Print the bare kernel call, the Python overhead of solve_ivp and the old classical RK4."""
+    from continuum_statics.core.kernel import integrate_batch
+    from continuum_statics.tools import rk4_reference
+
+    state = robot.passive_state(u0)
+    moments, tensions = robot.loads(state)
+    args = (robot.s_grid, robot.params, robot.model_code, force[None], u0[None], moments[None],
+            tensions[None], robot.cable_offsets, robot.cable_end_node, robot.section_end_node)
+    bare = _row('kernel call (integrate_batch)', timings(lambda: integrate_batch(*args), repeat))
+    print('  Python overhead per solve_ivp call: %.1f us' % (ivp - bare))
+    old = _row('old classical RK4 kernel (reference)', timings(
+        lambda: rk4_reference.integrate_batch(robot.s_grid, robot.params, force[None],
+                                              u0[None]), repeat))
+    old_ivp = _row('old classical RK4 shape (reference)', timings(
+        lambda: rk4_reference.solve_ivp(robot, u0, force), repeat))
+    print('  SE(3) RKMK4 / old classical RK4: kernel %.2fx, shape solve %.2fx'
+          % (bare / old, ivp / old_ivp))
 
 
 def bench_robot(path, repeat):
@@ -203,6 +235,8 @@ def bench_robot(path, repeat):
         force = np.array([0.0, 0.0, -0.045 * 9.81])
         u0 = robot.solve_bvp(tip_force=force).u0
     ivp = _row('shape solve (IVP)', timings(lambda: robot.solve_ivp(u0, force), repeat))
+    if len(robot.s_grid) == robot.solver.steps + 1:  # no guide breaks: the old kernel's grid
+        _kernel_rows(robot, u0, force, ivp, repeat)
     _row('6x6 Jacobian (7 IVPs, one call)', timings(lambda: robot.jacobian(u0, force), repeat))
     baseline = timings(lambda: scipy_tip(robot, u0, force), max(20, repeat // 50), warmup=2)
     scipy_median = _row('SciPy solve_ivp RK45 (1e-3, 1e-6)', baseline)
@@ -228,6 +262,11 @@ def bench_robot(path, repeat):
         print('  estimate: %d iterations, %d IVPs, residual %.1e m, max cable change %.2f mm'
               % (est.iterations, est.model_runs, est.residual,
                  1e3 * np.max(np.abs(changed - lengths))))
+        cold = robot.estimate_shape(changed, force)
+        _row('shape estimate (cold)', timings(lambda: robot.estimate_shape(changed, force),
+                                              max(100, repeat // 4)))
+        print('  cold estimate: %d iterations, %d IVPs, residual %.1e m'
+              % (cold.iterations, cold.model_runs, cold.residual))
         # a reachable goal about 5 cm from the current tip
         goal = robot.solve_ivp(u0 + [0.0, 1.3, 0.0], force).tip_position
         start_tip = shape.tip_position
