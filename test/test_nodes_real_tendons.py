@@ -197,12 +197,6 @@ def test_real_tendons_report_tensions_and_min_tension_keeps_antagonists_taut(har
     assert stack.statics_values().get('slack_cables') == 'none'
 
 
-@pytest.mark.xfail(strict=True, reason=(
-    'bug: with measured tensions (cable_states.effort, which the sim driver reports for a robot '
-    'with a tendons block) estimate_shape solves the shape of those tensions and compares its '
-    "cable *paths* with the *motor-side* lengths, ignoring the stretch of the robot file's "
-    'stiffness/pretension: lengths and tensions of the model itself "disagree" by ~0.5 mm RMS '
-    'at any bent pose, so statics is WARN (tensions distrusted) for every measurement'))
 def test_lengths_and_tensions_of_the_tendon_model_itself_are_not_distrusted(harness):
     goal = REAL.solve_ivp([2.0, 0.5, 0.0]).tip_position
     lengths = command_for(REAL, REAL.solve_tip_goal(goal).shape, 1.0).lengths

@@ -6,12 +6,14 @@ the measurements in the least-squares sense, subject to the tip moment balance (
 Cables cannot twist the rod and can only bend it about axes their holes span, so unobservable
 bending stays at the passive equilibrium instead of being fixed by an arbitrary regulariser.
 With measured tensions the shape is the forward statics of those tensions (the lengths then only
-measure how well model and measurement agree).
+measure how well model and measurement agree), for ideal cables.
 
 Real tendons (:mod:`continuum_statics.core.tendons`): a robot file with a tendon model (stiffness,
 pretension, friction or zero offsets) is estimated by the displacement-driven statics
 (:func:`length_statics.solve_lengths`), which also gives each cable's tension and which are
-slack. Ideal cables keep the least-squares fit above; when it misses the lengths by more than
+slack; measured tensions are then compared with the model's (the motor-held lengths decide the
+shape: a tension reading of a stretched, rubbing cable says less than its motor's position).
+Ideal cables keep the least-squares fit above; when it misses the lengths by more than
 :data:`SLACK_RESIDUAL` (a paid-out cable no taut shape explains) the same statics is tried, and
 its shape is taken when it explains the lengths with some cables slack.
 """
@@ -100,6 +102,18 @@ def estimate_shape(robot, cable_lengths, tip_force=(0.0, 0.0, 0.0), tip_moment=(
         tensions = as_vector(tensions, n_cables, 'tensions')
         if np.any(tensions < 0.0):
             raise ValueError('tensions must be >= 0 N, got %s' % np.round(tensions, 6).tolist())
+    if not robot.tendons.is_ideal:
+        # the motor-held lengths decide the shape (stretch, slack, friction); measured
+        # tensions are compared with the model's
+        estimate = _tendon_estimate(robot, measured, tip_force, tip_moment, previous,
+                                    observable, notes)
+        if tensions is not None:
+            off = _rms(estimate.tendons.tensions - tensions)
+            estimate = dataclasses.replace(estimate, message='; '.join(
+                filter(None, [estimate.message, 'measured tensions %.3g N RMS from the '
+                              "tendon model's" % off])))
+        return estimate
+    if tensions is not None:
         try:
             state = bvp.solve_loaded(robot, robot.passive_state(), tensions, tip_force,
                                      tip_moment, start)
@@ -113,9 +127,6 @@ def estimate_shape(robot, cable_lengths, tip_force=(0.0, 0.0, 0.0), tip_moment=(
         notes.insert(0, 'shape from the measured tensions')
         return _result(shape, converged, residual, 0, observable, notes)
 
-    if not robot.tendons.is_ideal:
-        return _tendon_estimate(robot, measured, tip_force, tip_moment, previous, observable,
-                                notes)
     slack_before = getattr(previous, 'slack', None)
     if slack_before is not None and np.any(slack_before):
         # still slack, most likely: the tendon model first, kept only when it explains the

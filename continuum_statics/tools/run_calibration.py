@@ -49,6 +49,9 @@ DEFAULT_FIT = ('registration', 'section_rotation', 'cable_angle', 'cable_zero', 
 #: Stiffness start (times E I / (L r), the tension that bends the robot by about 1 rad) for a
 #: robot file whose tendons are inextensible: a stretch of 0.1 % at that tension.
 STIFFNESS_START = 1000.0
+#: Angles per section and rows of the pattern-rotation scan that starts a fit.
+SCAN_STEPS = 24
+SCAN_ROWS = 250
 #: m/s^2: a fitted gravity is written with this magnitude (its excess goes into the density).
 STANDARD_GRAVITY = 9.80665
 #: Error (m, per axis) of a row whose model point is not finite.
@@ -298,12 +301,39 @@ def rms(errors):
     return float(np.sqrt(np.mean(np.sum(errors ** 2, axis=1))))
 
 
+def scan_rotations(model, x0, log=print, steps=SCAN_STEPS, rows=SCAN_ROWS):
+    """Start each section's pattern rotation at the best of ``steps`` angles around the circle.
+
+    A lab knows its holes' radius and spacing but not how each pattern sits: a local fit from a
+    wrong quarter turn ends in a wrong basin. Sections are scanned base to tip on every
+    ``len(run) // rows``-th row (the registration, solved in closed form, follows each guess).
+    """
+    block = next((b for b in model.blocks if b.name == 'section_rotation'), None)
+    if block is None:
+        return x0
+    stride = max(1, len(model.run.tips) // rows)
+    coarse = RunModel(model.robot, model.fit,
+                      model.run.subset(np.arange(0, len(model.run.tips), stride)))
+    x = np.array(x0, dtype=float)
+    for index in range(block.index.start, block.index.stop):
+        costs = []
+        for angle in x[index] + np.linspace(-math.pi, math.pi, steps, endpoint=False):
+            trial = x.copy()
+            trial[index] = math.remainder(angle, 2.0 * math.pi)
+            costs.append((float(np.sum(coarse.residuals(trial) ** 2)), trial[index]))
+        x[index] = min(costs)[1]
+    log('  pattern rotations scanned (%d angles each, %d rows): start %s rad'
+        % (steps, len(coarse.run.tips), np.round(x[block.index], 3).tolist()))
+    return x
+
+
 def fit(model, log=print, workers=None, max_evaluations=40):
     """Fit the model's search vector; returns (x, scipy result)."""
     global _WORKER_MODEL
     workers = workers or min(os.cpu_count() or 1, 8)
     low, high = model.bounds()
     x0 = np.clip(model.start(), low, high)
+    x0 = scan_rotations(model, x0, log)
     model.residuals(x0, update=True)
     _WORKER_MODEL = model
     context = multiprocessing.get_context('fork')
