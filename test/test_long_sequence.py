@@ -127,19 +127,20 @@ def test_a_long_sequence_of_normal_use_ends_with_every_goal_reached(layout, tmp_
         for goal in reachable_tips(ROBOT, 4, SEED):
             client.load(rng.uniform(-0.4, 0.4, 3) * force_limit)
             client.goal(goal)  # under load it may be out of reach: answered, not judged
-        # 2. the load removed, then one section paid out by 4 mm by hand
+        # 2. the load removed, then one section pulled in by 4 mm by hand (paid out, it would be
+        # slack: a shape)
         client.load(np.zeros(3))
         measured = np.array(client.states.last.position)
         names = list(client.states.last.name)
         section = [names.index(name) for name in ROBOT.cable_names[:3]]
-        measured[section] += 0.004
+        measured[section] -= 0.004
         client.commands.publish(JointState(name=names, position=[float(v) for v in measured]))
         wait_until(lambda: np.max(np.abs(np.array(client.states.last.position)[section]
                                          - measured[section])) < 2e-4, 10.0,
-                   'the section paid out')
+                   'the section pulled in')
         # lengths no shape fits: statics drops them and the tip pose goes stale, as in use
         wait_until(lambda: 'fit no shape' in client.statics().get('last_rejection', ''),
-                   10.0, 'statics to drop the paid-out lengths')
+                   10.0, 'statics to drop the pulled-in lengths')
         wait_until(client.tip_quiet, 10.0, 'no tip pose for a second')
         # 3. every goal after that is reached
         errors = []

@@ -100,8 +100,9 @@ def test_late_joiner_gets_the_latched_backbone(harness):
 BAD_MEASUREMENTS = [
     (['cable_0', 'cable_1', 'cable_2', 'cable_3'], [0.3, math.nan, 0.3, 0.3], 'positive finite'),
     (['cable_0', 'cable_1', 'cable_2', 'cable_3'], [0.3, 0.0, 0.3, -0.3], 'for cable_1, cable_3'),
-    # all four 5 mm too long: the rod would have to stretch, no shape explains it
-    (['cable_0', 'cable_1', 'cable_2', 'cable_3'], [0.305] * 4, 'fit no shape: RMS residual 0.00'),
+    # all four 5 mm too short: the rod would have to shrink, no shape explains it (5 mm too
+    # long is the passive rod with four slack cables)
+    (['cable_0', 'cable_1', 'cable_2', 'cable_3'], [0.295] * 4, 'fit no shape: RMS residual 0.00'),
     (['cable_0', 'cable_1', 'cable_2', 'cable_3'], [1000.0] * 4, "outside the robot file's"),
     (['cable_0', 'cable_1', 'cable_2', 'cable_3'], [0.3, 0.3, 0.3, 0.26], 'cable_3 0.2600 m not'),
     (['cable_0', 'cable_1', 'cable_2', 'cable_9'], [0.3] * 4, 'unknown cable name'),

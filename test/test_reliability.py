@@ -88,11 +88,12 @@ class Stack:
 def test_goals_work_again_after_the_cables_were_paid_out_to_lengths_that_fit_no_shape(harness):
     stack = Stack(harness, TWO)
     wait_until(lambda: stack.tip.last is not None, 10.0, 'the first tip pose')
-    # The red team's command: p0, p1, p2 paid out to 0.154 m (inside the limits): statics then
-    # drops every measurement ("fit no shape") and publishes no tip pose.
+    # The red team's command had p0, p1, p2 paid out to 0.154 m, which is now the rod with a slack
+    # section; pulled in to 0.146 m (inside the limits) no shape fits: statics then drops every
+    # measurement ("fit no shape") and publishes no tip pose.
     names = list(ROBOT_TWO.cable_names)
     lengths = ROBOT_TWO.straight_cable_lengths.copy()
-    lengths[:3] = 0.154
+    lengths[:3] = 0.146
     stack.commands.publish(JointState(name=names, position=[float(v) for v in lengths]))
     wait_until(lambda: 'fit no shape' in stack.values('statics').get('last_rejection', ''),
                10.0, 'statics to drop the lengths')

@@ -74,7 +74,8 @@ def test_noisy_lengths_give_a_bounded_best_fit(noise):
         assert est.converged and est.iterations <= 12
         # 4 lengths, 2 freedoms: the best fit leaves about sqrt(2/4) of the noise
         assert est.residual < 4.0 * noise
-        assert 'best fit' in est.message
+        # noise of this size reads as a best fit, or as cables that went slack
+        assert 'best fit' in est.message or 'slack' in est.message
         errors.append(np.linalg.norm(est.shape.tip_position - truth.tip_position))
         previous = est
     # the tip error stays of the order of the noise scaled by the lever arm L / offset

@@ -92,6 +92,7 @@ class Plan:
     load: np.ndarray  # tip wrench (6,) it was solved under
     commanded: np.ndarray  # first command (m): the measured lengths when recovering
     recover: np.ndarray  # lengths to recover onto first (m), or None
+    target: np.ndarray  # the goal's commanded lengths (m)
 
 
 def towards(commanded, target, step):
@@ -208,10 +209,10 @@ class GoalRun:
         if not np.all(np.isfinite(solution.cable_lengths)):
             raise ValueError('the solver returned non-finite cable lengths')
         try:
-            self.command(solution)
+            target = self.command(solution)
         except ValueError as error:
             raise ValueError('goal (%.4f, %.4f, %.4f) m %s' % (*position, error)) from None
-        return Plan(start, solution, np.array(load, dtype=float), commanded, recover)
+        return Plan(start, solution, np.array(load, dtype=float), commanded, recover, target)
 
     def command(self, result):
         """Motor-side lengths (m) holding a model result's shape, inside the length limits.
@@ -233,7 +234,7 @@ class GoalRun:
         # at max_cable_speed (see _advance) instead of jumping back
         self.command_state = plan.start if plan.recover is None else None
         self._recover_target = plan.recover
-        self._start_path(plan.start, plan.solution, plan.load)
+        self._start_path(plan.start, plan.solution, plan.load, plan.target)
         self._corrected_goal = goal.position.copy()
         self.warm = plan.solution
         self.corrections = 0
@@ -256,9 +257,9 @@ class GoalRun:
         goal.done.set()
         return True
 
-    def _start_path(self, start, solution, load):
+    def _start_path(self, start, solution, load, target):
         self._path = (start, solution, load)
-        self._target = self.command(solution)
+        self._target = target
         self._fraction = 0.0
         self._fraction_step = min(self._fraction_step * 4.0, 0.25)
         self._straight = False
@@ -409,11 +410,11 @@ class GoalRun:
             self.finish(goal, False, 'correction gave non-finite cable lengths')
             return
         try:
-            self.command(solution)
+            target = self.command(solution)
         except ValueError as error:
             self.finish(goal, False, 'correction %s' % error)
             return
         self.corrections += 1
         self.warm = solution
-        self._start_path(start, solution, load)
+        self._start_path(start, solution, load, target)
         self.phase = Phase.RAMP

@@ -27,12 +27,14 @@ from continuum_statics.core.inputs import as_vector
 from continuum_statics.core.layout import ProbeRows
 from continuum_statics.core.least_squares import constrained_gauss_newton
 from continuum_statics.core.shape import Shape
+from continuum_statics.core.tendons import full_circle_tension
 from continuum_statics.core.tracking import TRACK_ITERATIONS, track
 
 #: RMS length residual (m) above which an estimate says in its message that it is a best fit.
 BEST_FIT_NOTE = 1e-6
-#: RMS length residual (m) of the least-squares fit above which ideal cables are tried as slack.
-SLACK_RESIDUAL = 2e-5
+#: RMS length residual (m) of the least-squares fit above which ideal cables are tried as slack
+#: (statics' default warn_residual: below it lag and encoder noise, above it a paid-out cable).
+SLACK_RESIDUAL = 1e-4
 _NO_JACOBIAN = np.zeros((0, 0))  # tells track to use finite-difference Jacobians
 
 
@@ -199,13 +201,19 @@ def _slack_estimate(robot, measured, tip_force, tip_moment, previous, observable
     """Return the tendon model's estimate when it explains lengths least squares missed.
 
     Returns None when the least-squares fit was within :data:`SLACK_RESIDUAL` or the tendon
-    model did no better (lengths no taut-or-slack shape has either: noise, a wrong file).
+    model did no better (lengths no taut-or-slack shape has either: noise, a wrong file), or
+    only with tensions no cable takes (inextensible cables pulled in against the rod's axial
+    stiffness: above the full-circle tension or a tension limit).
     """
     if residual <= SLACK_RESIDUAL or not len(measured):
         return None
     slack = _tendon_estimate(robot, measured, tip_force, tip_moment, previous, observable,
                              list(notes))
-    return slack if slack.converged and slack.residual < residual else None
+    limit = min(full_circle_tension(robot), float(np.min(robot.tendons.tension_limits[:, 1])))
+    if not (slack.converged and slack.residual < residual
+            and np.max(slack.tensions, initial=0.0) <= limit):
+        return None
+    return slack
 
 
 def _tendon_estimate(robot, measured, tip_force, tip_moment, previous, observable, notes):

@@ -20,6 +20,16 @@ import numpy as np
 TENDON_KEYS = ('stiffness', 'pretension', 'friction', 'tension_limits')
 
 
+def full_circle_tension(robot):
+    """Return a tension (N) bending the whole rod into a full circle from its outermost hole.
+
+    2 pi E I / (L r): no plausible cable tension of the robot exceeds it.
+    """
+    offsets = robot.cable_offsets
+    radius = float(np.max(np.hypot(offsets[:, 0], offsets[:, 1]), initial=1e-3))
+    return 2.0 * np.pi * float(robot.c[0]) / (robot.length * radius)
+
+
 @dataclass(frozen=True)
 class Tendons:
     """Tendon parameters of every cable, ``robot.cable_names`` order (read-only arrays).

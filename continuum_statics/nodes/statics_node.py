@@ -55,6 +55,7 @@ from continuum_statics.control.records import TipLoad, current_load
 from continuum_statics.control.shape_tracking import ShapeTracker, Thresholds
 from continuum_statics.core.backbone_sampling import BackboneSampler
 from continuum_statics.core.rotations import rotation_to_quaternion
+from continuum_statics.core.tendons import full_circle_tension
 from continuum_statics.core.warmup import warm_up
 from continuum_statics.nodes import diagnostics_util as diag
 from continuum_statics.nodes.dedicated_intake import make_intake
@@ -138,11 +139,7 @@ class StaticsNode(Node):
         self._lost_reported = 0
         self._tensions_distrusted = 0
         self._distrust = ('', None)  # (why the tensions were not used, monotonic time)
-        rod = self.robot
-        radius = float(np.max(np.hypot(rod.cable_offsets[:, 0], rod.cable_offsets[:, 1]),
-                              initial=1e-3))
-        # a tension that bends the whole rod into a full circle from its outermost hole
-        self._full_circle_tension = 2.0 * math.pi * float(rod.c[0]) / (rod.length * radius)
+        self._full_circle_tension = full_circle_tension(self.robot)
 
         self._backbone_pub = self.create_publisher(Path, 'backbone', LATCHED_QOS)
         self._tip_pub = self.create_publisher(PoseStamped, 'tip_pose', LATCHED_QOS)

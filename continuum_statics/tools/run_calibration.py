@@ -24,6 +24,7 @@ Fit names (``--fit``):
   the offsets' mean per section tells them apart: it is held at zero)
 - ``friction``: one capstan coefficient for every cable
 - ``youngs_modulus`` (Pa), ``density`` (kg/m^3)
+- ``tip_marker`` (m, tip frame): where the tracked point sits on the tip
 - ``gravity`` (m/s^2, tracker frame): which way gravity pointed, for a run that did not record
   it; with the density it fits the rod's weight per length, so the written file keeps
   |g| = 9.81 and scales the density
@@ -43,7 +44,7 @@ from continuum_statics.core.tendons import Tendons
 
 RUN_PARAMETERS = ('registration', 'base_position', 'section_rotation', 'cable_angle',
                   'cable_zero', 'stiffness', 'pretension', 'friction', 'youngs_modulus',
-                  'density', 'gravity')
+                  'density', 'gravity', 'tip_marker')
 DEFAULT_FIT = ('registration', 'section_rotation', 'cable_angle', 'cable_zero', 'stiffness',
                'friction')
 #: Stiffness start (times E I / (L r), the tension that bends the robot by about 1 rad) for a
@@ -105,6 +106,9 @@ class RunModel:
             'youngs_modulus': (np.zeros(1), -3.0, 3.0),
             'density': (np.zeros(1), -3.0, 3.0),
             'gravity': (np.array(robot.gravity, dtype=float), -100.0, 100.0),
+            'tip_marker': (np.array(robot.tip_marker, dtype=float),
+                           robot.tip_marker - 0.1 * robot.length,
+                           robot.tip_marker + 0.1 * robot.length),
         }
         blocks, at = [], 0
         for name in self.fit:
@@ -184,6 +188,8 @@ class RunModel:
                 rod, youngs_modulus=rod.youngs_modulus * factor,
                 shear_modulus=rod.shear_modulus * factor,
                 density=rod.density * values.get('density', [1.0])[0])
+        if 'tip_marker' in values:
+            changes['tip_marker'] = values['tip_marker']
         gravity = np.asarray(values.get('gravity', description.gravity), dtype=float)
         if frame == 'base':
             changes['base_position'] = np.zeros(3)
@@ -460,6 +466,7 @@ def write_run_robot_file(output, robot_file, robot, summary):
     document['base'] = dict(document['base'], position=_rounded(description.base_position),
                             orientation=_rounded(description.base_orientation, 9))
     document['gravity'] = _rounded(description.gravity, 6)
+    document['tip_marker'] = _rounded(robot.tip_marker, 6)
     rod = robot.rod
     document['rod'] = dict(document['rod'], youngs_modulus=float('%.6g' % rod.youngs_modulus),
                            density=float('%.6g' % rod.density))
