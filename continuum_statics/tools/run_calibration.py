@@ -22,6 +22,7 @@ Fit names (``--fit``):
 - ``cable_zero`` (m): per-cable ``zero_offset`` (a cable homed too long: > 0)
 - ``stiffness`` (N): EA per section; ``pretension`` (N) per section (with ``cable_zero`` only
   the offsets' mean per section tells them apart: it is held at zero)
+- ``cable_stiffness`` (N): EA per cable instead of per section
 - ``friction``: one capstan coefficient for every cable
 - ``youngs_modulus`` (Pa), ``density`` (kg/m^3)
 - ``tip_marker`` (m, tip frame): where the tracked point sits on the tip
@@ -44,7 +45,7 @@ from continuum_statics.core.tendons import Tendons
 
 RUN_PARAMETERS = ('registration', 'base_position', 'section_rotation', 'cable_angle',
                   'cable_zero', 'stiffness', 'pretension', 'friction', 'youngs_modulus',
-                  'density', 'gravity', 'tip_marker')
+                  'density', 'gravity', 'tip_marker', 'cable_stiffness')
 DEFAULT_FIT = ('registration', 'section_rotation', 'cable_angle', 'cable_zero', 'stiffness',
                'friction')
 #: Stiffness start (times E I / (L r), the tension that bends the robot by about 1 rad) for a
@@ -94,12 +95,16 @@ class RunModel:
         stiffness = np.array([tendons.stiffness[list(s.cable_indices)].mean()
                               for s in robot.sections])
         stiffness[~np.isfinite(stiffness)] = STIFFNESS_START * t_ref
+        per_cable = np.where(np.isfinite(tendons.stiffness), tendons.stiffness,
+                             STIFFNESS_START * t_ref)
         first = 1 if self.registered else 0
         starts = {
             'section_rotation': (np.zeros(n_sections - first), -math.pi, math.pi),
             'cable_angle': (np.zeros(n_cables), -0.5, 0.5),
             'cable_zero': (np.array(tendons.zero_offset), -0.02, 0.02),
             'stiffness': (np.log(stiffness), np.log(stiffness) - 9.0, np.log(stiffness) + 9.0),
+            'cable_stiffness': (np.log(per_cable), np.log(per_cable) - 9.0,
+                                np.log(per_cable) + 9.0),
             'pretension': (np.array([tendons.pretension[list(s.cable_indices)].mean()
                                      for s in robot.sections]), 0.0, 100.0 * t_ref),
             'friction': (np.array([float(np.mean(tendons.friction))]), 0.0, 1.0),
@@ -139,7 +144,7 @@ class RunModel:
         out = {}
         for block in self.blocks:
             v = np.array(x[block.index], dtype=float)
-            if block.name == 'stiffness':
+            if block.name in ('stiffness', 'cable_stiffness'):
                 v = np.exp(v)
             elif block.name in ('youngs_modulus', 'density'):
                 v = np.exp(v)  # factor on the file's value
@@ -176,6 +181,8 @@ class RunModel:
                 arrays['stiffness'][cables] = values['stiffness'][k]
             if 'pretension' in values:
                 arrays['pretension'][cables] = values['pretension'][k]
+        if 'cable_stiffness' in values:
+            arrays['stiffness'][:] = values['cable_stiffness']
         if 'cable_zero' in values:
             arrays['zero_offset'][:] = values['cable_zero']
         if 'friction' in values:
@@ -479,14 +486,21 @@ def write_run_robot_file(output, robot_file, robot, summary):
     for holder, section in zip(holders, robot.sections):
         block = dict(holder.get('tendons') or {}) if holder is not document else top
         cables = list(section.cable_indices)
+        per_cable = []  # keys whose values differ within the section: on each cable entry
         for key in ('stiffness', 'pretension'):
             values = getattr(tendons, key)[cables]
-            if np.all(np.isfinite(values)) and (key == 'stiffness' or np.any(values != 0.0)):
+            if not np.all(np.isfinite(values)) or (key == 'pretension' and not np.any(values)):
+                continue
+            if np.all(values == values[0]):
                 block[key] = float('%.6g' % values[0])
+            else:
+                per_cable.append(key)
         if holder is not document:
             holder['tendons'] = block
         for cable in holder.get('cables') or []:
             cable['offset'] = _rounded(robot.cable_offsets[j], 7)
+            for key in per_cable:
+                cable[key] = float('%.6g' % getattr(tendons, key)[j])
             if tendons.zero_offset[j] != 0.0:
                 cable['zero_offset'] = float('%.6g' % tendons.zero_offset[j])
             j += 1
