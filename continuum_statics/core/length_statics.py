@@ -24,8 +24,10 @@ run from the motor to the base disk is straight and folded into EA, and sticking
 holding any tension in the band) is represented by the last sliding direction.
 """
 from dataclasses import dataclass
+import warnings
 
 import numpy as np
+from scipy.linalg import LinAlgWarning, lu_factor, lu_solve
 
 from continuum_statics.core import bvp
 from continuum_statics.core.inputs import as_vector
@@ -38,8 +40,7 @@ from continuum_statics.core.tendon_kernel import path_stretch
 MOTION_THRESHOLD = 1e-7
 #: Chord steps on a warm start's Jacobian before a fresh Newton solve.
 CHORD_ITERATIONS = 6
-#: Cable-row tolerance (m) and balance tolerance (relative) of a converged solve.
-LENGTH_TOLERANCE = 1e-10
+#: Balance tolerance (relative) of a converged solve; cable rows: solver.estimate_tolerance (m).
 BALANCE_TOLERANCE = 1e-9
 #: End tension (relative to E I / (L r)) at or below which a cable counts as slack.
 SLACK_TENSION = 1e-9
@@ -100,7 +101,8 @@ class _Problem:
         self.kappa = self.radius / self.t_ref  # m per N in min(kappa t, g)
         self.scale = np.concatenate([np.full(3, 1.0 / robot.length),
                                      np.full(self.n, self.t_ref)])
-        self.moment_map = _moment_map(robot) if robot.model_code == POINT_MOMENT else None
+        self.moment_map = (robot.tension_moment_map if robot.model_code == POINT_MOMENT
+                           else None)
 
     def state_of(self, z):
         """Solver state x and fixed tensions of z (the robot's solver-state convention)."""
@@ -150,7 +152,9 @@ class _Problem:
         taut = self.kappa * t >= gap
         residual = np.concatenate([values[rows.balance],
                                    np.where(taut, gap, self.kappa * t) / self.radius])
-        return residual, self.jacobian(parts, taut), (x, fixed, states, motor, gap, taut), parts
+        # a chord step (parts given) assembles its Jacobian itself, when the branches change
+        jacobian = self.jacobian(parts, taut) if jac is not None else None
+        return residual, jacobian, (x, fixed, states, motor, gap, taut), parts
 
     def jacobian(self, parts, taut):
         """Jacobian in scaled z of the residual, for the cables' branches ``taut``."""
@@ -173,25 +177,6 @@ class _Problem:
                      self.base_axis, np.ascontiguousarray(t), self.friction, self.compliance,
                      consumed, motor, mean)
         return consumed, motor, mean
-
-
-def _moment_map(robot):
-    """(state_size - 3, n) matrix: end tensions (N) -> section moment coordinates (1/m).
-
-    The point moment of section k is sum_j t_j (e3 x l_j) over its cables (local frame), whose
-    coordinates in the section's basis B_k, divided by E I, are the solver state's.
-    """
-    n = len(robot.cable_names)
-    table = np.zeros((robot.state_size - 3, n))
-    for k, section in enumerate(robot.sections):
-        first, rank = robot.section_state_index[k], robot.section_ranks[k]
-        if first < 0:
-            continue
-        basis = robot.section_bases[k][:, :rank]
-        for j in section.cable_indices:
-            arm = np.cross([0.0, 0.0, 1.0], robot.cable_offsets[j])
-            table[first - 3:first - 3 + rank, j] = basis.T @ arm / robot.c[0]
-    return table
 
 
 def motion_since(robot, free_lengths, warm_start):
@@ -234,7 +219,7 @@ def solve_lengths(robot, lengths, tip_force=(0.0, 0.0, 0.0), tip_moment=(0.0, 0.
     total = 0
     parts = getattr(warm_start, 'jacobian_parts', None)
     if warm is not None and parts is not None and parts[0].shape == (3, 3 + n):
-        z, ok, iterations, info = _chord(problem, warm, parts)
+        z, ok, iterations, info, parts = _chord(problem, warm, parts)
         total += iterations
         if ok:
             return _solution(robot, problem, z, info, True, total, '', parts)
@@ -264,24 +249,61 @@ def _warm_z(robot, warm_start):
 
 
 def _chord(problem, z0, parts):
-    """Chord steps on the previous solve's Jacobian (one IVP each); (z, ok, iterations, info).
+    """Quasi-Newton steps from the previous solve's Jacobian (one IVP each).
 
-    A tracking sequence moves little between calls, so the old Jacobian (with each cable's
-    branch of now) still contracts the error; it gives up as soon as a step gains less than half.
+    A tracking sequence moves little between calls, so the last Jacobian (with each cable's
+    branch of now), corrected by a Broyden update after every step, still contracts the error;
+    it gives up as soon as a step gains less than half. Returns (z, ok, iterations, info, parts):
+    the updated Jacobian pieces start the next call.
     """
     z = np.array(z0, dtype=float)
-    res, jac, info, _ = problem.evaluate(z, parts)
+    res, _, info, _ = problem.evaluate(z, parts)
     error = float(res @ res)
     for iteration in range(CHORD_ITERATIONS):
         if _done(problem, res):
-            return z, True, iteration, info
-        step = -np.linalg.lstsq(jac, res, rcond=1e-12)[0] * problem.scale
-        trial_res, trial_jac, trial_info, _ = problem.evaluate(z + step, parts)
+            return z, True, iteration, info, parts
+        taut = info[5]
+        jacobian = problem.jacobian(parts, taut)
+        scaled = -_solve(_factorise(jacobian), res)
+        trial_res, _, trial_info, _ = problem.evaluate(z + scaled * problem.scale, parts)
         trial_error = float(trial_res @ trial_res)
         if not trial_error <= 0.25 * error:
-            return z, False, iteration + 1, info
-        z, res, jac, info, error = z + step, trial_res, trial_jac, trial_info, trial_error
-    return z, _done(problem, res), CHORD_ITERATIONS, info
+            return z, False, iteration + 1, info, parts
+        parts = _broyden(problem, parts, taut, jacobian, scaled, trial_res - res)
+        z, res, info, error = z + scaled * problem.scale, trial_res, trial_info, trial_error
+    return z, _done(problem, res), CHORD_ITERATIONS, info, parts
+
+
+def _broyden(problem, parts, taut, jacobian, step, change):
+    """Jacobian pieces after Broyden's rank-one update for a scaled step and residual change.
+
+    The update of the assembled (scaled) Jacobian goes back into the pieces it was made of:
+    the balance rows and the taut cables' rows (a slack cable's row is exact).
+    """
+    update = np.outer(change - jacobian @ step, step) / float(step @ step)
+    balance, d_consumed = parts
+    balance = balance + update[:3] / problem.scale
+    d_consumed = d_consumed.copy()
+    d_consumed[taut] -= update[3:][taut] * problem.radius / problem.scale
+    return balance, d_consumed
+
+
+def _factorise(jacobian):
+    """LU factors of a Jacobian, or the matrix itself when singular (least-norm steps)."""
+    with warnings.catch_warnings():
+        warnings.simplefilter('error', LinAlgWarning)
+        try:
+            factors = lu_factor(jacobian, check_finite=False)
+        except (LinAlgWarning, ValueError):
+            return jacobian
+    return factors if np.all(np.isfinite(factors[0])) else jacobian
+
+
+def _solve(factors, rhs):
+    """Solve J x = rhs with :func:`_factorise`'s result (least norm for a singular J)."""
+    if isinstance(factors, tuple):
+        return lu_solve(factors, rhs, check_finite=False)
+    return np.linalg.lstsq(factors, rhs, rcond=1e-12)[0]
 
 
 def _newton(problem, z0, max_iterations=None):
@@ -337,7 +359,8 @@ def _continuation(robot, problem, z0):
 
 def _done(problem, res):
     return (np.max(np.abs(res[:3]), initial=0.0) <= BALANCE_TOLERANCE
-            and np.max(np.abs(res[3:]), initial=0.0) * problem.radius <= LENGTH_TOLERANCE)
+            and np.max(np.abs(res[3:]), initial=0.0) * problem.radius
+            <= problem.robot.solver.estimate_tolerance)
 
 
 def _cable_residual(info):

@@ -9,6 +9,7 @@ slack) and loads the rod with them all along the cables. Equilibrium is the tip 
 (:func:`kernel.probe` rows ``balance``): three equations whatever the number of sections.
 """
 import dataclasses
+import functools
 import math
 
 import numpy as np
@@ -178,6 +179,23 @@ class Robot:
         # the loads of a passive state, batch of one (the kernel only reads them)
         self._no_moments = np.zeros((1, n_sections, 3))
         self._no_tensions = np.zeros((1, n_cables))
+
+    @functools.cached_property
+    def tension_moment_map(self):
+        """(state_size - 3, n_cables): section moment coordinates (1/m) per N of end tension.
+
+        The point moment of section k is sum_j t_j (e3 x l_j) over its cables (local frame);
+        its coordinates in the section's basis, divided by E I, are the solver state's.
+        """
+        table = np.zeros((self.state_size - 3, len(self.cable_names)))
+        arms = np.cross([0.0, 0.0, 1.0], self.cable_offsets)
+        for k, section in enumerate(self.sections):
+            first, rank = self.section_state_index[k], self.section_ranks[k]
+            if first >= 0:
+                cables = list(section.cable_indices)
+                table[first - 3:first - 3 + rank, cables] = (
+                    self.section_bases[k][:, :rank].T @ arms[cables].T / self.c[0])
+        return table
 
     def with_solver(self, **settings):
         """Copy of this robot with some solver settings replaced (e.g. ``steps=200``)."""
