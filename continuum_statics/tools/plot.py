@@ -23,6 +23,9 @@ import sys
 
 import numpy as np
 
+from continuum_statics.tools.bag_reading import open_bag
+from continuum_statics.tools.bag_reading import pick_connections as pick
+
 #: Backbone snapshots drawn in backbone.png.
 SNAPSHOTS = 6
 #: Most samples kept per time series (longer recordings are thinned evenly: bounded memory).
@@ -49,19 +52,6 @@ def _point(p):
     return (p.x, p.y, p.z)
 
 
-def _pick(connections, suffix, msgtype):
-    """Return the connections of the busiest ``.../suffix`` topic of type ``msgtype``."""
-    matching = [c for c in connections
-                if c.msgtype == msgtype and (c.topic == suffix or c.topic.endswith('/' + suffix))]
-    if not matching:
-        return []
-    counts = {}
-    for c in matching:
-        counts[c.topic] = counts.get(c.topic, 0) + c.msgcount
-    topic = max(sorted(counts), key=counts.get)
-    return [c for c in matching if c.topic == topic]
-
-
 def _float(text):
     try:
         return float(text)
@@ -74,17 +64,7 @@ def read_recording(bag, snapshots=SNAPSHOTS):
 
     :raises ValueError: when the bag cannot be opened or read
     """
-    from rosbags.highlevel import AnyReader
-    from rosbags.typesys import Stores, get_typestore
-
-    path = Path(bag)
-    if not path.exists():
-        raise ValueError('no such bag: %s' % path)
-    try:
-        reader = AnyReader([path], default_typestore=get_typestore(Stores.LATEST))
-        reader.open()
-    except Exception as error:  # rosbags raises several reader errors (and OSError)
-        raise ValueError('cannot read bag %s: %s' % (path, error)) from None
+    reader = open_bag(bag)
     try:
         return _read(reader, snapshots)
     finally:
@@ -96,13 +76,13 @@ def _read(reader, count):
     connections = list(reader.connections)
     rec.topics = {c.topic: c.msgtype for c in connections}
     roles = {
-        'backbone': _pick(connections, 'backbone', 'nav_msgs/msg/Path'),
-        'tip_pose': _pick(connections, 'tip_pose', 'geometry_msgs/msg/PoseStamped'),
-        'goal': (_pick(connections, 'tip_goal_active', 'geometry_msgs/msg/PoseStamped')
-                 or _pick(connections, 'tip_goal_pose', 'geometry_msgs/msg/PoseStamped')),
-        'commands': _pick(connections, 'cable_commands', 'sensor_msgs/msg/JointState'),
-        'states': _pick(connections, 'cable_states', 'sensor_msgs/msg/JointState'),
-        'diagnostics': _pick(connections, 'diagnostics', 'diagnostic_msgs/msg/DiagnosticArray'),
+        'backbone': pick(connections, 'backbone', 'nav_msgs/msg/Path'),
+        'tip_pose': pick(connections, 'tip_pose', 'geometry_msgs/msg/PoseStamped'),
+        'goal': (pick(connections, 'tip_goal_active', 'geometry_msgs/msg/PoseStamped')
+                 or pick(connections, 'tip_goal_pose', 'geometry_msgs/msg/PoseStamped')),
+        'commands': pick(connections, 'cable_commands', 'sensor_msgs/msg/JointState'),
+        'states': pick(connections, 'cable_states', 'sensor_msgs/msg/JointState'),
+        'diagnostics': pick(connections, 'diagnostics', 'diagnostic_msgs/msg/DiagnosticArray'),
     }
     role_of = {c.id: role for role, conns in roles.items() for c in conns}
     # Keep every stride-th message of a series (the counts are in the bag's index).

@@ -20,7 +20,7 @@ from pathlib import Path
 
 import numpy as np
 
-from continuum_statics.tools.plot import _pick
+from continuum_statics.tools.bag_reading import open_bag, pick_connections
 
 KINDS = ('length', 'displacement')
 
@@ -221,21 +221,12 @@ def _stamp(msg, received):
 
 
 def _read_bag(path, cable_names, tip_topic):
-    from rosbags.highlevel import AnyReader
-    from rosbags.typesys import Stores, get_typestore
-
-    if not path.exists():
-        raise ValueError('no such bag: %s' % path)
-    try:
-        reader = AnyReader([path], default_typestore=get_typestore(Stores.LATEST))
-        reader.open()
-    except Exception as error:  # rosbags raises several reader errors (and OSError)
-        raise ValueError('cannot read bag %s: %s' % (path, error)) from None
+    reader = open_bag(path)
     try:
         connections = list(reader.connections)
-        states = _pick(connections, 'cable_states', 'sensor_msgs/msg/JointState')
+        states = pick_connections(connections, 'cable_states', 'sensor_msgs/msg/JointState')
         # matched as plot.py does: the exact topic or its last name parts ('tip' ~ '/a/tip')
-        tip = _pick(connections, tip_topic, 'geometry_msgs/msg/PoseStamped')
+        tip = pick_connections(connections, tip_topic, 'geometry_msgs/msg/PoseStamped')
         topics = ', '.join(sorted('%s (%s)' % (c.topic, c.msgtype) for c in connections))
         if not states:
             raise ValueError('bag %s has no .../cable_states JointState topic (topics: %s)'
