@@ -15,6 +15,7 @@ import yaml
 
 from continuum_statics import Robot, load_robot
 from continuum_statics.control.goal_run import GoalRun, RunSettings
+from continuum_statics.control.teleop import TeleopRun, TeleopSettings, Twist
 from continuum_statics.core.robot_file import parse_robot_description
 from continuum_statics.core.tendon_commands import command_for, shape_tensions
 from continuum_statics.drivers.sim import SimulatedCableBackend
@@ -125,3 +126,24 @@ def test_tendon_keys_are_validated_naming_the_field():
     robot = Robot(parse_robot_description(good))
     assert robot.tendons.stiffness.tolist() == [2000.0, 2000.0, 2000.0, 500.0]
     assert dataclasses.replace(robot.tendons).pretension.tolist() == [2.0] * 4
+
+
+def test_teleoperation_commands_the_stretch_its_equilibria_need():
+    data = yaml.safe_load((REPO / 'config' / 'two_section_robot.yaml').read_text())
+    data['tendons'] = {'stiffness': 1500.0, 'pretension': 1.0}
+    robot = Robot(parse_robot_description(data))  # 4 bending freedoms: the tip can go anywhere
+    start = robot.solve_tip_goal(robot.solve_ivp([2.0, 1.0, 0.0]).tip_position)
+    run = TeleopRun(robot, TeleopSettings(max_tip_speed=0.05, max_cable_speed=0.02))
+    run.start(start, command_for(robot, start.shape).lengths)
+    t, command = 0.0, None
+    for _ in range(25):
+        t += 0.02
+        command = run.tick(t, 0.02, Twist(np.array([0.0, 0.01, -0.005]), np.zeros(3), t),
+                           np.zeros(6))
+    assert not run.stopped
+    # the robot holding the last command is where teleoperation's own state says the tip is
+    held = robot.solve_lengths(command)
+    assert held.converged, held.message
+    assert np.linalg.norm(held.shape.tip_position - run.state.tip_position) < 1e-7
+    # paths (what ideal cables would command) would be millimetres off with this stretch
+    assert np.max(np.abs(robot.cable_lengths(run.state) - command)) > 1e-4

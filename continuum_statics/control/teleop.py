@@ -17,6 +17,7 @@ import numpy as np
 
 from continuum_statics.core.layout import ProbeRows
 from continuum_statics.core.rotations import rotation_vector_matrix
+from continuum_statics.core.tendon_commands import command_for_state
 
 
 @dataclass(frozen=True)
@@ -147,7 +148,11 @@ class TeleopRun:
         values, _, _ = robot.probe(x, 0, force, moment)
         if not np.all(np.isfinite(values)):
             return None
-        return x, values[probe.lengths].copy(), values[probe.tip].copy(), direction
+        try:  # the motors' lengths: the stretch of the tensions this state needs
+            lengths = command_for_state(robot, x, values[probe.lengths].copy()).lengths
+        except ValueError:  # more tension than tension_limits allow: as far as it goes
+            return None
+        return x, lengths, values[probe.tip].copy(), direction
 
 
 def _capped(vector, limit):

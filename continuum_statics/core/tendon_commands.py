@@ -31,8 +31,16 @@ def shape_tensions(robot, shape, min_tension=0.0):
 
     Each is at least ``min_tension`` and the low end of its ``tension_limits`` (N).
     """
-    state = shape.state
-    fixed = robot.tensions_or_zero(getattr(shape, 'fixed_tensions', None))
+    return state_tensions(robot, shape.state, getattr(shape, 'fixed_tensions', None),
+                          min_tension)
+
+
+def state_tensions(robot, state, fixed_tensions=None, min_tension=0.0):
+    """Return the tensions (N) of :func:`shape_tensions` of a solver state.
+
+    ``fixed_tensions`` (N) are the state's fixed tensions (None: zero).
+    """
+    fixed = robot.tensions_or_zero(fixed_tensions)
     moments, implied = robot.loads(state, fixed)
     tensions = np.zeros(len(robot.cable_names))
     arms = np.cross([0.0, 0.0, 1.0], robot.cable_offsets)
@@ -58,11 +66,16 @@ def command_for(robot, shape, min_tension=0.0):
 
     :raises ValueError: a tension above a cable's ``tension_limits`` (the reason names it)
     """
-    paths = robot.cable_lengths(shape)
+    return command_for_state(robot, shape.state, robot.cable_lengths(shape),
+                             getattr(shape, 'fixed_tensions', None), min_tension)
+
+
+def command_for_state(robot, state, paths, fixed_tensions=None, min_tension=0.0):
+    """Return :func:`command_for` of a solver state whose cable paths (m) are known."""
     tendons = robot.tendons
     if tendons.is_ideal and min_tension <= 0.0 and not np.any(tendons.tension_limits[:, 0]):
-        return Command(paths, shape_tensions(robot, shape))
-    tensions = shape_tensions(robot, shape, min_tension)
+        return Command(paths, state_tensions(robot, state, fixed_tensions))
+    tensions = state_tensions(robot, state, fixed_tensions, min_tension)
     high = tendons.tension_limits[:, 1]
     over = np.flatnonzero(tensions > high)
     if over.size:
