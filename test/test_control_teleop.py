@@ -77,3 +77,20 @@ def test_the_keyboard_tool_maps_keys_to_velocities():
     assert velocity_for('+', direction, speed)[1] > speed
     assert not velocity_for(' ', direction, speed)[0].any()
     assert velocity_for('q', direction, speed)[0] is None
+
+
+def test_a_start_from_slack_cables_moves_on_top_of_their_tensions():
+    # the estimate of lengths with a paid-out cable is the tendon model's: for the distributed
+    # model its shape carries the cables' tensions, which the twist must keep
+    start = bent_start()
+    lengths = ROBOT.cable_lengths(start.shape)
+    lengths[4] += 0.002
+    estimate = ROBOT.estimate_shape(lengths, warm_start=start)
+    assert estimate.tendons is not None and np.any(estimate.shape.fixed_tensions)
+    run = TeleopRun(ROBOT, TeleopSettings(max_tip_speed=0.05, max_cable_speed=0.02))
+    run.start(estimate, ROBOT.cable_lengths(estimate.shape))  # as tip_controller starts it
+    velocity = np.array([0.0, 0.01, -0.005])
+    drive(run, velocity, 0.5)
+    assert not run.stopped
+    moved = run.state.tip_position - estimate.shape.tip_position
+    np.testing.assert_allclose(moved, velocity * 0.5, atol=2e-4)

@@ -49,6 +49,7 @@ class TeleopRun:
         self.active = False
         self.state = None  # the shape (an equilibrium) commanded last
         self.x = None  # its solver state
+        self.fixed = None  # its fixed cable tensions (N), held while the section moments move
         self.commanded = None  # its cable lengths (m)
         self.target = None  # where the twist has taken the tip so far (m, base frame)
         self.direction = None  # its tip z axis while an angular twist steers it, else None
@@ -59,6 +60,9 @@ class TeleopRun:
         """Start from an equilibrium (an estimate or a solution) and the lengths commanded."""
         shape = getattr(state, 'shape', state)
         self.x = np.array(shape.state, dtype=float)
+        # a shape of measured lengths may carry its cables' tensions (the tendon model): they
+        # stay, and the twist moves the section moments on top of them
+        self.fixed = self.robot.tensions_or_zero(getattr(shape, 'fixed_tensions', None)).copy()
         self.state = shape
         self.commanded = np.clip(np.asarray(commanded, dtype=float), self.limits[:, 0],
                                  self.limits[:, 1])
@@ -119,8 +123,8 @@ class TeleopRun:
         lag = float(np.linalg.norm(tip - target))
         self.target = target if lag <= 0.25 * float(np.linalg.norm(wanted)) + 1e-6 else tip
         self.x, self.commanded, self.direction = x, lengths, direction
-        states = self.robot.integrate_state(x, load[:3])
-        self.state = self.robot.make_shape(x, load[:3], states)
+        states = self.robot.integrate_state(x, load[:3], self.fixed)
+        self.state = self.robot.make_shape(x, load[:3], states, self.fixed)
         return self.commanded
 
     def _step(self, move, turn, load):
@@ -133,7 +137,7 @@ class TeleopRun:
         robot = self.robot
         n = len(robot.cable_names)
         force, moment = np.asarray(load[:3], dtype=float), np.asarray(load[3:], dtype=float)
-        values, jac, _ = robot.probe(self.x, robot.state_size, force, moment)
+        values, jac, _ = robot.probe(self.x, robot.state_size, force, moment, self.fixed)
         probe = ProbeRows(n)
         rows = [jac[probe.tip], jac[probe.balance]]
         rhs = [self.target + move - values[probe.tip], -values[probe.balance]]
@@ -145,11 +149,12 @@ class TeleopRun:
             rhs.append((direction - values[probe.axis]) * robot.length)
         delta = np.linalg.lstsq(np.vstack(rows), np.concatenate(rhs), rcond=1e-10)[0]
         x = self.x + delta
-        values, _, _ = robot.probe(x, 0, force, moment)
+        values, _, _ = robot.probe(x, 0, force, moment, self.fixed)
         if not np.all(np.isfinite(values)):
             return None
         try:  # the motors' lengths: the stretch of the tensions this state needs
-            lengths = command_for_state(robot, x, values[probe.lengths].copy()).lengths
+            lengths = command_for_state(robot, x, values[probe.lengths].copy(),
+                                        self.fixed).lengths
         except ValueError:  # more tension than tension_limits allow: as far as it goes
             return None
         return x, lengths, values[probe.tip].copy(), direction
