@@ -147,3 +147,20 @@ def test_teleoperation_commands_the_stretch_its_equilibria_need():
     assert np.linalg.norm(held.shape.tip_position - run.state.tip_position) < 1e-7
     # paths (what ideal cables would command) would be millimetres off with this stretch
     assert np.max(np.abs(robot.cable_lengths(run.state) - command)) > 1e-4
+
+
+def test_pulled_in_cables_fit_no_shape_even_after_slack_ones():
+    # inextensible cables pulled in against the rod's axial stiffness "balance" with ~1.6 kN of
+    # tension; after an estimate with slack cables (the warm start tries the tendon model first)
+    # that must still be no shape: once it was taken and statics never dropped such lengths
+    robot = load_robot(REPO / 'config' / 'two_section_robot.yaml')
+    plan = robot.solve_tip_goal(robot.solve_ivp([2.0, 1.0, 0.0]).tip_position)
+    paid_out = plan.cable_lengths.copy()
+    paid_out[4] += 0.003
+    previous = robot.estimate_shape(paid_out)
+    assert previous.slack is not None and previous.slack[4]
+    pulled_in = plan.cable_lengths.copy()
+    pulled_in[:3] -= 0.004
+    estimate = robot.estimate_shape(pulled_in, warm_start=previous)
+    assert estimate.tendons is None and estimate.residual > 2e-3
+    assert 'fit no shape' in estimate.message

@@ -136,7 +136,7 @@ def estimate_shape(robot, cable_lengths, tip_force=(0.0, 0.0, 0.0), tip_moment=(
         # equilibrium: then the least-squares fit below, as without slack)
         slack = _tendon_estimate(robot, measured, tip_force, tip_moment, previous, observable,
                                  list(notes))
-        if slack.converged:
+        if _plausible(robot, slack):
             return slack
     if start is None:
         start = robot.passive_state(bvp.linear_guess(robot, tip_force, tip_moment))
@@ -209,11 +209,17 @@ def _slack_estimate(robot, measured, tip_force, tip_moment, previous, observable
         return None
     slack = _tendon_estimate(robot, measured, tip_force, tip_moment, previous, observable,
                              list(notes))
+    return slack if _plausible(robot, slack) and slack.residual < residual else None
+
+
+def _plausible(robot, estimate):
+    """Whether a tendon-model estimate of ideal cables converged with tensions a cable takes.
+
+    Inextensible cables pulled in against the rod's axial stiffness "converge" with thousands of
+    N: above the full-circle tension or a tension limit the lengths fit no shape.
+    """
     limit = min(full_circle_tension(robot), float(np.min(robot.tendons.tension_limits[:, 1])))
-    if not (slack.converged and slack.residual < residual
-            and np.max(slack.tensions, initial=0.0) <= limit):
-        return None
-    return slack
+    return estimate.converged and np.max(estimate.tensions, initial=0.0) <= limit
 
 
 def _tendon_estimate(robot, measured, tip_force, tip_moment, previous, observable, notes):
