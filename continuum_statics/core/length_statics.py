@@ -72,7 +72,7 @@ class LengthSolution:
     motion: np.ndarray
     iterations: int = 0
     residual: float = 0.0
-    jacobian_parts: tuple = None  # the last Newton Jacobian's pieces: chord steps when warm
+    jacobian_parts: tuple = None  # the last Jacobian pieces: the next warm call starts on them
 
     @property
     def state(self):
