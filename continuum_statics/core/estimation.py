@@ -129,8 +129,8 @@ def estimate_shape(robot, cable_lengths, tip_force=(0.0, 0.0, 0.0), tip_moment=(
         notes.insert(0, 'shape from the measured tensions')
         return _result(shape, converged, residual, 0, observable, notes)
 
-    slack_before = getattr(previous, 'slack', None)
-    if slack_before is not None and np.any(slack_before):
+    paid_out = getattr(getattr(previous, 'tendons', None), 'slack_lengths', None)
+    if paid_out is not None and np.any(paid_out > SLACK_RESIDUAL):
         # still slack, most likely: the tendon model first, kept only when it explains the
         # lengths (ideal cables that all end up shorter than any shape allows have no
         # equilibrium: then the least-squares fit below, as without slack)
@@ -225,7 +225,9 @@ def _plausible(robot, estimate):
 def _tendon_estimate(robot, measured, tip_force, tip_moment, previous, observable, notes):
     """Return the estimate of the displacement-driven statics (slack, stretch, friction)."""
     warm = getattr(previous, 'tendons', None) or previous
-    solution = length_statics.solve_lengths(robot, measured, tip_force, tip_moment, warm)
+    # ideal cables only try it (the least squares are the fallback): no slow last resort
+    solution = length_statics.solve_lengths(robot, measured, tip_force, tip_moment, warm,
+                                            continuation=not robot.tendons.is_ideal)
     if solution.message:
         notes.insert(0, solution.message)
     if np.any(solution.slack):

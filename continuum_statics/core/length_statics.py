@@ -73,6 +73,7 @@ class LengthSolution:
     iterations: int = 0
     residual: float = 0.0
     jacobian_parts: tuple = None  # the last Jacobian pieces: the next warm call starts on them
+    slack_lengths: np.ndarray = None  # (n,) m by which each cable is longer than its path
 
     @property
     def state(self):
@@ -193,13 +194,14 @@ def motion_since(robot, free_lengths, warm_start):
 
 
 def solve_lengths(robot, lengths, tip_force=(0.0, 0.0, 0.0), tip_moment=(0.0, 0.0, 0.0),
-                  warm_start=None):
+                  warm_start=None, continuation=True):
     """Equilibrium when the motors hold cable ``lengths`` (m, motor side, cable_names order).
 
     ``tip_force`` (N) and ``tip_moment`` (N m) in the base frame; ``warm_start`` the previous
     :class:`LengthSolution` of the same sequence (its state starts the solve and its free lengths
     give each cable's direction of motion for friction). Never raises for a failed solve: then
     ``converged`` is False and ``message`` says why; bad arguments raise ``ValueError``.
+    ``continuation`` False skips the slow last resort (a try whose failure has a fallback).
     """
     n = len(robot.cable_names)
     lengths = as_vector(lengths, n, 'lengths')
@@ -229,6 +231,10 @@ def solve_lengths(robot, lengths, tip_force=(0.0, 0.0, 0.0), tip_moment=(0.0, 0.
         total += iterations
         if ok:
             return _solution(robot, problem, z, info, True, total, '', parts)
+    if not continuation:
+        return _solution(robot, problem, z, info, False, total,
+                         'no equilibrium found from the warm or the small-deflection start',
+                         parts)
     z, ok, iterations, info, parts = _continuation(robot, problem, starts[-1])
     total += iterations
     message = '' if ok else ('no equilibrium found for these lengths (cable residual %.3g m '
@@ -383,4 +389,4 @@ def _solution(robot, problem, z, info, converged, iterations, message, parts=Non
                           converged=bool(converged), message='; '.join(notes),
                           free_lengths=problem.free.copy(), motion=problem.motion.copy(),
                           iterations=iterations, residual=_cable_residual(info),
-                          jacobian_parts=parts)
+                          jacobian_parts=parts, slack_lengths=np.where(slack, gap, 0.0))
