@@ -136,7 +136,9 @@ class TeleopRun:
         """
         robot = self.robot
         n = len(robot.cable_names)
-        force, moment = np.asarray(load[:3], dtype=float), np.asarray(load[3:], dtype=float)
+        # copies: the node's zero load is read-only, and numba compiles another signature for
+        # a read-only array (seconds on a cold cache, in the middle of a twist)
+        force, moment = np.array(load[:3], dtype=float), np.array(load[3:], dtype=float)
         values, jac, _ = robot.probe(self.x, robot.state_size, force, moment, self.fixed)
         probe = ProbeRows(n)
         rows = [jac[probe.tip], jac[probe.balance]]

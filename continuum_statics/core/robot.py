@@ -223,13 +223,13 @@ class Robot:
         """Return fixed cable tensions (n_cables,) in N as a float array; zero for None."""
         if fixed_tensions is None:
             return np.zeros(len(self.cable_names))
-        return np.asarray(fixed_tensions, dtype=float)
+        return np.array(fixed_tensions, dtype=float)  # a copy: never a read-only view
 
     def integrate_state(self, state, tip_force, fixed_tensions=None, params=None):
         """(N, 21) kernel states of one solver state under a tip force F (N, global)."""
         moments, tensions = self.loads(state, fixed_tensions)
         return integrate_batch(self.s_grid, self.params if params is None else params,
-                               self.model_code, np.asarray(tip_force, dtype=float)[None],
+                               self.model_code, np.array(tip_force, dtype=float)[None],
                                np.asarray(state[:3], dtype=float)[None], moments[None],
                                tensions[None], self.cable_offsets, self.cable_end_node,
                                self.section_end_node)[0]
@@ -239,14 +239,16 @@ class Robot:
 
         Unchecked fast path for the solvers: arguments must be float arrays.
         """
+        # tip loads copied: a read-only view (the nodes' zero load) is another numba signature
         return probe(self.s_grid, self.params if params is None else params, self.model_code,
-                     tip_force, tip_moment, state, n_free, self.bending_step(),
+                     np.array(tip_force, dtype=float), np.array(tip_moment, dtype=float), state,
+                     n_free, self.bending_step(),
                      self.tensions_or_zero(fixed_tensions), *self.arrays)
 
     def kernel_args(self, tip_force, tip_moment, fixed_tensions=None, params=None):
         """Return the model arguments of :func:`kernel.probe` but the state (compiled solvers)."""
         return (self.s_grid, self.params if params is None else params, self.model_code,
-                np.asarray(tip_force, dtype=float), np.asarray(tip_moment, dtype=float),
+                np.array(tip_force, dtype=float), np.array(tip_moment, dtype=float),
                 self.bending_step(), self.tensions_or_zero(fixed_tensions), *self.arrays)
 
     def make_shape(self, state, tip_force, states, fixed_tensions=None):
