@@ -90,6 +90,22 @@ def test_a_reachable_goal_goes_through_the_phases_and_is_reached_within_the_spee
     assert run.phase is Phase.IDLE and run.goal is None
 
 
+def test_the_tick_that_ends_a_goal_commands_nothing():
+    # The service answers as the goal ends; a command published after that would overwrite the
+    # client's next one (a hand-made command lost behind the goal's last, seen across processes).
+    run = GoalRun(ROBOT)
+    plant = Plant(ROBOT.straight_cable_lengths)
+    goal, _, _ = start(run, plant, ROBOT.solve_ivp([1.0, 0.5, 0.0]).tip_position)
+    now, command, returned = 0.0, None, []
+    while not goal.done.is_set() and now < 20.0:
+        now += DT
+        measurement, tip = plant.step(command, now)
+        command = run.tick(now, DT, measurement, tip, plant.tips[-200:], ZERO)
+        returned.append(command)
+    assert goal.reached, goal.reason
+    assert returned[-1] is None and returned[-2] is not None
+
+
 def test_a_model_error_is_corrected_in_closed_loop():
     # the real robot's holes sit 0.5 mm further out than the robot file says: it bends less
     # for the same lengths, and the tip misses by millimetres until corrected

@@ -319,6 +319,10 @@ class GoalRun:
                 self.phase, self._judge_start = Phase.JUDGE, now
         else:
             self._judge(goal, now, tips, load)
+        if goal.done.is_set():
+            # Nothing after the end: the answer may already be with a client whose next
+            # cable command this one would overwrite (the cables are at it anyway).
+            return None
         return self.commanded
 
     def _advance(self, budget):
