@@ -31,7 +31,9 @@ Fit names (``--fit``):
   |g| = 9.81 and scales the density
 """
 from concurrent.futures import ProcessPoolExecutor
+import contextlib
 import dataclasses
+import gc
 import math
 import multiprocessing
 import os
@@ -340,6 +342,25 @@ def scan_rotations(model, x0, log=print, steps=SCAN_STEPS, rows=SCAN_ROWS):
     return x
 
 
+@contextlib.contextmanager
+def fork_pool(workers):
+    """Yield a pool of ``workers`` forked processes that never collect the parent's garbage.
+
+    Forked, the workers share the model without pickling it. A reference cycle the parent left
+    behind (an rclpy node of an earlier test or tool in the same process) collected in a fork
+    runs its DDS finalizers there and segfaults the worker; so the parent collects first and
+    freezes what is left out of every later collection until the pool is closed.
+    """
+    gc.collect()
+    gc.freeze()
+    try:
+        with ProcessPoolExecutor(max_workers=workers,
+                                 mp_context=multiprocessing.get_context('fork')) as pool:
+            yield pool
+    finally:
+        gc.unfreeze()
+
+
 def fit(model, log=print, workers=None, max_evaluations=40):
     """Fit the model's search vector; returns (x, scipy result)."""
     global _WORKER_MODEL
@@ -349,10 +370,9 @@ def fit(model, log=print, workers=None, max_evaluations=40):
     x0 = scan_rotations(model, x0, log)
     model.residuals(x0, update=True)
     _WORKER_MODEL = model
-    context = multiprocessing.get_context('fork')
     began = time.monotonic()
     count = [0]
-    with ProcessPoolExecutor(max_workers=workers, mp_context=context) as pool:
+    with fork_pool(workers) as pool:
         cache = {}
 
         def fun(x):
