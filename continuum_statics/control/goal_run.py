@@ -12,7 +12,9 @@ A state machine (:class:`Phase`) the tip_controller node ticks at its control ra
 3. ``SETTLE``: wait until every cable is measured at its command (or ``settle_time``);
 4. ``JUDGE``: average the tip poses that *arrived* since then (enough that the noise of the mean
    is inside the tolerance, at most ``tip_average_time``): reached, or correct the goal by the
-   remaining error (``target += goal - mean_tip``) and ramp again, up to ``max_corrections``.
+   remaining error (``target += goal - mean_tip``) and ramp again, up to ``max_corrections``
+   and never further than ``max_correction`` from the goal in all (a tip source that disagrees
+   with the model by more is wrong, not the model: the goal fails and says so).
 
 Every command of a model state is its motor-side lengths with real tendons
 (:func:`tendon_commands.command_for`: the stretch of the tensions the shape needs, antagonists
@@ -57,6 +59,7 @@ class RunSettings:
     tip_average_time: float = 1.0
     max_state_age: float = 0.5
     min_tension: float = 0.0
+    max_correction: float = math.inf  # m: the corrections of a goal add up to at most this
 
 
 @dataclass(eq=False)
@@ -318,7 +321,7 @@ class GoalRun:
                     <= self.settings.settled_cable_error):
                 self.phase, self._judge_start = Phase.JUDGE, now
         else:
-            self._judge(goal, now, tips, load)
+            self._judge(goal, now, tips, load, measurement)
         if goal.done.is_set():
             # Nothing after the end: the answer may already be with a client whose next
             # cable command this one would overwrite (the cables are at it anyway).
@@ -373,7 +376,7 @@ class GoalRun:
         if np.array_equal(self.commanded, self._target):
             self._fraction, self.command_state = 1.0, solution
 
-    def _judge(self, goal, now, tips, load):
+    def _judge(self, goal, now, tips, load, measurement):
         """Judge the mean tip since the cables settled: reached, correct, or wait for more."""
         samples = [tip.position for tip in tips if tip.received >= self._judge_start]
         if len(samples) < MIN_TIP_SAMPLES:
@@ -393,14 +396,29 @@ class GoalRun:
                                                       now - goal.started, self.corrections))
         elif error - 2.0 * spread > goal.tolerance or timed_out:
             self.judged_error = None
-            self._correct(goal, mean, load)
+            self._correct(goal, mean, load, measurement)
 
-    def _correct(self, goal, measured_tip, load):
+    def _correct(self, goal, measured_tip, load, measurement=None):
+        off = (float(np.max(np.abs(measurement.lengths - self.commanded)))
+               if measurement is not None else 0.0)
+        # cables that did not reach their command: the driver, not the model, is the cause
+        not_following = ('; the cables are %.1f mm from their command: is cable_driver active '
+                         'and following cable_commands? (its /diagnostics status says)'
+                         % (off * 1e3)) if off > OFF_COMMAND else ''
         if self.corrections >= self.settings.max_corrections:
-            self.finish(goal, False, 'still %.2f mm from the goal after %d corrections'
-                        % (goal.error * 1e3, self.corrections))
+            self.finish(goal, False, 'still %.2f mm from the goal after %d corrections%s'
+                        % (goal.error * 1e3, self.corrections, not_following))
             return
-        self._corrected_goal = self._corrected_goal + (goal.position - measured_tip)
+        corrected = self._corrected_goal + (goal.position - measured_tip)
+        total = float(np.linalg.norm(corrected - goal.position))
+        if total > self.settings.max_correction:
+            self.finish(goal, False, 'the corrections would move the target %.1f mm from the '
+                        'goal, more than tracker_max_disagreement %.1f mm: the measured tip and '
+                        'the model disagree that much (check the tracker and its registration, '
+                        'or calibrate the robot)%s'
+                        % (total * 1e3, self.settings.max_correction * 1e3, not_following))
+            return
+        self._corrected_goal = corrected
         start = self.command_state
         try:
             solution = self.robot.solve_tip_goal(

@@ -42,17 +42,6 @@ def tracked_tip(marker_position, tip_rotation, marker_offset):
     return np.asarray(marker_position, dtype=float) - np.asarray(tip_rotation) @ marker_offset
 
 
-def judged_tips(now, measured, measured_tips, model, model_tips, max_age, use_measured):
-    """Which tip a goal is judged on: (newest sample, recent samples, source name).
-
-    A tracker (``tip_pose_measured``) while it is fresh and wanted, else the model's
-    ``tip_pose``: the loop then closes on the estimate of the measured lengths.
-    """
-    if use_measured and measured is not None and measured.age(now) <= max_age:
-        return measured, measured_tips, 'tip_pose_measured'
-    return model, model_tips, 'tip_pose'
-
-
 ZERO_LOAD = np.zeros(6)
 ZERO_LOAD.setflags(write=False)
 

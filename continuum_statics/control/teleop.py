@@ -8,7 +8,9 @@ moves the solver state there from the previous equilibrium, so each command is t
 set of a shape of the robot at ~1 ms a step; a step that would move a cable faster than
 ``max_cable_speed`` is shortened. Where the target leaves the reachable set (the workspace
 boundary, a cable at a length limit) the tip stops there and the run says why. With no twist for
-``twist_timeout`` (the dead-man) the run ends and the cables hold. An angular velocity turns the
+``twist_timeout`` (the dead-man) the run ends and the cables hold; before that, a twist moves
+the tip only for :func:`twist_hold` (about two message intervals of the stream), so the tip
+travels no further after the last message than between two of them. An angular velocity turns the
 tip direction goal (the tip's z axis) when the robot has the freedoms for it. No ROS.
 """
 from dataclasses import dataclass
@@ -30,6 +32,15 @@ class TeleopSettings:
     max_cable_speed: float = 0.02
 
 
+#: Why a twist is not followed where the model has no equilibrium along it.
+BOUNDARY = ('the workspace boundary: the robot has no freedom in that direction here (e.g. '
+            'along the axis of a straight section, which its cables cannot shorten)')
+#: A twist moves the tip for this many intervals of its stream (jitter of a 2x late message).
+HOLD_INTERVALS = 2.5
+#: How long the first twist of a stream moves the tip, s (its rate is not known yet).
+FIRST_HOLD = 0.1
+
+
 @dataclass(frozen=True, eq=False)
 class Twist:
     """One ``tip_twist``: linear (3,) m/s and angular (3,) rad/s in the base frame."""
@@ -37,6 +48,19 @@ class Twist:
     linear: np.ndarray
     angular: np.ndarray
     received: float  # monotonic s
+    hold: float = FIRST_HOLD  # s it moves the tip after it arrived (:func:`twist_hold`)
+
+
+def twist_hold(previous, received, timeout):
+    """Seconds a twist arriving at ``received`` moves the tip (monotonic s throughout).
+
+    :param previous: arrival of the stream's previous twist, or None
+    :param timeout: ``twist_timeout``, the longest hold
+    """
+    interval = None if previous is None else received - previous
+    if interval is None or not 0.0 < interval <= timeout:
+        return min(FIRST_HOLD, timeout)
+    return min(HOLD_INTERVALS * interval, timeout)
 
 
 class TeleopRun:
@@ -86,6 +110,8 @@ class TeleopRun:
             return None
         velocity = _capped(np.asarray(twist.linear, dtype=float), settings.max_tip_speed)
         rate = _capped(np.asarray(twist.angular, dtype=float), settings.max_tip_rate)
+        if age > twist.hold:  # the stream paused: hold until it resumes or the dead-man
+            velocity, rate = np.zeros(3), np.zeros(3)
         if not (velocity.any() or rate.any()):
             self.stopped = ''
             return self.commanded
@@ -93,7 +119,7 @@ class TeleopRun:
         for _ in range(4):  # shorten the step until no cable moves faster than allowed
             step = self._step(velocity * dt * fraction, rate * dt * fraction, load)
             if step is None:
-                why = 'the workspace boundary'
+                why = BOUNDARY
                 break
             x, lengths, tip, direction = step
             change = float(np.max(np.abs(lengths - self.commanded)))
@@ -112,7 +138,8 @@ class TeleopRun:
                 why = 'the length limit of ' + ', '.join(self.robot.cable_names[i]
                                                         for i in outside)
             elif velocity.any() and moved @ wanted < 0.5 * (wanted @ wanted):
-                why = 'the workspace boundary'
+                why = BOUNDARY + ' (the tip moved %.0f %% of the step asked)' % (
+                    100.0 * max(0.0, moved @ wanted) / (wanted @ wanted))
         if why:
             self.stopped = 'stopped at %s: the tip cannot follow the twist further' % why
             return self.commanded

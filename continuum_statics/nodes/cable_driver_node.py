@@ -491,7 +491,10 @@ class CableDriverNode(LifecycleNode):
 
     # -- diagnostics --------------------------------------------------------------------------
     def _publish_diagnostics(self):
-        values = {'backend': self._backend_cls.name, 'lifecycle': self._lifecycle_state()}
+        # read by tip_controller: a goal fails at once, naming this, when commands are refused
+        refusal = self._refusal() if self.cable_names else ''
+        values = {'backend': self._backend_cls.name, 'lifecycle': self._lifecycle_state(),
+                  'accepts_commands': not refusal, 'refusal': refusal}
         if not self.cable_names:
             level, message = diag.OK, 'robot has no cables: nothing to drive'
         elif self.backend is None:

@@ -58,15 +58,16 @@ from continuum_statics.control.goal_run import (
     RunSettings,
     stale_state,
 )
+from continuum_statics.control.handover import Handover
 from continuum_statics.control.records import (
     Measurement,
     TipLoad,
     TipSample,
     current_load,
-    judged_tips,
     tracked_tip,
 )
-from continuum_statics.control.teleop import TeleopRun, TeleopSettings, Twist
+from continuum_statics.control.teleop import TeleopRun, TeleopSettings, Twist, twist_hold
+from continuum_statics.control.tip_source import TipSource, disagreement_bound
 from continuum_statics.core.rotations import quaternion_to_rotation
 from continuum_statics.core.warmup import warm_up
 from continuum_statics.core.workspace import reachable_tips
@@ -92,6 +93,7 @@ from continuum_statics.nodes.ros_conversions import (
     tip_load,
 )
 from continuum_statics.nodes.timers import steady_timer
+from continuum_statics.nodes.waits import Waits
 
 THROTTLE_S = 2.0
 #: Smallest tip_goal tolerance, m: below a micrometre the model's own accuracy decides.
@@ -101,6 +103,12 @@ MIN_TOLERANCE = 1e-6
 MEAN_WINDOW_S = 0.05
 #: Reachable tips drawn as RViz click targets (workspace_markers).
 WORKSPACE_SAMPLES = 400
+#: A tip_twist stamped further than this from now is refused, s (or twist_timeout if longer).
+MAX_TWIST_STAMP_OFFSET = 1.0
+#: How often waiting goals check their condition (fresh state, the goal's end), s.
+WAIT_PERIOD = 0.01
+#: The cable_driver's /diagnostics status counts this long, s (it publishes at >= 1 Hz).
+DRIVER_STATUS_AGE = 5.0
 
 
 class TipControllerNode(Node):
@@ -122,6 +130,8 @@ class TipControllerNode(Node):
 
         self._lock = threading.Lock()  # guards the run: the control loop and goal starts
         self._closing = False
+        self._handover = Handover()  # goals and teleoperation: the later arrival wins
+        self._tracker = TipSource(self._tracker_bound())
         self._run = GoalRun(self.robot, self._run_settings())
         self._teleop = TeleopRun(self.robot, self._teleop_settings())
         self._twist = None  # the newest Twist
@@ -142,9 +152,13 @@ class TipControllerNode(Node):
         self._counts = {'reached': 0, 'failed': 0, 'rejected': 0, 'preempted': 0}
         self._last_outcome = 'no goal yet'
         self._command_msg = JointState()
+        self._driver_status = None  # (refusal or '', monotonic s) of cable_driver's /diagnostics
 
         self._control_group = MutuallyExclusiveCallbackGroup()
+        # Goals from every source are coroutines awaiting their end (no thread held), in a group
+        # of their own: never behind or in front of the control timer.
         service_group = ReentrantCallbackGroup()
+        self._waits = Waits(self, WAIT_PERIOD, MutuallyExclusiveCallbackGroup())
         self._command_pub = self.create_publisher(JointState, 'cable_commands', COMMAND_QOS)
         # The state topics arrive at the measurement rate (hundreds of Hz): a thread of their own
         # serves them, which costs a tenth of the multi-threaded executor's overhead.
@@ -159,12 +173,17 @@ class TipControllerNode(Node):
         self._intake.add(JointState, 'cable_states', self._on_cable_states, LATEST_SENSOR_QOS,
                          raw=True)
         self._intake.add(WrenchStamped, 'tip_wrench', self._on_tip_wrench, LATEST_SENSOR_QOS)
+        # the driver says when it refuses commands (inactive, faulted, disconnected)
+        self._driver_status_name = '%s/%s' % (self.get_namespace().rstrip('/'),
+                                              self._params['cable_driver_name'])
+        self._driver_status_name = self._driver_status_name.lstrip('/')
+        self._intake.add(diag.DiagnosticArray, '/diagnostics', self._on_diagnostics, 10)
         self._intake.start()
         self.create_subscription(TwistStamped, 'tip_twist', self._on_twist, COMMAND_QOS,
                                  callback_group=self._control_group)
         # RViz's Publish Point tool: a click on the workspace markers is a 3-D tip goal
         self.create_subscription(PointStamped, 'tip_goal_point', self._on_goal_point,
-                                 COMMAND_QOS, callback_group=self._control_group)
+                                 COMMAND_QOS, callback_group=service_group)
         if self.cable_names:
             workspace = self.create_publisher(MarkerArray, 'workspace_markers', LATCHED_QOS)
             workspace.publish(workspace_markers(
@@ -173,7 +192,7 @@ class TipControllerNode(Node):
         self._active_goal_pub = self.create_publisher(PoseStamped, 'tip_goal_active',
                                                       LATCHED_QOS)
         self.create_subscription(PoseStamped, 'tip_goal_pose', self._on_goal_pose, COMMAND_QOS,
-                                 callback_group=self._control_group)
+                                 callback_group=service_group)
         self.create_service(GetPlan, 'tip_goal', self._on_tip_goal, callback_group=service_group)
         action = load_interface()
         self._action = None if action is None else MoveTipServer(self, action, service_group)
@@ -191,7 +210,14 @@ class TipControllerNode(Node):
 
     def _run_settings(self):
         params = self._params
-        return RunSettings(**{name: params[name] for name in RunSettings.__dataclass_fields__})
+        return RunSettings(**{name: params[name] for name in RunSettings.__dataclass_fields__
+                              if name != 'max_correction'},
+                           max_correction=self._tracker_bound())
+
+    def _tracker_bound(self, value=None):
+        """tracker_max_disagreement in m (0: a tenth of the rod length)."""
+        value = self._params['tracker_max_disagreement'] if value is None else value
+        return disagreement_bound(self.robot.length, value)
 
     def _teleop_settings(self):
         params = self._params
@@ -205,6 +231,10 @@ class TipControllerNode(Node):
         with self._lock:  # goals reset/cancel the timer under the same lock
             if name in RunSettings.__dataclass_fields__:
                 self._run.settings = dataclasses.replace(self._run.settings, **{name: value})
+            if name == 'tracker_max_disagreement':
+                self._tracker.bound = self._tracker_bound(value)
+                self._run.settings = dataclasses.replace(self._run.settings,
+                                                         max_correction=self._tracker.bound)
             if name in TeleopSettings.__dataclass_fields__:
                 self._teleop.settings = dataclasses.replace(self._teleop.settings,
                                                             **{name: value})
@@ -293,15 +323,32 @@ class TipControllerNode(Node):
             return
         self._load = TipLoad(wrench, time.monotonic())
 
+    def _on_diagnostics(self, msg):
+        name = self._driver_status_name
+        for status in msg.status:
+            if status.name == name:
+                values = {kv.key: kv.value for kv in status.values}
+                if 'accepts_commands' in values:  # a driver of this package
+                    refusal = ('' if values['accepts_commands'] == 'True'
+                               else values.get('refusal') or status.message)
+                    self._driver_status = (refusal, time.monotonic())
+
+    def driver_refusal(self):
+        """Why cable_driver refuses cable_commands now (its fresh /diagnostics), or ''."""
+        status = self._driver_status
+        if status is None or time.monotonic() - status[1] > DRIVER_STATUS_AGE:
+            return ''
+        return status[0]
+
     def _current_tip_load(self):
         return current_load(self._load, time.monotonic(), self._params['tip_wrench_timeout'])
 
     # -- goals -----------------------------------------------------------------------------
-    def _on_tip_goal(self, request, response):
+    async def _on_tip_goal(self, request, response):
         header = Header(frame_id=self.base_frame_id, stamp=self.get_clock().now().to_msg())
         response.plan = Path(header=header)
         try:
-            return self._serve_tip_goal(request, response)
+            return await self._serve_tip_goal(request, response)
         except Exception as error:  # never let one request take the executor down
             self.get_logger().error('tip_goal failed: %r' % (error,))
             self.goal_rejected('internal error: %r' % (error,))
@@ -323,38 +370,55 @@ class TipControllerNode(Node):
         """Return what the controller does now: a goal run's phase or 'teleoperation'."""
         return 'teleoperation' if self._teleop.active else self._run.phase.value
 
-    def _serve_tip_goal(self, request, response):
+    async def _serve_tip_goal(self, request, response):
         # GetPlan's tolerance is a float32
         tolerance = float32_value(request.tolerance)
         try:
             tolerance = self.checked_tolerance(tolerance)
-            goal = self.start_goal(goal_position(request.goal, self.base_frame_id), tolerance,
-                                    'tip_goal service', self._goal_direction(request.goal))
+            goal = await self.start_goal(goal_position(request.goal, self.base_frame_id),
+                                         tolerance, 'tip_goal service',
+                                         self._goal_direction(request.goal))
         except ValueError as error:
             self.goal_rejected(error)
             return response
-        limit = time.monotonic() + self._params['goal_timeout'] + 5.0
-        while not goal.done.wait(0.05):
-            if self._closing or time.monotonic() > limit:
-                self.finish_goal(goal, False, 'shutting down' if self._closing else 'timed out')
-                break
+        await self.goal_end(goal)
         if goal.reached:
-            plan = self.plan_after(goal.tip_stamp)
+            plan = await self.plan_after(goal.tip_stamp)
             if plan is not None:
                 response.plan = plan
         return response
 
-    def _on_goal_point(self, msg):
+    def wait_until(self, condition, deadline):
+        """Future (``await`` it) of ``condition()`` once it holds or ``deadline`` passes.
+
+        The awaiting coroutine holds no executor thread (:mod:`~continuum_statics.nodes.waits`).
+        """
+        return self._waits.until(lambda: self._closing or condition(), deadline)
+
+    async def goal_end(self, goal, deadline=None):
+        """Wait for ``goal`` to end (True) or ``deadline`` (False), holding no thread.
+
+        Past the goal's own deadline (plus a margin for the last judgement) or at shutdown the
+        goal is ended here.
+        """
+        limit = goal.deadline + 5.0
+        await self.wait_until(goal.done.is_set, limit if deadline is None
+                              else min(deadline, limit))
+        if not goal.done.is_set() and (self._closing or time.monotonic() >= limit):
+            self.finish_goal(goal, False, 'shutting down' if self._closing else 'timed out')
+        return goal.done.is_set()
+
+    async def _on_goal_point(self, msg):
         pose = PoseStamped(header=msg.header)
         pose.pose.position = msg.point
         pose.pose.orientation.w = 1.0
-        self._on_goal_pose(pose)
+        await self._on_goal_pose(pose)
 
-    def _on_goal_pose(self, msg):
+    async def _on_goal_pose(self, msg):
         try:
-            self.start_goal(goal_position(msg, self.base_frame_id),
-                             self._params['default_tolerance'], 'tip_goal_pose',
-                             self._goal_direction(msg))
+            await self.start_goal(goal_position(msg, self.base_frame_id),
+                                  self._params['default_tolerance'], 'tip_goal_pose',
+                                  self._goal_direction(msg))
         except ValueError as error:
             self.goal_rejected(error)
         except Exception as error:  # never let one message take the node down
@@ -373,7 +437,11 @@ class TipControllerNode(Node):
                 raise ValueError('non-finite velocity')
             if angular.any() and self._params['goal_orientation'] != 'direction':
                 angular = np.zeros(3)  # the tip direction is not controlled
-            self._twist = Twist(linear, angular, time.monotonic())
+            self._check_twist_stamp(msg.header.stamp)
+            now, previous = time.monotonic(), self._twist
+            timeout = self._params['twist_timeout']
+            self._twist = Twist(linear, angular, now, twist_hold(
+                None if previous is None else previous.received, now, timeout))
             if self._teleop.active or not (linear.any() or angular.any()):
                 return
             self._start_teleop()
@@ -383,6 +451,24 @@ class TipControllerNode(Node):
             self.get_logger().error('tip_twist failed: %r' % (error,))
             self._reject('tip_twist', 'internal error: %r' % (error,))
 
+    def _check_twist_stamp(self, stamp):
+        """ValueError for a twist stamped far from now (a replay, a sender's wrong clock).
+
+        Stamp 0 (unstamped) is taken on arrival, and so is everything while the node's own
+        clock reads 0 (simulated time before the first /clock).
+        """
+        stamp_ns = stamp.sec * 1_000_000_000 + stamp.nanosec
+        now_ns = self.get_clock().now().nanoseconds
+        if stamp_ns == 0 or now_ns == 0:
+            return
+        offset = (now_ns - stamp_ns) * 1e-9
+        limit = max(MAX_TWIST_STAMP_OFFSET, self._params['twist_timeout'])
+        if abs(offset) > limit:
+            raise ValueError('stamped %.3g s %s now (more than %.3g s): a replayed command or '
+                             'a sender with another clock; unstamped twists (stamp 0) are '
+                             'taken on arrival' % (abs(offset), 'before' if offset > 0
+                                                   else 'after', limit))
+
     def _start_teleop(self):
         """Take over from any goal and follow the twists from the current equilibrium."""
         now = time.monotonic()
@@ -390,6 +476,7 @@ class TipControllerNode(Node):
                       else self._stale_state(now, need_tip=False))
         if no_lengths:
             raise ValueError(no_lengths)
+        ticket = self._handover.take('teleoperation (tip_twist)')
         with self._lock:
             goal = self._run.goal
             if goal is not None and self._run.finish(goal, False, 'pre-empted by teleoperation'):
@@ -403,6 +490,10 @@ class TipControllerNode(Node):
                                               tip_moment=load[3:], warm_start=warm)
             commanded = self.robot.cable_lengths(state.shape)
         with self._lock:
+            if not self._handover.holds(ticket):  # a goal arrived meanwhile: it wins
+                self.get_logger().info('tip_twist not followed: %s arrived after it'
+                                       % self._handover.holder)
+                return
             self._teleop.start(state, commanded)
             self._last_tick = now
             self._timer.reset()
@@ -438,40 +529,53 @@ class TipControllerNode(Node):
                              'unit quaternion (norm %.3g)' % norm)
         return quaternion_to_rotation(quaternion / norm)[:, 2]
 
-    def start_goal(self, position, tolerance, source, direction=None):
-        """Solve the goal and make it the active one; ValueError says why it is rejected."""
+    async def start_goal(self, position, tolerance, source, direction=None):
+        """Solve the goal and make it the active one; ValueError says why it is rejected.
+
+        Returns the running :class:`Goal` (the same goal again attaches to it); a goal that
+        teleoperation or a newer goal overtook while it was being solved comes back finished
+        ('pre-empted ... before it started'): whichever arrives later wins.
+        """
         if not self.cable_names:
             raise ValueError('robot has no cables: %r is a passive rod, nothing to move'
                              % self.robot.name)
+        # the infinity norm: no overflow for a goal at 1e308 m
+        reach = float(np.max(np.abs(position - self.robot.base_position)))
+        if reach > self.robot.length:
+            raise ValueError('the tip goal (%.4g, %.4g, %.4g) m is unreachable: %.3g m from '
+                             'the base along an axis, the rod is %.3g m long'
+                             % (*position, reach, self.robot.length))
+        ticket = self._handover.take('a newer goal')
         # Right after start-up, or while a driver or statics restarts, the state may be missing
         # or old for a moment: wait up to state_wait for fresh state before answering.
-        limit = time.monotonic() + self._params['state_wait']
-        while True:
-            missing = self._missing_state()
-            stale = self._stale_state(time.monotonic())
-            if not (missing or stale) or self._closing or time.monotonic() >= limit:
-                break
-            time.sleep(0.01)
+        await self.wait_until(
+            lambda: not (self._missing_state() or self._stale_state(time.monotonic())
+                         or self.driver_refusal()),
+            time.monotonic() + self._params['state_wait'])
         no_lengths = ('no cable_states from cable_driver yet' if self._measurement is None
                       else self._stale_state(time.monotonic(), need_tip=False))
         if no_lengths:
             raise ValueError('%s (waited %.3g s)' % (no_lengths, self._params['state_wait']))
+        refusal = self.driver_refusal()
+        if refusal:
+            raise ValueError('cable_driver refuses cable_commands: %s' % refusal)
         # Fresh lengths but no fresh tip pose: statics drops the lengths (they fit no shape, e.g.
         # after a hand-made command or a removed tip load). Start from the measured lengths'
         # nearest shape and move the cables onto it: statics then follows again.
-        tip_lost = missing or stale
+        tip_lost = self._missing_state() or self._stale_state(time.monotonic())
         if tip_lost:
             self.get_logger().warning('goal without a fresh tip pose (%s): moving the cables '
                                       'onto the model from the measured lengths first' % tip_lost)
         with self._lock:
             running = self._run.goal
-        if running is not None and running.tolerance == tolerance and np.array_equal(
-                running.position, position) and np.array_equal(running.direction, direction):
-            return running  # the same goal again (a stream repeats it): it goes on
-        load = self._current_tip_load()
-        with self._lock:
+            if running is not None and running.tolerance == tolerance and np.array_equal(
+                    running.position, position) and np.array_equal(running.direction, direction):
+                return running  # the same goal again (a stream repeats it): it goes on
+            if not self._handover.holds(ticket):
+                return self._overtaken(position, tolerance, source, direction)
             self._end_teleop('pre-empted by a tip goal')
             snapshot = self._run.snapshot()
+        load = self._current_tip_load()
         plan = self._run.plan(position, tolerance, direction,
                               self._mean_lengths(self._measurement), load, not tip_lost,
                               snapshot)
@@ -479,9 +583,13 @@ class TipControllerNode(Node):
         goal = Goal(position=position, tolerance=tolerance, source=source, started=now,
                     deadline=now + self._params['goal_timeout'], direction=direction)
         with self._lock:
+            # teleoperation or a newer goal came while this one was solved: they win
+            if not self._handover.holds(ticket):
+                return self._overtaken(position, tolerance, source, direction)
             previous = self._run.begin(goal, plan, now)
             if previous is not None:
                 self._report(previous)
+            self._tracker.reset()
             self._last_tick = now
             self._timer.reset()
         active = PoseStamped()
@@ -492,6 +600,16 @@ class TipControllerNode(Node):
         self.get_logger().info('tip goal (%.4f, %.4f, %.4f) m, tolerance %.2g m from %s%s' % (
             *position, tolerance, source, '' if plan.recover is None
             else ' (cables off the last command: onto the model first)'))
+        return goal
+
+    def _overtaken(self, position, tolerance, source, direction):
+        """Return a goal that lost the hand-over before it started, finished (under the lock)."""
+        now = time.monotonic()
+        goal = Goal(position=position, tolerance=tolerance, source=source, started=now,
+                    deadline=now, direction=direction)
+        self._run.finish(goal, False, 'pre-empted by %s before it started'
+                         % self._handover.holder)
+        self._report(goal)
         return goal
 
     def _mean_lengths(self, newest):
@@ -534,16 +652,14 @@ class TipControllerNode(Node):
         return stale_state(now, self._measurement, self._tip, self._params['max_state_age'],
                            need_tip)
 
-    def plan_after(self, tip_stamp, wait=0.5):
+    async def plan_after(self, tip_stamp, wait=0.5):
         """Return the newest backbone, waiting briefly for the one of the reached tip pose."""
-        limit = time.monotonic() + wait
-        while True:
-            backbone = self._backbone
-            if backbone is not None and (tip_stamp is None or backbone[0] >= tip_stamp):
-                break
-            if time.monotonic() > limit or self._closing:
-                break
-            time.sleep(0.005)
+        def arrived():
+            return self._backbone is not None and (tip_stamp is None
+                                                   or self._backbone[0] >= tip_stamp)
+
+        await self.wait_until(arrived, time.monotonic() + wait)
+        backbone = self._backbone
         if backbone is None:
             return None
         try:
@@ -587,9 +703,17 @@ class TipControllerNode(Node):
         goal = self._run.goal
         if goal is None:
             return None
-        tip, tips, self._tip_source = judged_tips(
+        refusal = self.driver_refusal()
+        if refusal:
+            self._run.finish(goal, False, 'cable_driver refuses cable_commands: %s' % refusal)
+            self._report(goal)
+            return None
+        tip, tips, self._tip_source, warning = self._tracker.judged(
             now, self._measured_tip, self._measured_tips, self._tip, self._tips,
             self._params['max_state_age'], self._params['use_measured_tip'])
+        if warning:
+            self._problems.add('tip_pose_measured', warning)
+            self.get_logger().warning(warning)
         commanded = self._run.tick(now, dt, self._measurement, tip, tips,
                                    self._current_tip_load())
         for note in self._run.notes:
@@ -660,6 +784,7 @@ class TipControllerNode(Node):
     def release_waiters(self):
         """End the goal in progress so that a waiting service call returns (shutdown)."""
         self._closing = True
+        self._waits.release_all()
         with self._lock:
             goal = self._run.goal
             if goal is not None and self._run.finish(goal, False, 'shutting down'):

@@ -1,0 +1,52 @@
+"""Which tip a goal is judged on, and when an external tracker stops being trusted.
+
+A tracker (``tip_pose_measured``: motion capture, an EM sensor) closes the loop on the real tip,
+but a frozen, biased or jumping tracker once walked the robot 120-214 mm across its workspace one
+correction at a time. The tracker is trusted only while it agrees with the model's tip
+(``tip_pose``, the estimate of the measured cable lengths) within ``bound``: a calibrated model is
+within millimetres of the real tip (11 mm RMS held out on the v6 robot, README), so a tracker
+further away than a tenth of the rod length is more likely wrong than the model. Outside the
+bound the tracker is set aside for the rest of the goal, with a warning that names it, and the
+goal continues on the model. No ROS.
+"""
+import numpy as np
+
+#: Default ``tracker_max_disagreement`` as a fraction of the rod length.
+DISAGREEMENT_FRACTION = 0.1
+
+
+def disagreement_bound(robot_length, parameter):
+    """Return the bound (m): ``tracker_max_disagreement``, or 0.1 L when it is 0."""
+    return parameter if parameter > 0.0 else DISAGREEMENT_FRACTION * robot_length
+
+
+class TipSource:
+    """Chooses tracker or model tip per control tick; ``set_aside`` says why not the tracker."""
+
+    def __init__(self, bound):
+        self.bound = bound  # m
+        self.set_aside = ''  # the warning, once the tracker is set aside for this goal
+
+    def reset(self):
+        """Give the tracker its trust back (a new goal)."""
+        self.set_aside = ''
+
+    def judged(self, now, measured, measured_tips, model, model_tips, max_age, use_measured):
+        """(newest sample, recent samples, source name, new warning or '') to judge a goal on.
+
+        The tracker while it is fresh, wanted and within ``bound`` of the model's tip; else the
+        model's ``tip_pose``, on which the loop closes through the estimate of the lengths.
+        """
+        tracker = use_measured and measured is not None and measured.age(now) <= max_age
+        if not tracker or self.set_aside:
+            return model, model_tips, 'tip_pose', ''
+        if model is not None:
+            gap = float(np.linalg.norm(measured.position - model.position))
+            if gap > self.bound:
+                self.set_aside = (
+                    'tracker set aside: tip_pose_measured is %.1f mm from the model tip '
+                    '(tip_pose), more than tracker_max_disagreement %.1f mm (a frozen, biased '
+                    'or jumping tracker, or a wrong registration?); the goal continues on the '
+                    'model' % (gap * 1e3, self.bound * 1e3))
+                return model, model_tips, 'tip_pose', self.set_aside
+        return measured, measured_tips, 'tip_pose_measured', ''
