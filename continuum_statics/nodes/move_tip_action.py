@@ -10,23 +10,25 @@ newer goal from any source pre-empts it (aborted, "pre-empted"). The GetPlan ser
 
 Each goal is a coroutine that awaits its end (:mod:`~continuum_statics.nodes.waits`): however
 many goals wait, identical or not, none holds an executor thread. The goal, cancel and result
-services keep every request of a burst (depth ``REQUEST_DEPTH``; the default 10 dropped 38 of
-50 results of one client's burst).
+services keep every request of a burst (:data:`~continuum_statics.nodes.qos.ACTION_SERVICE_QOS`,
+depth 1000; a client sending bursts of more than 10 goals gives its ActionClient the same), and
+a result is kept ``RESULT_TIMEOUT`` after its goal ended (Kilted's default, 10 s, answered results
+asked for later with UNKNOWN; Jazzy's is 900 s).
 """
 import math
 import time
 
 import numpy as np
 from rclpy.action import ActionServer, CancelResponse, GoalResponse
-from rclpy.qos import QoSProfile, ReliabilityPolicy
 
 from continuum_statics.core.rotations import quaternion_to_rotation
+from continuum_statics.nodes.qos import ACTION_SERVICE_QOS
 from continuum_statics.nodes.ros_conversions import goal_position, set_pose
 
 #: Feedback rate while a goal runs, Hz.
 FEEDBACK_HZ = 10.0
-#: Requests queued per action service (goal, cancel, result) before the oldest are dropped.
-REQUEST_DEPTH = 1000
+#: How long the server keeps a result after its goal ended, s.
+RESULT_TIMEOUT = 900
 #: ``error`` and ``distance`` when no tip was judged, m.
 UNKNOWN = -1.0
 
@@ -46,14 +48,14 @@ class MoveTipServer:
     def __init__(self, node, action_type, callback_group):
         self.node = node
         self.action_type = action_type
-        requests = QoSProfile(depth=REQUEST_DEPTH, reliability=ReliabilityPolicy.RELIABLE)
         self.server = ActionServer(node, action_type, 'move_tip', self._execute,
                                    goal_callback=self._on_goal,
                                    cancel_callback=lambda _: CancelResponse.ACCEPT,
                                    callback_group=callback_group,
-                                   goal_service_qos_profile=requests,
-                                   result_service_qos_profile=requests,
-                                   cancel_service_qos_profile=requests)
+                                   goal_service_qos_profile=ACTION_SERVICE_QOS,
+                                   result_service_qos_profile=ACTION_SERVICE_QOS,
+                                   cancel_service_qos_profile=ACTION_SERVICE_QOS,
+                                   result_timeout=RESULT_TIMEOUT)
 
     def destroy(self):
         """Destroy the action server (node shutdown)."""

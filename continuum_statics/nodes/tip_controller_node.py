@@ -626,8 +626,8 @@ class TipControllerNode(Node):
 
     def _report(self, goal):
         """Count, log and put on diagnostics a goal that ended (under the lock)."""
-        if self._run.goal is None:
-            self._timer.cancel()
+        if self._run.goal is None and not self._teleop.active:
+            self._timer.cancel()  # nothing to control (teleoperation keeps it running)
         key = goal.outcome
         self._counts[key] += 1
         self._last_outcome = '%s (%.4f, %.4f, %.4f): %s' % (key, *goal.position, goal.reason)
