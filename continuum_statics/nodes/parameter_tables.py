@@ -27,14 +27,6 @@ def statics_parameters():
         diagnostics_rate_spec(),
         ParamSpec('path_samples', 20, 'poses in each backbone Path, base to tip', 2, 500),
         ParamSpec('marker_rate', 30.0, 'backbone_markers rate, Hz (0: off)', 0.0, 200.0),
-        ParamSpec('tracker_max_disagreement', 0.0, 'tip_pose_measured (a tracker) is set '
-                  'aside for the rest of a goal when it is further than this from the model '
-                  'tip, and the corrections of a goal add up to at most this, m (0: a tenth '
-                  'of the rod length; raise it for a robot not calibrated yet)', 0.0, 10.0),
-        ParamSpec('cable_driver_name', 'cable_driver', 'node name of the cable_driver in '
-                  'this namespace: its /diagnostics status tells when it refuses commands '
-                  '(goals then wait, fail or are rejected, naming the reason)',
-                  read_only=True),
         ParamSpec('tip_wrench_timeout', 1.0, 'a tip_wrench estimate older than this is '
                   'replaced by zero, s (0: never expires)', 0.0, 3600.0),
         ParamSpec('warn_residual', 1e-4, 'above this cable-length residual (RMS) the '
