@@ -240,10 +240,9 @@ class TipControllerNode(Node):
                                                             **{name: value})
             elif name == 'control_rate':
                 self.destroy_timer(self._timer)
+                # idle, it ticks once and stops itself (_on_control)
                 self._timer = steady_timer(self, 1.0 / value, self._on_control,
                                            callback_group=self._control_group)
-                if self._run.goal is None:
-                    self._timer.cancel()
 
     # -- state inputs ----------------------------------------------------------------------
     def _reject(self, kind, reason):
@@ -626,8 +625,6 @@ class TipControllerNode(Node):
 
     def _report(self, goal):
         """Count, log and put on diagnostics a goal that ended (under the lock)."""
-        if self._run.goal is None and not self._teleop.active:
-            self._timer.cancel()  # nothing to control (teleoperation keeps it running)
         key = goal.outcome
         self._counts[key] += 1
         self._last_outcome = '%s (%.4f, %.4f, %.4f): %s' % (key, *goal.position, goal.reason)
@@ -690,11 +687,15 @@ class TipControllerNode(Node):
                     self._problems.add('tip_twist', self._teleop.stopped)
                 if not self._teleop.active:
                     self._end_teleop(self._teleop.reason)
-                    if self._run.goal is None:
-                        self._timer.cancel()
             else:
                 commanded = self._control_goal(
                     now, min(elapsed, 3.0 / self._params['control_rate']))
+            if self._run.goal is None and not self._teleop.active:
+                # Nothing to control: the timer stops itself. Only ever here, in its own
+                # callback and under the lock that goal starts reset it under: a timer that
+                # another thread cancels between the executor's wait and its call raises in the
+                # executor (Jazzy's rclpy: "timer is canceled") and stops the node.
+                self._timer.cancel()
         if commanded is not None:
             self._publish_command(commanded)
 
