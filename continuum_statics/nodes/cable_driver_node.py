@@ -116,6 +116,7 @@ class CableDriverNode(LifecycleNode):
         self.backend = None  # created by configure, released by cleanup
         self._backend_options = options
         self._active = False
+        self._finalized = False  # after the shutdown transition
         self._ros_topics = None  # the command sender lent to a ROS-topic backend
         if not self.cable_names:
             # A passive rod (no cables): say it once, stay up, publish only diagnostics.
@@ -183,8 +184,9 @@ class CableDriverNode(LifecycleNode):
         return TransitionCallbackReturn.SUCCESS
 
     def on_shutdown(self, state):
-        """Power off and release, from any state."""
+        """Power off and release, from any state (finalized: no transition leads back)."""
         self._release()
+        self._finalized = True
         return TransitionCallbackReturn.SUCCESS
 
     def _switch_power(self, on):
@@ -304,6 +306,8 @@ class CableDriverNode(LifecycleNode):
 
     def _refusal(self):
         """Why commands cannot be carried out now, or ''."""
+        if self._finalized:
+            return 'cable_driver is shut down (lifecycle finalized): restart it'
         if not self._active:
             return 'cable_driver is %s (lifecycle): activate it to accept commands' % (
                 self._lifecycle_state())
@@ -497,6 +501,9 @@ class CableDriverNode(LifecycleNode):
                   'accepts_commands': not refusal, 'refusal': refusal}
         if not self.cable_names:
             level, message = diag.OK, 'robot has no cables: nothing to drive'
+        elif self._finalized:
+            level, message = diag.OK, ('shut down (lifecycle finalized): actuators released; '
+                                       'restart cable_driver to drive the cables')
         elif self.backend is None:
             level, message = diag.OK, ('unconfigured (lifecycle): configure and activate '
                                        'cable_driver to drive the cables')
@@ -549,7 +556,9 @@ class CableDriverNode(LifecycleNode):
         return super().destroy_node()
 
     def _lifecycle_state(self):
-        """'unconfigured', 'inactive' (configured) or 'active'."""
+        """'unconfigured', 'inactive' (configured), 'active' or 'finalized'."""
+        if self._finalized:
+            return 'finalized'
         if self._active:
             return 'active'
         return 'unconfigured' if self.backend is None else 'inactive'

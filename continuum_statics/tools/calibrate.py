@@ -33,6 +33,7 @@ import json
 import math
 import os
 import sys
+import time
 
 import numpy as np
 from scipy.optimize import least_squares
@@ -41,13 +42,21 @@ import yaml
 
 from continuum_statics import ConvergenceError, Robot, load_robot
 from continuum_statics.tools import run_calibration
-from continuum_statics.tools.recorded_run import add_column_arguments, column_map_from_args
+from continuum_statics.tools.recorded_run import (
+    add_column_arguments,
+    check_tip_units,
+    column_map_from_args,
+)
 
 FORCE_COLUMNS = ('tip_force_x', 'tip_force_y', 'tip_force_z')
 MOMENT_COLUMNS = ('tip_moment_x', 'tip_moment_y', 'tip_moment_z')
 TIP_COLUMNS = ('tip_x', 'tip_y', 'tip_z')
 #: Model tip error (m, each axis) of a row whose solve fails: large, so the fit moves away.
 FAILED_ROW_ERROR = 1.0
+#: A long fit prints a progress line this often, s (stderr).
+PROGRESS_S = 5.0
+#: A parameter whose 1-sigma exceeds this fraction of its bounds' width is not determined.
+UNDETERMINED = 0.5
 BASE_ANGLES = ('base_roll', 'base_pitch', 'base_yaw')
 
 
@@ -152,6 +161,8 @@ class Model:
             'youngs_modulus': rod.youngs_modulus, 'density': rod.density,
             'base_roll': 0.0, 'base_pitch': 0.0, 'base_yaw': 0.0, 'cable_offset_scale': 1.0}
         self.poisson_given = None  # set by calibrate() from the YAML (G follows E or not)
+        self.evaluations = 0
+        self._started = self._reported = time.monotonic()
 
     def values(self, x):
         """Map optimiser variables to parameter values in their units."""
@@ -219,6 +230,14 @@ class Model:
     def residuals(self, x):
         """Model minus measured tip positions, flattened (m)."""
         errors = self.tips(self.robot_for(self.values(x))) - self.data.tips
+        self.evaluations += 1
+        now = time.monotonic()
+        if now - self._reported >= PROGRESS_S:  # a long fit says it is alive (stderr)
+            self._reported = now
+            print('calibrate: %d model evaluations of %d rows, %.0f s, tip RMS %.3f mm'
+                  % (self.evaluations, len(errors), now - self._started,
+                     1e3 * math.sqrt(np.nanmean(np.sum(errors ** 2, axis=1)))),
+                  file=sys.stderr, flush=True)
         return np.nan_to_num(errors, nan=FAILED_ROW_ERROR).ravel()
 
 
@@ -263,8 +282,14 @@ def calibrate(robot_file, data_file, fit, output=None):
     if needs_cables and data.cable_lengths is None:
         raise ValueError('%s needs measured cable lengths: the data has no column per cable (%s)'
                          % (', '.join(needs_cables), ', '.join(robot.cable_names) or 'no cables'))
-    if len(data.tips) * 3 < len(fit):
-        raise ValueError('%d rows cannot determine %d parameters' % (len(data.tips), len(fit)))
+    check_tip_units(data.tips, robot.length, data_file, 'the tip columns are in m')
+    distinct = len(np.unique(np.column_stack([
+        data.tip_forces, data.tip_moments, data.tips,
+        *(() if data.cable_lengths is None else (data.cable_lengths,))]), axis=0))
+    if distinct < len(fit) + 1:
+        raise ValueError('%d distinct row(s) (of %d) cannot determine %d parameter(s) and their '
+                         'uncertainty: measure at least %d different tip loads or poses'
+                         % (distinct, len(data.tips), len(fit), len(fit) + 1))
     model = Model(robot, fit, data)
     model.poisson_given = 'shear_modulus' not in (document.get('rod') or {})
     before = model.tips(robot)
@@ -279,6 +304,15 @@ def calibrate(robot_file, data_file, fit, output=None):
     fitted_robot = model.robot_for(values)
     after = model.tips(fitted_robot)
     sigma = _standard_errors(result, model)
+    undetermined = [name for i, name in enumerate(fit)
+                    if not (sigma[i] <= UNDETERMINED * (highs[i] - lows[i]))]
+    if undetermined:  # a meaningless fit is never written
+        raise ValueError('the data do not determine %s (1-sigma %s, bounds %s): add rows with '
+                         'other tip loads or poses' % (
+                             ', '.join(undetermined),
+                             ', '.join('%.3g' % sigma[fit.index(n)] for n in undetermined),
+                             ', '.join('[%g, %g]' % (lows[fit.index(n)], highs[fit.index(n)])
+                                       for n in undetermined)))
     before_errors, after_errors = tip_errors(before, data.tips), tip_errors(after, data.tips)
     summary = {
         'robot': str(robot_file), 'data': str(data_file), 'rows': int(len(data.tips)),
@@ -451,6 +485,7 @@ def _run_report(summary):
         lines.append('held out %s: RMS %.2f mm (%.2f mm aligned), max %.2f mm' % (
             summary['validate'], summary['validate_rms'] * 1e3,
             summary['validate_rms_aligned'] * 1e3, summary['validate_max'] * 1e3))
+    lines.extend('note: ' + note for note in summary.get('notes', ()))
     if summary['output']:
         lines.append('wrote %s' % summary['output'])
     return '\n'.join(lines)

@@ -144,6 +144,20 @@ def read_recorded_run(path, cable_names, straight_lengths, column_map=ColumnMap(
     return _read_csv(path, cable_names, straight_lengths, column_map)
 
 
+def check_tip_units(tips, rod_length, source, option='--tip-scale 0.001'):
+    """ValueError when tips (m) spread further than one rod can reach: tips in mm, most likely.
+
+    Every tip of one robot lies within a rod length of its base, so no tip is further than
+    2 L from the median tip, whatever the tracker's frame.
+    """
+    tips = np.asarray(tips, dtype=float).reshape(-1, 3)
+    spread = float(np.max(np.linalg.norm(tips - np.median(tips, axis=0), axis=1)))
+    if spread > 2.0 * rod_length:
+        raise ValueError('%s: the tips spread over %.4g m, but a %.3g m rod reaches at most '
+                         '%.3g m from its base: are the tips in mm? (%s converts them)'
+                         % (source, spread, rod_length, rod_length, option))
+
+
 def _read_csv(path, cable_names, straight_lengths, columns):
     cable_columns = list(columns.cables or cable_names)
     if len(cable_columns) != len(cable_names):

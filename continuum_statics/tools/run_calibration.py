@@ -422,7 +422,7 @@ def calibrate_run(robot_file, data_file, fit_names, column_map, output=None, val
     :raises ValueError: unreadable files, unknown parameters, missing columns
     """
     from continuum_statics import load_robot
-    from continuum_statics.tools.recorded_run import read_recorded_run
+    from continuum_statics.tools.recorded_run import check_tip_units, read_recorded_run
 
     unknown = [name for name in fit_names if name not in RUN_PARAMETERS]
     if unknown:
@@ -431,8 +431,10 @@ def calibrate_run(robot_file, data_file, fit_names, column_map, output=None, val
     robot = load_robot(robot_file)
 
     def read(path):
-        return read_recorded_run(path, robot.cable_names, robot.straight_cable_lengths,
-                                 column_map, tip_topic)
+        run = read_recorded_run(path, robot.cable_names, robot.straight_cable_lengths,
+                                column_map, tip_topic)
+        check_tip_units(run.tips, robot.length, path)
+        return run
 
     run = read(data_file)
     held_out = read(validate) if validate else None
@@ -458,6 +460,7 @@ def calibrate_run(robot_file, data_file, fit_names, column_map, output=None, val
         'optimizer': {'success': bool(result.success), 'evaluations': int(result.nfev),
                       'message': str(result.message)},
         'seconds': round(time.monotonic() - began, 1),
+        'notes': _notes(_fitted(model, x)),
         'output': None if output is None else str(output),
     }
     if held_out is not None:
@@ -479,6 +482,21 @@ def _summary_errors(errors):
 
 def _fitted(model, x):
     return {name: np.atleast_1d(value).tolist() for name, value in model.values(x).items()}
+
+
+#: A capstan coefficient below this changes a tension by < 0.3 % over a half turn: none.
+NEGLIGIBLE_FRICTION = 1e-3
+
+
+def _notes(fitted):
+    """Return notes on fitted values that are not what they look like (e.g. friction ~ 0)."""
+    notes = []
+    friction = fitted.get('friction')
+    if friction is not None and max(friction) < NEGLIGIBLE_FRICTION:
+        notes.append('friction: the data show none (fitted %.2g; below %g the capstan effect '
+                     'is under 0.3 %% per half turn of wrap)' % (max(friction),
+                                                                NEGLIGIBLE_FRICTION))
+    return notes
 
 
 def write_run_robot_file(output, robot_file, robot, summary):

@@ -89,11 +89,18 @@ def solve_main(argv=None):
             '%s=%.6f' % item for item in zip(robot.cable_names, robot.cable_lengths(shape))))
     if estimate is not None:
         print('estimate: %s, cable length residual %.3g m, %d iterations%s' % (
-            'converged' if estimate.converged else 'NOT converged', estimate.residual,
-            estimate.iterations, (': ' + estimate.message) if estimate.message else ''))
+            _estimate_status(estimate), estimate.residual, estimate.iterations,
+            (': ' + estimate.message) if estimate.message else ''))
     if args.plot:
         print('backbone drawn in %s' % args.plot)
     return 0
+
+
+def _estimate_status(estimate):
+    """Return one status: a converged best fit of inconsistent lengths is not an exact shape."""
+    if not estimate.converged:
+        return 'NOT converged'
+    return 'best fit (no exact shape)' if 'fit no shape' in estimate.message else 'converged'
 
 
 def _plot(args, robot, shape):
