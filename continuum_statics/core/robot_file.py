@@ -402,6 +402,43 @@ def _tendons(rows):
     return Tendons(**{key: _frozen(value) for key, value in arrays.items()})
 
 
+#: Tendon plausibility (robot file errors, not warnings: the model would run and mislead).
+#: EA of a steel bar 25 cm across, N: anything stiffer is an inextensible cable (give no
+#: stiffness; the inextensible-limit tests use 1e9).
+MAX_TENDON_STIFFNESS = 1e10
+#: EA below this, N, or below the upper tension limit (the cable would double its length
+#: there) is no cable a robot pulls with.
+MIN_TENDON_STIFFNESS = 1.0
+#: |zero_offset| above this fraction of the rod length is a homing error, not an offset.
+MAX_ZERO_OFFSET_FRACTION = 0.1
+
+
+def _check_tendons(rows, names, rod_length):
+    """ValueError for tendon values that contradict each other or the rod, naming the cable."""
+    for name, values in zip(names, rows):
+        field = 'cable %r' % name
+        limits = values.get('tension_limits', (0.0, math.inf))
+        stiffness = values.get('stiffness')
+        if stiffness is not None:
+            low = max(MIN_TENDON_STIFFNESS, limits[1] if math.isfinite(limits[1]) else 0.0)
+            if not low <= stiffness <= MAX_TENDON_STIFFNESS:
+                raise ValueError('%s: tendons stiffness (EA) %g N is outside [%g, %g] N: below it '
+                                 'the cable would double its length at its tension limit, above '
+                                 'it give no stiffness (an inextensible cable)'
+                                 % (field, stiffness, low, MAX_TENDON_STIFFNESS))
+        pretension = values.get('pretension', 0.0)
+        if not limits[0] <= pretension <= limits[1]:
+            raise ValueError('%s: tendons pretension %g N is outside tension_limits [%g, %g] N '
+                             '(every solve would report it over a limit)'
+                             % (field, pretension, limits[0], limits[1]))
+        offset = values.get('zero_offset', 0.0)
+        if abs(offset) > MAX_ZERO_OFFSET_FRACTION * rod_length:
+            raise ValueError('%s: zero_offset %g m is more than %g of the %g m rod: a homing '
+                             'error, not an offset (re-home the cable, or calibrate --fit '
+                             'cable_zero)' % (field, offset, MAX_ZERO_OFFSET_FRACTION,
+                                              rod_length))
+
+
 def _tendon_warnings(rows, names):
     """Warnings for tendon values no real robot has (the model still runs)."""
     warnings = []
@@ -446,6 +483,7 @@ def parse_robot_description(data, source='robot file'):
     defaults = _tendon_block(data.get('tendons'), 'tendons')
     tendon_rows = []
     sections, names, offsets, limits = _parse_sections(data, rod.length, tendon_rows, defaults)
+    _check_tendons(tendon_rows, names, rod.length)
     model = data.get('cable_model', 'point_moment')
     if model not in CABLE_MODELS:
         raise ValueError('cable_model must be one of %s, got %r'
