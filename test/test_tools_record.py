@@ -233,3 +233,55 @@ def test_duration_namespace_filter_and_topic_list(harness, tmp_path):
     assert read_counts(tmp_path / 'all') == {t: n for t, n in counts.items() if n}
     with pytest.raises(ValueError, match='exists already'):
         record(tmp_path / 'all', duration=0.1, namespace=namespace)
+
+
+def test_move_tip_feedback_and_status_are_recorded_and_read_back(harness, tmp_path):
+    """The package's own action topics: feedback (MoveTip_FeedbackMessage) and status.
+
+    Before: 'not recording .../move_tip/_action/feedback: no message definition installed'.
+    """
+    from rclpy.action import ActionClient
+
+    from continuum_statics.nodes.cable_driver_node import CableDriverNode
+    from continuum_statics.nodes.statics_node import StaticsNode
+    from continuum_statics.nodes.tip_controller_node import TipControllerNode
+    from continuum_statics.tools.record import record
+
+    MoveTip = pytest.importorskip('continuum_statics_interfaces.action').MoveTip
+    harness.add(StaticsNode, marker_rate=0.0)
+    harness.add(CableDriverNode)
+    harness.add(TipControllerNode, max_cable_speed=0.01)  # a ramp long enough to record
+    node = harness.client()
+    action = ActionClient(node, MoveTip, 'move_tip')
+    assert action.wait_for_server(timeout_sec=10.0)
+    namespace = harness.namespace.strip('/')
+    feedback_topic = '/%s/move_tip/_action/feedback' % namespace
+    status_topic = '/%s/move_tip/_action/status' % namespace
+    logged, results = [], []
+
+    def send_when_subscribed(text):
+        logged.append(text)
+        if text.startswith('record: recording %s ' % feedback_topic):
+            goal = MoveTip.Goal(tolerance=1e-3)
+            goal.target.header.frame_id = 'base_link'
+            p = goal.target.pose.position
+            p.x, p.y, p.z = (float(v) for v in ROBOT.solve_ivp([2.0, -1.0, 0.0]).tip_position)
+            goal.target.pose.orientation.w = 1.0
+            future = action.send_goal_async(goal)
+            future.add_done_callback(
+                lambda f: f.result().get_result_async().add_done_callback(results.append))
+
+    # the action's topics exist once the server does: the recorder subscribes at its start
+    record(tmp_path / 'bag', duration=30.0, namespace=namespace, log=send_when_subscribed,
+           stop_requested=lambda: bool(results))
+    assert not [line for line in logged if 'not recording' in line], logged
+    counts = read_counts(tmp_path / 'bag')
+    assert counts.get(feedback_topic, 0) >= 3, counts
+    assert counts.get(status_topic, 0) >= 1, counts
+    with AnyReader([tmp_path / 'bag']) as reader:
+        connections = [c for c in reader.connections if c.topic == feedback_topic]
+        distances = [reader.deserialize(raw, c.msgtype).feedback.distance
+                     for c, _, raw in reader.messages(connections=connections)]
+    assert connections[0].msgtype == 'continuum_statics_interfaces/action/MoveTip_FeedbackMessage'
+    known = [d for d in distances if d >= 0.0]
+    assert known and known[0] > known[-1], distances  # the tip got closer

@@ -73,14 +73,7 @@ def register_type(typestore, msgtype):
         name = pending.pop()
         if name in typestore.fielddefs:
             continue
-        package, _, short = name.split('/')
-        for share in _interface_dirs():
-            path = share / package / 'msg' / (short + '.msg')
-            if path.is_file():
-                break
-        else:
-            raise ValueError('no message definition for %s installed' % name)
-        types = get_types_from_msg(path.read_text(encoding='utf-8'), name)
+        types = get_types_from_msg(_definition(name), name)
         missing = set()
         for _, fields in types.values():
             for _, (kind, detail) in fields:
@@ -92,6 +85,51 @@ def register_type(typestore, msgtype):
             pending.extend(sorted(missing))
             continue
         typestore.register(types)
+
+
+#: The message types rosidl makes of an action ``A`` and where their fields come from: the
+#: parts of ``A.action`` (goal --- result --- feedback) or the feedback topic's wrapper. The
+#: wrapper's feedback field is named ``pkg/msg/A_Feedback`` in a bag's definitions (rosbags
+#: writes nested definitions of /msg/ types only; the bytes and every reader's decoding are
+#: the same).
+ACTION_PARTS = {'_Goal': 0, '_Result': 1, '_Feedback': 2}
+FEEDBACK_MESSAGE = ('unique_identifier_msgs/UUID goal_id\n'
+                    '%s/msg/%s_Feedback feedback\n')
+
+
+def _definition(msgtype):
+    """Return the text of an installed message definition.
+
+    ``pkg/msg/Name`` from its .msg file; an action's topic types (``pkg/action/A_Feedback
+    Message`` and its parts) from ``A.action``.
+
+    :raises ValueError: when none is installed
+    """
+    package, kind, short = msgtype.split('/')
+    if kind == 'action' and short.endswith('_FeedbackMessage'):
+        action = short[:-len('_FeedbackMessage')]
+        _installed(package, 'action', action + '.action', msgtype)
+        return FEEDBACK_MESSAGE % (package, action)
+    if kind == 'msg':
+        try:
+            return _installed(package, 'msg', short + '.msg', msgtype)
+        except ValueError:
+            if not short.endswith(tuple(ACTION_PARTS)):
+                raise
+    for suffix, part in ACTION_PARTS.items():
+        if short.endswith(suffix):
+            text = _installed(package, 'action', short[:-len(suffix)] + '.action', msgtype)
+            return text.split('\n---')[part]
+    raise ValueError('no message definition for %s installed' % msgtype)
+
+
+def _installed(package, kind, filename, msgtype):
+    """Text of ``share/<package>/<kind>/<filename>`` of the first prefix that has it."""
+    for share in _interface_dirs():
+        path = share / package / kind / filename
+        if path.is_file():
+            return path.read_text(encoding='utf-8')
+    raise ValueError('no message definition for %s installed' % msgtype)
 
 
 def _nested_names(kind, detail):
@@ -109,7 +147,11 @@ def _nested_names(kind, detail):
 def message_class(msgtype):
     """Return the message class of 'pkg/msg/Name' (raw subscriptions need it too)."""
     package, kind, name = msgtype.split('/')
-    return getattr(importlib.import_module('%s.%s' % (package, kind)), name)
+    module = importlib.import_module('%s.%s' % (package, kind))
+    if kind == 'action' and not hasattr(module, name):  # A_FeedbackMessage: A.Impl's
+        action, _, part = name.partition('_')
+        return getattr(getattr(module, action).Impl, part)
+    return getattr(module, name)
 
 
 def wanted(topic, namespace, topics):
