@@ -11,7 +11,8 @@ REQUIREMENTS=${REQUIREMENTS:-requirements.txt}
 stamp=$VENV/.installed
 want=$(cat "$REQUIREMENTS" setup.py package.xml scripts/build_interfaces.sh \
   continuum_statics_interfaces/CMakeLists.txt continuum_statics_interfaces/package.xml \
-  continuum_statics_interfaces/action/*.action | sha256sum | cut -d' ' -f1)
+  continuum_statics_interfaces/action/*.action vendor/tf2_msgs/CMakeLists.txt \
+  vendor/tf2_msgs/package.xml vendor/tf2_msgs/msg/*.msg | sha256sum | cut -d' ' -f1)
 if [ -f "$stamp" ] && [ "$(cat "$stamp")" = "$want" ]; then
   exit 0
 fi
@@ -25,6 +26,9 @@ fi
 "$VENV/bin/python" -m pip install --quiet --no-deps -e .
 # The MoveTip action (continuum_statics_interfaces) with plain cmake into the venv prefix.
 scripts/build_interfaces.sh "$VENV"
+# tf2_msgs (TFMessage, for /tf) has no wheel: the same route builds vendor/tf2_msgs unless the
+# venv already has it (a ROS installation's, or a wheel one day).
+"$VENV/bin/python" -c 'import tf2_msgs' 2>/dev/null || scripts/build_interfaces.sh "$VENV" vendor/tf2_msgs
 # Compile the numba kernels once into their cache (__pycache__ in the source tree, or
 # NUMBA_CACHE_DIR): every later process loads them in ~0.1 s instead of compiling for ~20 s.
 "$VENV/bin/python" -m continuum_statics warmup

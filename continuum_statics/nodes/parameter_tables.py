@@ -27,6 +27,12 @@ def statics_parameters():
         diagnostics_rate_spec(),
         ParamSpec('path_samples', 20, 'poses in each backbone Path, base to tip', 2, 500),
         ParamSpec('marker_rate', 30.0, 'backbone_markers rate, Hz (0: off)', 0.0, 200.0),
+        ParamSpec('publish_tf', True, "publish the robot's frames on /tf at the backbone rate "
+                  '(tip, section ends; base frame -> each)', read_only=True),
+        ParamSpec('tip_frame_id', '', "the tip's frame on /tf (empty: <robot name>_tip)",
+                  read_only=True),
+        ParamSpec('tf_disks', False, 'also one /tf frame per guide disk (<robot name>_disk_<i>)',
+                  read_only=True),
         ParamSpec('tip_wrench_timeout', 1.0, 'a tip_wrench estimate older than this is '
                   'replaced by zero, s (0: never expires)', 0.0, 3600.0),
         ParamSpec('warn_residual', 1e-4, 'above this cable-length residual (RMS) the '

@@ -1,4 +1,4 @@
-"""Backbone and tip pose serialized straight to CDR from a template (no message objects)."""
+"""Backbone, tip pose and /tf serialized straight to CDR from a template (no message objects)."""
 import numpy as np
 
 
@@ -53,6 +53,53 @@ class PoseSequenceEncoder:
         return bytes(self._buffer)
 
 
+class TransformEncoder:
+    """Serialize a tf2_msgs/TFMessage of ``parent`` -> each of ``children`` straight to CDR.
+
+    The same template approach as :class:`PoseSequenceEncoder` (a geometry_msgs/Transform has
+    the layout of a Pose: translation, then rotation [x, y, z, w]); every transform carries one
+    stamp.
+
+    :param parent: frame of every header, e.g. the base frame
+    :param children: child frame ids, in the order of the poses given to :meth:`encode`
+    """
+
+    def __init__(self, parent, children):
+        self.parent = parent
+        self.children = tuple(children)
+        writer = _CdrTemplate()
+        writer.uint32(len(self.children))
+        stamps, doubles = [], []
+        for child in self.children:
+            stamps.append(writer.header(parent))
+            writer.string(child)
+            doubles.append(writer.pose())
+        self._buffer = writer.buffer
+        body = memoryview(self._buffer)[4:]
+        self._int32 = np.frombuffer(body[:len(body) // 4 * 4], dtype='<i4')
+        self._uint32 = np.frombuffer(body[:len(body) // 4 * 4], dtype='<u4')
+        self._float64 = np.frombuffer(body[:len(body) // 8 * 8], dtype='<f8')
+        self._sec = np.array(stamps, dtype=np.intp) // 4
+        self._nanosec = self._sec + 1
+        self._poses = np.array(doubles, dtype=np.intp).reshape(-1, 1) // 8 + np.arange(7)
+
+    def encode(self, sec, nanosec, translations, quaternions):
+        """Return the serialized TFMessage for one stamp, (n, 3) m and (n, 4) [x, y, z, w].
+
+        :raises ValueError: on a non-finite value or a wrong number of transforms
+        """
+        values = np.hstack([np.reshape(translations, (-1, 3)), np.reshape(quaternions, (-1, 4))])
+        if values.shape[0] != len(self.children):
+            raise ValueError('expected %d transforms, got %d'
+                             % (len(self.children), values.shape[0]))
+        if not np.all(np.isfinite(values)):
+            raise ValueError('refusing to publish non-finite transforms')
+        self._int32[self._sec] = sec
+        self._uint32[self._nanosec] = nanosec
+        self._float64[self._poses] = values
+        return bytes(self._buffer)
+
+
 class _CdrTemplate:
     """Little-endian XCDR1 writer that records where stamps and poses go (offsets from origin)."""
 
@@ -71,10 +118,14 @@ class _CdrTemplate:
         self._align(4)
         offset = len(self.buffer) - 4
         self.buffer.extend(b'\x00' * 8)
-        encoded = frame_id.encode('utf-8') + b'\x00'
+        self.string(frame_id)
+        return offset
+
+    def string(self, text):
+        """Write a CDR string (length with the terminating NUL, then the bytes)."""
+        encoded = text.encode('utf-8') + b'\x00'
         self.uint32(len(encoded))
         self.buffer.extend(encoded)
-        return offset
 
     def pose(self):
         """Write an identity geometry_msgs/Pose; return the offset of its first double."""

@@ -15,3 +15,6 @@ COMMAND_QOS = QoSProfile(depth=10, reliability=ReliabilityPolicy.RELIABLE)
 #: queues instead of overflowing (ROS's default depth 10 lost 11 of 50 answers of a client's
 #: burst even with the server keeping up; a client that sends bursts passes this too).
 ACTION_SERVICE_QOS = QoSProfile(depth=1000, reliability=ReliabilityPolicy.RELIABLE)
+#: /tf as tf2_ros's TransformBroadcaster offers it: reliable, depth 100, volatile.
+TF_QOS = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=100,
+                    reliability=ReliabilityPolicy.RELIABLE, durability=DurabilityPolicy.VOLATILE)

@@ -42,7 +42,7 @@ import sys
 import time
 
 from builtin_interfaces.msg import Time
-from geometry_msgs.msg import PoseStamped, WrenchStamped
+from geometry_msgs.msg import PoseStamped, TransformStamped, WrenchStamped
 from nav_msgs.msg import Path
 import numpy as np
 from rclpy.node import Node
@@ -72,9 +72,10 @@ from continuum_statics.nodes.node_params import (
     tip_wrench_limits,
 )
 from continuum_statics.nodes.parameter_tables import statics_parameters
-from continuum_statics.nodes.pose_encoder import PoseSequenceEncoder
-from continuum_statics.nodes.qos import LATCHED_QOS, LATEST_SENSOR_QOS
+from continuum_statics.nodes.pose_encoder import PoseSequenceEncoder, TransformEncoder
+from continuum_statics.nodes.qos import LATCHED_QOS, LATEST_SENSOR_QOS, TF_QOS
 from continuum_statics.nodes.ros_conversions import cable_index, tip_load
+from continuum_statics.nodes.tf_frames import FramePoses, frames, marker_frame
 from continuum_statics.nodes.timers import steady_timer
 
 THROTTLE_S = 2.0
@@ -143,6 +144,7 @@ class StaticsNode(Node):
 
         self._backbone_pub = self.create_publisher(Path, 'backbone', LATCHED_QOS)
         self._tip_pub = self.create_publisher(PoseStamped, 'tip_pose', LATCHED_QOS)
+        self._tf = self._make_tf() if self._params['publish_tf'] else None
         self._marker_pub = self.create_publisher(MarkerArray, 'backbone_markers', LATCHED_QOS)
         input_qos = QoSProfile(history=HistoryPolicy.KEEP_LAST,
                                depth=self._params['input_queue_depth'],
@@ -329,11 +331,16 @@ class StaticsNode(Node):
         try:
             backbone = self._path_encoder.encode(sec, nanosec, points, quaternions)
             tip = self._tip_encoder.encode(sec, nanosec, points[-1], quaternions[-1])
+            if self._tf is not None:
+                publisher, encoder, poses = self._tf
+                transforms = encoder.encode(sec, nanosec, *poses.of(shape))
         except ValueError as error:
             self._reject('shape', error)
             return False
         self._backbone_pub.publish(backbone)
         self._tip_pub.publish(tip)
+        if self._tf is not None:
+            publisher.publish(transforms)
         self._stamp = (sec, nanosec)
         self._tip_position = points[-1]
         self._shape, self._shape_is_new = shape, True
@@ -341,6 +348,29 @@ class StaticsNode(Node):
         return True
 
     # -- outputs ---------------------------------------------------------------------------
+    def _make_tf(self):
+        """Return the publisher, encoder and frame poses of /tf (:mod:`~.tf_frames`), or None."""
+        try:
+            from tf2_msgs.msg import TFMessage
+        except ImportError:
+            self.get_logger().warning('tf2_msgs is not installed: no /tf (make venv builds it; '
+                                      'on a robot computer rosdep installs it)')
+            return None
+        names, arc_lengths = frames(self.robot, self._params['tip_frame_id'],
+                                    self._params['tf_disks'])
+        marker = np.asarray(self.robot.tip_marker, dtype=float)
+        if marker.any():  # the tracker's marker: fixed on the tip frame, /tf_static (latched)
+            static = TransformStamped(child_frame_id=marker_frame(names[0]))
+            static.header.frame_id = names[0]
+            static.header.stamp = self.get_clock().now().to_msg()
+            t = static.transform.translation
+            t.x, t.y, t.z = (float(v) for v in marker)
+            static.transform.rotation.w = 1.0
+            self._tf_static = self.create_publisher(TFMessage, '/tf_static', LATCHED_QOS)
+            self._tf_static.publish(TFMessage(transforms=[static]))
+        return (self.create_publisher(TFMessage, '/tf', TF_QOS),
+                TransformEncoder(self.base_frame_id, names), FramePoses(arc_lengths))
+
     def _publish_markers(self):
         if not self._shape_is_new:
             return
