@@ -93,3 +93,14 @@ def test_the_interfaces_package_is_an_ament_cmake_interface_package_the_node_dep
             if part.split('#')[0].strip()] == [
         ['geometry_msgs/PoseStamped', 'target'], ['bool', 'use_direction'],
         ['float64', 'tolerance']]
+
+
+def test_tf2_msgs_is_declared_and_the_vendored_copy_is_the_upstream_message():
+    """The manifest brings tf2_msgs and tf2_ros; the vendored TFMessage is never colcon-built."""
+    assert {'tf2_msgs', 'tf2_ros'} <= manifest_keys()
+    vendor = REPO / 'vendor'
+    assert (vendor / 'COLCON_IGNORE').is_file()
+    root = ElementTree.parse(vendor / 'tf2_msgs' / 'package.xml').getroot()
+    assert root.findtext('name') == 'tf2_msgs'
+    assert (vendor / 'tf2_msgs' / 'msg' / 'TFMessage.msg').read_text().split() == [
+        'geometry_msgs/TransformStamped[]', 'transforms']
