@@ -40,3 +40,9 @@ def test_launch_file_starts_rviz2_with_the_config_on_request():
     assert 'continuum_robot.rviz' in constants[0]
     assert "executable='rviz2'" in text and "'-d'" in text
     assert "glob('config/*.rviz')" in (REPO / 'setup.py').read_text()
+
+
+def test_rviz_config_shows_the_tf_frames():
+    _, by_class = displays()
+    display = by_class['rviz_default_plugins/TF']
+    assert display['Enabled'] and display['Show Axes'] and display['Show Names']

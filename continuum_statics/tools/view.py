@@ -11,6 +11,7 @@ Works wherever the page opens: no RViz needed.
 import argparse
 from collections import deque
 import math
+import re
 import sys
 import threading
 import time
@@ -37,6 +38,7 @@ class LiveState:
         self.tensions = {}  # cable name -> N
         self.trail = deque(maxlen=TRAIL)
         self.goal = None  # (3,) m
+        self.frames = {}  # section-end frames from /tf: child id -> (position (3,), xyzw (4,))
         self.statuses = {}  # node -> (level, message)
         self.version = 0
 
@@ -107,6 +109,16 @@ def ros_thread(namespace, state, outbox, stop):
         if point is not None:
             state.update(goal=point)
 
+    def on_tf(msg):
+        frames = dict(state.frames)
+        for transform in msg.transforms:
+            if re.search(r'_section_\d+$', transform.child_frame_id):
+                t, q = transform.transform.translation, transform.transform.rotation
+                pose = _finite((t.x, t.y, t.z, q.x, q.y, q.z, q.w))
+                if pose is not None:
+                    frames[transform.child_frame_id] = (pose[:3], pose[3:])
+        state.update(frames=frames)
+
     def on_diagnostics(msg):
         statuses = dict(state.statuses)
         for status in msg.status:
@@ -121,6 +133,13 @@ def ros_thread(namespace, state, outbox, stop):
     node.create_subscription(PoseStamped, 'tip_pose', on_tip, LATCHED_QOS)
     node.create_subscription(PoseStamped, 'tip_goal_active', on_goal, LATCHED_QOS)
     node.create_subscription(DiagnosticArray, '/diagnostics', on_diagnostics, 10)
+    try:  # the section ends on /tf (statics publishes them; tf2_msgs is built by make venv)
+        from tf2_msgs.msg import TFMessage
+
+        from continuum_statics.nodes.qos import TF_QOS
+        node.create_subscription(TFMessage, '/tf', on_tf, TF_QOS)
+    except ImportError:
+        pass
     goals = node.create_publisher(PoseStamped, 'tip_goal_pose', COMMAND_QOS)
     executor = rclpy.executors.SingleThreadedExecutor(context=context)
     executor.add_node(node)
@@ -204,6 +223,7 @@ class Page:
             disks, cables = list(state.disks), list(state.cables)
             tensions, trail = dict(state.tensions), np.array(state.trail)
             goal, statuses = state.goal, dict(state.statuses)
+            frames = dict(state.frames)
         scene = self.server.scene
         if backbone is not None:
             segments = np.stack([backbone[:-1], backbone[1:]], axis=1)
@@ -224,6 +244,9 @@ class Page:
             segments = np.stack([points[:-1], points[1:]], axis=1)
             scene.add_line_segments('/robot/cable_%d' % index, segments, tuple(colour),
                                     thickness=0.0015)
+        for child, (position, (x, y, z, w)) in frames.items():
+            scene.add_frame('/robot/frames/' + child, wxyz=(w, x, y, z), position=tuple(position),
+                            axes_length=0.025, axes_radius=0.0012)
         if len(trail) >= 2:
             scene.add_point_cloud('/trail', trail, (40, 120, 220), point_size=0.003)
         if goal is not None:
