@@ -18,12 +18,10 @@ asked for later with UNKNOWN; Jazzy's is 900 s).
 import math
 import time
 
-import numpy as np
 from rclpy.action import ActionServer, CancelResponse, GoalResponse
 
-from continuum_statics.core.rotations import quaternion_to_rotation
 from continuum_statics.nodes.qos import ACTION_SERVICE_QOS
-from continuum_statics.nodes.ros_conversions import goal_position, set_pose
+from continuum_statics.nodes.ros_conversions import goal_direction, goal_position, set_pose
 
 #: Feedback rate while a goal runs, Hz.
 FEEDBACK_HZ = 10.0
@@ -71,16 +69,11 @@ class MoveTipServer:
                                 'tolerance %g' % values)
         return GoalResponse.REJECT
 
-    def _direction(self, request):
+    @staticmethod
+    def _direction(request):
         if not request.use_direction:
             return None
-        q = request.target.pose.orientation
-        quaternion = np.array([q.x, q.y, q.z, q.w])
-        norm = float(np.linalg.norm(quaternion))
-        if not abs(norm - 1.0) < 1e-3:
-            raise ValueError('use_direction but the target orientation is not a unit '
-                             'quaternion (norm %.3g)' % norm)
-        return quaternion_to_rotation(quaternion / norm)[:, 2]
+        return goal_direction(request.target, 'use_direction', 'target')
 
     async def _execute(self, handle):
         node = self.node

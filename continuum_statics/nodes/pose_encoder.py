@@ -2,7 +2,32 @@
 import numpy as np
 
 
-class PoseSequenceEncoder:
+class _StampedPoses:
+    """A CDR template with stamps and 7-double poses at known offsets, filled per message."""
+
+    def _bind(self, writer, stamps, doubles):
+        self._buffer = writer.buffer
+        body = memoryview(self._buffer)[4:]
+        self._int32 = np.frombuffer(body[:len(body) // 4 * 4], dtype='<i4')
+        self._uint32 = np.frombuffer(body[:len(body) // 4 * 4], dtype='<u4')
+        self._float64 = np.frombuffer(body[:len(body) // 8 * 8], dtype='<f8')
+        self._sec = np.array(stamps, dtype=np.intp) // 4
+        self._nanosec = self._sec + 1
+        self._poses = np.array(doubles, dtype=np.intp).reshape(-1, 1) // 8 + np.arange(7)
+
+    def _fill(self, sec, nanosec, positions, quaternions):
+        values = np.hstack([np.reshape(positions, (-1, 3)), np.reshape(quaternions, (-1, 4))])
+        if values.shape[0] != self._poses.shape[0]:
+            raise ValueError('expected %d poses, got %d' % (self._poses.shape[0], values.shape[0]))
+        if not np.all(np.isfinite(values)):
+            raise ValueError('refusing to publish non-finite poses')
+        self._int32[self._sec] = sec
+        self._uint32[self._nanosec] = nanosec
+        self._float64[self._poses] = values
+        return bytes(self._buffer)
+
+
+class PoseSequenceEncoder(_StampedPoses):
     """Serialize a nav_msgs/Path or geometry_msgs/PoseStamped straight to CDR bytes.
 
     rclpy spends ~0.2 ms converting a 20-pose Path object to C before publishing it; the layout of
@@ -28,32 +53,17 @@ class PoseSequenceEncoder:
             for _ in range(count):
                 stamps.append(writer.header(frame_id))
                 doubles.append(writer.pose())
-        self._buffer = writer.buffer
-        body = memoryview(self._buffer)[4:]
-        self._int32 = np.frombuffer(body[:len(body) // 4 * 4], dtype='<i4')
-        self._uint32 = np.frombuffer(body[:len(body) // 4 * 4], dtype='<u4')
-        self._float64 = np.frombuffer(body[:len(body) // 8 * 8], dtype='<f8')
-        self._sec = np.array(stamps, dtype=np.intp) // 4
-        self._nanosec = self._sec + 1
-        self._poses = np.array(doubles, dtype=np.intp).reshape(-1, 1) // 8 + np.arange(7)
+        self._bind(writer, stamps, doubles)
 
     def encode(self, sec, nanosec, positions, quaternions):
         """Return the serialized message for one stamp and (count, 3) / (count, 4) arrays.
 
         :raises ValueError: on a non-finite value or a wrong number of poses
         """
-        values = np.hstack([np.reshape(positions, (-1, 3)), np.reshape(quaternions, (-1, 4))])
-        if values.shape[0] != self._poses.shape[0]:
-            raise ValueError('expected %d poses, got %d' % (self._poses.shape[0], values.shape[0]))
-        if not np.all(np.isfinite(values)):
-            raise ValueError('refusing to publish non-finite poses')
-        self._int32[self._sec] = sec
-        self._uint32[self._nanosec] = nanosec
-        self._float64[self._poses] = values
-        return bytes(self._buffer)
+        return self._fill(sec, nanosec, positions, quaternions)
 
 
-class TransformEncoder:
+class TransformEncoder(_StampedPoses):
     """Serialize a tf2_msgs/TFMessage of ``parent`` -> each of ``children`` straight to CDR.
 
     The same template approach as :class:`PoseSequenceEncoder` (a geometry_msgs/Transform has
@@ -74,30 +84,14 @@ class TransformEncoder:
             stamps.append(writer.header(parent))
             writer.string(child)
             doubles.append(writer.pose())
-        self._buffer = writer.buffer
-        body = memoryview(self._buffer)[4:]
-        self._int32 = np.frombuffer(body[:len(body) // 4 * 4], dtype='<i4')
-        self._uint32 = np.frombuffer(body[:len(body) // 4 * 4], dtype='<u4')
-        self._float64 = np.frombuffer(body[:len(body) // 8 * 8], dtype='<f8')
-        self._sec = np.array(stamps, dtype=np.intp) // 4
-        self._nanosec = self._sec + 1
-        self._poses = np.array(doubles, dtype=np.intp).reshape(-1, 1) // 8 + np.arange(7)
+        self._bind(writer, stamps, doubles)
 
     def encode(self, sec, nanosec, translations, quaternions):
         """Return the serialized TFMessage for one stamp, (n, 3) m and (n, 4) [x, y, z, w].
 
         :raises ValueError: on a non-finite value or a wrong number of transforms
         """
-        values = np.hstack([np.reshape(translations, (-1, 3)), np.reshape(quaternions, (-1, 4))])
-        if values.shape[0] != len(self.children):
-            raise ValueError('expected %d transforms, got %d'
-                             % (len(self.children), values.shape[0]))
-        if not np.all(np.isfinite(values)):
-            raise ValueError('refusing to publish non-finite transforms')
-        self._int32[self._sec] = sec
-        self._uint32[self._nanosec] = nanosec
-        self._float64[self._poses] = values
-        return bytes(self._buffer)
+        return self._fill(sec, nanosec, translations, quaternions)
 
 
 class _CdrTemplate:

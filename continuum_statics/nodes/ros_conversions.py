@@ -11,6 +11,8 @@ from geometry_msgs.msg import PoseStamped
 import numpy as np
 from sensor_msgs.msg import JointState
 
+from continuum_statics.core.rotations import quaternion_to_rotation
+
 #: Quaternion of the identity rotation, [x, y, z, w].
 IDENTITY_QUATERNION = (0.0, 0.0, 0.0, 1.0)
 
@@ -157,6 +159,22 @@ def goal_position(pose_stamped, base_frame_id):
         raise ValueError('the tip goal has a non-finite number: position (%g, %g, %g), '
                          'orientation (%g, %g, %g, %g)' % values)
     return np.array(values[:3])
+
+
+def goal_direction(pose_stamped, asked, what='goal'):
+    """Return the tip direction goal of a goal pose: the unit z axis of its orientation.
+
+    :param asked: what asked for a direction, for the error (e.g. 'use_direction')
+    :param what: the pose's name in the error ('goal', 'target')
+    :raises ValueError: when the orientation is not a unit quaternion (within 1e-3)
+    """
+    q = pose_stamped.pose.orientation
+    quaternion = np.array([q.x, q.y, q.z, q.w])
+    norm = float(np.linalg.norm(quaternion))
+    if not abs(norm - 1.0) < 1e-3:
+        raise ValueError('%s but the %s orientation is not a unit quaternion (norm %.3g)'
+                         % (asked, what, norm))
+    return quaternion_to_rotation(quaternion / norm)[:, 2]
 
 
 def set_pose(pose, position, quaternion):

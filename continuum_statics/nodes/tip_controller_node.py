@@ -86,6 +86,7 @@ from continuum_statics.nodes.qos import COMMAND_QOS, LATCHED_QOS, LATEST_SENSOR_
 from continuum_statics.nodes.ros_conversions import (
     cable_index,
     float32_value,
+    goal_direction,
     goal_position,
     joint_state,
     pose_position,
@@ -520,13 +521,7 @@ class TipControllerNode(Node):
         """Tip direction goal (unit z axis of the goal orientation), or None when ignored."""
         if self._params['goal_orientation'] != 'direction':
             return None
-        q = pose_stamped.pose.orientation
-        quaternion = np.array([q.x, q.y, q.z, q.w])
-        norm = float(np.linalg.norm(quaternion))
-        if not abs(norm - 1.0) < 1e-3:
-            raise ValueError('goal_orientation is direction but the goal orientation is not a '
-                             'unit quaternion (norm %.3g)' % norm)
-        return quaternion_to_rotation(quaternion / norm)[:, 2]
+        return goal_direction(pose_stamped, 'goal_orientation is direction')
 
     async def start_goal(self, position, tolerance, source, direction=None):
         """Solve the goal and make it the active one; ValueError says why it is rejected.
