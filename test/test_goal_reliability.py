@@ -67,17 +67,23 @@ def test_a_tracker_beyond_the_bound_is_set_aside_for_the_rest_of_the_goal():
     assert source.judged(0.0, near, [near], model, [model], 0.5, True)[0] is near
 
 
+def straight_run_to_a_goal(settings):
+    """Return (run, goal, start): a GoalRun from the straight robot towards a bent goal."""
+    run = GoalRun(ROBOT, settings)
+    position = ROBOT.solve_ivp([2.0, 0.0, 0.0]).tip_position
+    start = ROBOT.estimate_shape(ROBOT.straight_cable_lengths)
+    plan = run.plan(position, 1e-3, None, ROBOT.straight_cable_lengths, np.zeros(6), True,
+                    (start, ROBOT.straight_cable_lengths, start))
+    goal = Goal(position=position, tolerance=1e-3, source='test', started=0.0, deadline=1e9)
+    run.begin(goal, plan, 0.0)
+    return run, goal, start
+
+
 def test_the_corrections_of_a_goal_add_up_to_at_most_max_correction():
     # a tracker frozen 20 mm from the goal (inside its bound): each correction would add the
     # same 20 mm, so the second one would take the target 40 mm > 30 mm from the goal
-    run = GoalRun(ROBOT, RunSettings(max_correction=0.03, settle_time=0.0))
-    goal_position = ROBOT.solve_ivp([2.0, 0.0, 0.0]).tip_position
-    start = ROBOT.estimate_shape(ROBOT.straight_cable_lengths)
-    plan = run.plan(goal_position, 1e-3, None, ROBOT.straight_cable_lengths, np.zeros(6), True,
-                    (start, ROBOT.straight_cable_lengths, start))
-    goal = Goal(position=goal_position, tolerance=1e-3, source='test', started=0.0,
-                deadline=1e9)
-    run.begin(goal, plan, 0.0)
+    run, goal, _ = straight_run_to_a_goal(RunSettings(max_correction=0.03, settle_time=0.0))
+    goal_position = goal.position
     frozen = goal_position + np.array([0.02, 0.0, 0.0])
     now = 0.0
     for _ in range(2000):
@@ -94,14 +100,7 @@ def test_the_corrections_of_a_goal_add_up_to_at_most_max_correction():
 
 
 def test_cables_that_do_not_follow_their_command_are_named_when_the_goal_fails():
-    run = GoalRun(ROBOT, RunSettings(max_corrections=0, settle_time=0.0))
-    goal_position = ROBOT.solve_ivp([2.0, 0.0, 0.0]).tip_position
-    start = ROBOT.estimate_shape(ROBOT.straight_cable_lengths)
-    plan = run.plan(goal_position, 1e-3, None, ROBOT.straight_cable_lengths, np.zeros(6), True,
-                    (start, ROBOT.straight_cable_lengths, start))
-    goal = Goal(position=goal_position, tolerance=1e-3, source='test', started=0.0,
-                deadline=1e9)
-    run.begin(goal, plan, 0.0)
+    run, goal, start = straight_run_to_a_goal(RunSettings(max_corrections=0, settle_time=0.0))
     still = start.shape.tip_position
     now = 0.0
     for _ in range(2000):  # a driver that never moves: the cables stay straight
