@@ -57,9 +57,6 @@ class Waits:
         for condition, _, future in pending:
             future.set_result(bool(condition()))
 
-    def __len__(self):
-        return len(self._pending)
-
     def _check(self):
         now = time.monotonic()
         done = []
