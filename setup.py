@@ -30,6 +30,7 @@ setup(
             'statics = continuum_statics.nodes.statics_node:main',
             'tip_controller = continuum_statics.nodes.tip_controller_node:main',
             'cable_driver = continuum_statics.nodes.cable_driver_node:main',
+            'tip_load_estimator = continuum_statics.nodes.tip_load_estimator_node:main',
             'bringup = continuum_statics.nodes.bringup:main',
         ],
     },

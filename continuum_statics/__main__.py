@@ -1,7 +1,7 @@
 """Command line: ``python -m continuum_statics COMMAND ...`` (tools and nodes)."""
 import sys
 
-NODES = ('statics', 'tip_controller', 'cable_driver')
+NODES = ('statics', 'tip_controller', 'cable_driver', 'tip_load_estimator')
 
 USAGE = """usage: python -m continuum_statics COMMAND [options]
 
@@ -9,7 +9,8 @@ commands:
   solve     solve the boundary-value problem for a robot file and print the tip pose
   bench     benchmark the numeric core (--nodes: the ROS nodes over DDS)
   bringup   start the statics, tip_controller and cable_driver nodes in one process
-  statics | tip_controller | cable_driver
+            (and tip_load_estimator for a robot with a tendon model)
+  statics | tip_controller | cable_driver | tip_load_estimator
             run one node alone, like `ros2 run` (options: --ros-args ...)
   view      the live robot in a web browser (3-D, with a draggable tip goal)
   teleop    drive the tip from the keyboard (tip_twist, in a terminal)

@@ -22,12 +22,13 @@ def _console_scripts():
     return dict(re.findall(r"'(\w+) = (continuum_statics[.\w]+:main)'", text))
 
 
-def test_launch_file_is_valid_python_with_the_three_executables():
+def test_launch_file_is_valid_python_with_the_four_executables():
     tree = ast.parse(LAUNCH_FILE.read_text(), filename=str(LAUNCH_FILE))
     executables = _constant(tree, 'EXECUTABLES')
     assert set(executables) == {'statics', 'tip_controller', 'cable_driver'}
+    assert _constant(tree, 'ESTIMATOR') == 'tip_load_estimator'
     scripts = _console_scripts()
-    for executable in executables:
+    for executable in executables + ('tip_load_estimator',):
         assert executable in scripts, '%s is not a console script in setup.py' % executable
         module = scripts[executable].split(':')[0]
         assert importlib.util.find_spec(module) is not None, module
@@ -41,7 +42,7 @@ def test_launch_file_names_existing_config_files_and_its_arguments():
     for name in _constant(tree, 'CONFIG_FILES'):
         assert (REPO / 'config' / name).is_file(), name
     text = LAUNCH_FILE.read_text()
-    for argument in ('robot_file', 'driver', 'namespace', 'params_file'):
+    for argument in ('robot_file', 'driver', 'namespace', 'params_file', 'load_estimator'):
         assert "DeclareLaunchArgument('%s'" % argument in text, argument
 
 
@@ -54,6 +55,7 @@ def test_params_file_lists_every_declared_parameter():
     from continuum_statics.nodes.cable_driver_node import CableDriverNode
     from continuum_statics.nodes.statics_node import StaticsNode
     from continuum_statics.nodes.tip_controller_node import TipControllerNode
+    from continuum_statics.nodes.tip_load_estimator_node import TipLoadEstimatorNode
 
     params = yaml.safe_load((REPO / 'config' / 'continuum_robot.params.yaml').read_text())
     context = rclpy.Context()
@@ -63,7 +65,8 @@ def test_params_file_lists_every_declared_parameter():
         builtin = set(plain.list_parameters([], 10).names)  # use_sim_time and friends
         plain.destroy_node()
         for name, node_class in [('statics', StaticsNode), ('tip_controller', TipControllerNode),
-                                 ('cable_driver', CableDriverNode)]:
+                                 ('cable_driver', CableDriverNode),
+                                 ('tip_load_estimator', TipLoadEstimatorNode)]:
             node = node_class(context=context, namespace='/params_check')
             try:
                 declared = {n: node.get_parameter(n).value

@@ -14,7 +14,7 @@ import math
 
 import numpy as np
 
-from continuum_statics.core import bvp, estimation, length_statics, tip_goal
+from continuum_statics.core import bvp, estimation, length_statics, load_estimation, tip_goal
 from continuum_statics.core.inputs import as_vector
 from continuum_statics.core.kernel import (
     DISTRIBUTED,
@@ -391,6 +391,16 @@ class Robot:
         return estimation.estimate_shape(self, cable_lengths, tip_force, tip_moment, tensions,
                                          _warm_or_guess(self, warm_start, u0_guess), jacobians,
                                          warm_start)
+
+    def estimate_tip_wrench(self, lengths=None, tensions=None, tip_position=None,
+                            tip_rotation=None, noise=None, moment=False, warm_start=None):
+        """Tip force (N) and moment (N m), base frame, that explain the measurements given.
+
+        Lengths (m) and tensions (N) at the motors, the tracked tip point (m) and orientation;
+        see :mod:`load_estimation` (models, noise defaults, what each measurement observes).
+        """
+        return load_estimation.estimate_tip_wrench(self, lengths, tensions, tip_position,
+                                                   tip_rotation, noise, moment, warm_start)
 
     def solve_tip_goal(self, goal_position, tip_force=(0.0, 0.0, 0.0), tolerance=None,
                        goal_direction=None, warm_start=None, tip_moment=(0.0, 0.0, 0.0),

@@ -4,7 +4,9 @@ Given the robot, the simulated cables are its real tendons too: each reading sol
 displacement-driven statics (:meth:`Robot.solve_lengths`: slack, stretch, pretension, friction by
 direction of motion) at the motors' lengths and reports the motor-side tensions, as a driver
 with current sensing or load cells would. Robots with ideal cables (no tendons block) report
-no tensions, as before.
+no tensions, as before. A hidden tip load (:meth:`SimulatedCableBackend.set_tip_wrench`, the
+node's ``sim_tip_wrench``) acts on that simulated robot: the motors hold their lengths and the
+tensions change, which is what a tip-load estimator has to find without being told.
 """
 import math
 
@@ -50,6 +52,7 @@ class SimulatedCableBackend(CableBackend):
         # the tendon model, when the robot file has one (ideal cables report no tension)
         self._robot = robot if robot is not None and not robot.tendons.is_ideal else None
         self._statics = None  # the last solve_lengths result: friction history, warm start
+        self._tip_wrench = np.zeros(6)  # hidden tip load (N, N m), base frame
         merged = self.options
         for key in ('time_constant', 'max_speed', 'noise_std'):
             self.set_option(key, merged[key])
@@ -80,6 +83,19 @@ class SimulatedCableBackend(CableBackend):
             super().set_option(key, value)
         self.options[key] = value
 
+    def set_tip_wrench(self, wrench):
+        """Apply a tip load [fx, fy, fz, mx, my, mz] (N, N m, base frame) to the robot."""
+        wrench = np.asarray(wrench, dtype=float).reshape(-1)
+        if wrench.shape != (6,) or not np.all(np.isfinite(wrench)):
+            raise ValueError('tip wrench must be 6 finite numbers [fx, fy, fz, mx, my, mz], '
+                             'got %s' % wrench.tolist())
+        self._tip_wrench = wrench
+
+    @property
+    def tip_wrench(self):
+        """The hidden tip load (6,) (a copy)."""
+        return self._tip_wrench.copy()
+
     def start(self, now):
         """Start the simulation clock at ``now`` (monotonic s)."""
         self._time = float(now)
@@ -109,7 +125,8 @@ class SimulatedCableBackend(CableBackend):
         """Motor-side tensions (N) of the tendon model at the true lengths, or None."""
         if self._robot is None:
             return None
-        solution = self._robot.solve_lengths(lengths, warm_start=self._statics)
+        solution = self._robot.solve_lengths(lengths, self._tip_wrench[:3], self._tip_wrench[3:],
+                                             warm_start=self._statics)
         if not solution.converged:  # keep the last good history; report nothing made up
             return None
         self._statics = solution

@@ -1,11 +1,14 @@
 """bringup: the statics, tip_controller and cable_driver nodes in one process.
 
 ``python -m continuum_statics bringup [--robot FILE] [--driver sim] [--namespace NS]
-[--ros-args ...]`` (also the ``bringup`` console script). Everything after ``--ros-args`` goes to
-rclpy (``--params-file``, remaps, ``-p`` parameters, log levels). ``--robot`` and ``--driver``
-override the ``robot_file`` and ``backend`` parameters of every node; without them the nodes use
-their parameters (default: the tendon robot in ``config/`` and the simulated driver). Ctrl-C
-(SIGINT) or SIGTERM stops everything and exits with code 0.
+[--load-estimator auto|on|off] [--ros-args ...]`` (also the ``bringup`` console script).
+Everything after ``--ros-args`` goes to rclpy (``--params-file``, remaps, ``-p`` parameters, log
+levels). ``--robot`` and ``--driver`` override the ``robot_file`` and ``backend`` parameters of
+every node; without them the nodes use their parameters (default: the tendon robot in
+``config/`` and the simulated driver). Ctrl-C (SIGINT) or SIGTERM stops everything and exits
+with code 0. ``--load-estimator`` adds the
+tip_load_estimator node: ``auto`` (default) for a robot file with a tendon model, whose cable
+tensions the simulated driver reports (ideal cables alone give it nothing that sees a load).
 
 On a robot computer with ROS installed, ``launch/continuum_robot.launch.py`` starts the same
 three nodes as separate processes.
@@ -33,7 +36,10 @@ def parse_args(argv):
                         'parameter, i.e. config/tendon_robot.yaml)')
     parser.add_argument('--driver', help='cable backend (default: the backend parameter, sim)')
     parser.add_argument('--namespace', default='continuum',
-                        help='namespace of the three nodes (default: %(default)s)')
+                        help='namespace of the nodes (default: %(default)s)')
+    parser.add_argument('--load-estimator', choices=('auto', 'on', 'off'), default='auto',
+                        help='also run tip_load_estimator: auto = when the robot file has a '
+                        'tendon model (default: %(default)s)')
     return parser.parse_args(argv), ros_args
 
 
@@ -45,8 +51,20 @@ def use_fast_discovery_profile():
             os.environ['FASTDDS_DEFAULT_PROFILES_FILE'] = str(profile)
 
 
-def node_factories(robot=None, driver=None, namespace='continuum'):
-    """Return callables creating the three nodes with the bringup overrides applied."""
+def wants_load_estimator(choice, robot=None):
+    """Whether bringup runs tip_load_estimator (``auto``: the robot has a tendon model)."""
+    if choice != 'auto':
+        return choice == 'on'
+    from continuum_statics.nodes.node_params import default_robot_file, load_robot_file
+    try:
+        model = load_robot_file(robot or default_robot_file())
+    except ValueError:
+        return False  # the nodes report the bad file themselves
+    return bool(model.cable_names) and not model.tendons.is_ideal
+
+
+def node_factories(robot=None, driver=None, namespace='continuum', load_estimator=False):
+    """Return callables creating the nodes with the bringup overrides applied."""
     from functools import partial
 
     from rclpy.parameter import Parameter
@@ -61,11 +79,16 @@ def node_factories(robot=None, driver=None, namespace='continuum'):
     driver_overrides = list(common)
     if driver is not None:
         driver_overrides.append(Parameter('backend', Parameter.Type.STRING, driver))
-    return [
+    factories = [
         partial(StaticsNode, namespace=namespace, parameter_overrides=common),
         partial(TipControllerNode, namespace=namespace, parameter_overrides=common),
         partial(CableDriverNode, namespace=namespace, parameter_overrides=driver_overrides),
     ]
+    if load_estimator:
+        from continuum_statics.nodes.tip_load_estimator_node import TipLoadEstimatorNode
+        factories.append(partial(TipLoadEstimatorNode, namespace=namespace,
+                                 parameter_overrides=common))
+    return factories
 
 
 def main(argv=None):
@@ -77,7 +100,8 @@ def main(argv=None):
         return 2
     use_fast_discovery_profile()
     from continuum_statics.nodes.node_runner import run_nodes
-    factories = node_factories(options.robot, options.driver, options.namespace.strip() or '/')
+    factories = node_factories(options.robot, options.driver, options.namespace.strip() or '/',
+                               wants_load_estimator(options.load_estimator, options.robot))
     return run_nodes(factories, args=['bringup'] + ros_args)
 
 

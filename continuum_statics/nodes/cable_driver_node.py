@@ -22,12 +22,16 @@ parameters ``<backend>.<option>``.
 - ``~/set_home`` (std_srvs/Trigger) makes the current actuator positions the straight pose and
   writes them to ``home_file`` (YAML), which is loaded at start.
 - A robot file without cables: the node says so once and stays up without publishing.
+- Simulated backend only: ``sim_tip_wrench`` (parameter [fx, fy, fz, mx, my, mz] and a
+  geometry_msgs/WrenchStamped topic of that name, base frame) is a tip load on the simulated
+  robot that no other node is told about (tensions change under it; the motors hold).
 """
 import sys
 import threading
 import time
 from types import SimpleNamespace
 
+from geometry_msgs.msg import WrenchStamped
 import numpy as np
 from rclpy.lifecycle import LifecycleNode, TransitionCallbackReturn
 from rclpy.qos import qos_profile_sensor_data
@@ -46,7 +50,12 @@ from continuum_statics.nodes.node_params import (
 )
 from continuum_statics.nodes.parameter_tables import cable_driver_parameters
 from continuum_statics.nodes.qos import COMMAND_QOS
-from continuum_statics.nodes.ros_conversions import cable_index, joint_positions, joint_state
+from continuum_statics.nodes.ros_conversions import (
+    cable_index,
+    joint_positions,
+    joint_state,
+    tip_load,
+)
 from continuum_statics.nodes.timers import steady_timer
 
 THROTTLE_S = 2.0
@@ -132,6 +141,10 @@ class CableDriverNode(LifecycleNode):
         self.create_subscription(JointState, 'cable_commands', self._on_raw_command,
                                  COMMAND_QOS, raw=True)
         self.create_service(Trigger, '~/reset', self._on_reset)
+        self._hidden_load = np.array(self._params['sim_tip_wrench'], dtype=float)
+        if hasattr(self._backend_cls, 'set_tip_wrench'):
+            self.create_subscription(WrenchStamped, 'sim_tip_wrench', self._on_sim_tip_wrench,
+                                     10)
         self.create_service(Trigger, '~/set_home', self._on_set_home)
         # cable_states from a thread of its own: steadier and ~10x cheaper than a 200 Hz timer.
         self._loop = PeriodicThread(self, self._params['publish_rate'], self._on_timer,
@@ -162,6 +175,8 @@ class CableDriverNode(LifecycleNode):
             self.get_logger().error('configure failed: %s' % error)
             return TransitionCallbackReturn.FAILURE
         backend.power = False
+        if hasattr(backend, 'set_tip_wrench'):
+            backend.set_tip_wrench(self._hidden_load)
         with self._lock:
             self.backend = backend
             if hasattr(backend, 'attach_ros'):  # ros2_control: the node lends it topics
@@ -290,6 +305,23 @@ class CableDriverNode(LifecycleNode):
     def _on_parameter_change(self, name, value):
         if name == 'publish_rate' and self._loop is not None:
             self._loop.rate = value
+        elif name == 'sim_tip_wrench':
+            self._set_hidden_load(np.array(value, dtype=float))
+
+    def _on_sim_tip_wrench(self, msg):
+        try:
+            wrench = tip_load(msg, self.robot.base_frame_id, what='sim_tip_wrench')
+        except ValueError as error:
+            self._reject('sim_tip_wrench', error)
+            return
+        self._set_hidden_load(wrench)
+
+    def _set_hidden_load(self, wrench):
+        """Set the simulated robot's hidden tip load (6,), now and for the next configure."""
+        with self._lock:
+            self._hidden_load = wrench
+            if self.backend is not None and hasattr(self.backend, 'set_tip_wrench'):
+                self.backend.set_tip_wrench(wrench)
 
     def _on_option_change(self, name, value):
         key = name.split('.', 1)[1]

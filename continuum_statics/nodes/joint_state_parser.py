@@ -149,6 +149,25 @@ def parse_joint_state(data, previous_name_bytes=None):
                           frame=data[frame_start:frame_end])
 
 
+def check_cable_view(view, index, cable_names):
+    """Check a parsed ``cable_states`` against its name ``index`` (one rule for every node).
+
+    Lengths one per name, positive and finite; ``velocity`` and ``effort`` empty or one per
+    cable. Raises ``ValueError`` naming what is wrong.
+    """
+    positions, n_cables = view.position, len(cable_names)
+    if positions.shape[0] != index.shape[0]:
+        raise ValueError('JointState has %d names but %d positions'
+                         % (index.shape[0], positions.shape[0]))
+    for what, values in (('velocity', view.velocity), ('effort', view.effort)):
+        if values.shape[0] not in (0, n_cables):
+            raise ValueError('JointState has %d names but %d %s values'
+                             % (n_cables, values.shape[0], what))
+    if not (positions > 0.0).all():  # also false for NaN
+        raise ValueError('cable length not a positive finite number for %s' % ', '.join(
+            cable_names[index[i]] for i in np.flatnonzero(~(positions > 0.0))))
+
+
 def _parse_with_rclpy(data):
     from rclpy.serialization import deserialize_message
     try:

@@ -194,10 +194,13 @@ def tip_wrench_limit_specs():
 def tip_wrench_limits(robot, params):
     """Return (force N, torque N m) limits: the parameters, or the rod's defaults where 0.
 
-    E I / L^2 is the rod's natural force scale (a tip force of that size bends a cantilever
-    by about 30 degrees) and E I / L its moment scale (that moment bends it by one radian).
+    The defaults are :func:`~continuum_statics.core.load_estimation.plausible_tip_load`.
     """
-    bending_stiffness, length = float(robot.c[0]), float(robot.length)
-    force = params['max_tip_force'] or 10.0 * bending_stiffness / length ** 2
-    torque = params['max_tip_torque'] or 2.0 * math.pi * bending_stiffness / length
-    return force, torque
+    from continuum_statics.core.load_estimation import plausible_tip_load
+    force, torque = plausible_tip_load(robot)
+    return params['max_tip_force'] or force, params['max_tip_torque'] or torque
+
+
+def tip_wrench_topic(params):
+    """Return the topic a node takes its tip load from (``tip_wrench_source``)."""
+    return 'tip_wrench_estimate' if params['tip_wrench_source'] == 'estimate' else 'tip_wrench'

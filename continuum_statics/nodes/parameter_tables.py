@@ -3,6 +3,8 @@
 What a user can tell a node, in one place per node (``ros2 param describe`` shows the same text);
 ``config/continuum_robot.params.yaml`` lists every one (a test checks).
 """
+import math
+
 from continuum_statics.drivers import backend_class
 from continuum_statics.nodes.node_params import (
     ParamSpec,
@@ -17,6 +19,17 @@ def _check_backend(value):
         backend_class(value)
     except ValueError as error:
         return str(error)
+    return None
+
+
+def _check_wrench_source(value):
+    return None if value in ('topic', 'estimate') else "must be 'topic' or 'estimate'"
+
+
+def _six_finite(value):
+    values = list(value)
+    if len(values) != 6 or not all(math.isfinite(v) for v in values):
+        return 'must be 6 finite numbers [fx, fy, fz, mx, my, mz], got %s' % values
     return None
 
 
@@ -35,6 +48,10 @@ def statics_parameters():
                   read_only=True),
         ParamSpec('tip_wrench_timeout', 1.0, 'a tip_wrench estimate older than this is '
                   'replaced by zero, s (0: never expires)', 0.0, 3600.0),
+        ParamSpec('tip_wrench_source', 'topic', 'where the tip load comes from: topic '
+                  '(tip_wrench, a force sensor or your estimator) or estimate '
+                  '(tip_wrench_estimate, from the tip_load_estimator node)', read_only=True,
+                  check=_check_wrench_source),
         ParamSpec('warn_residual', 1e-4, 'above this cable-length residual (RMS) the '
                   'lengths are not exactly a shape: the best fit is published with WARN on '
                   'diagnostics, m (>= 1e-7: a smaller one would warn on round-off)', 1e-7,
@@ -108,6 +125,12 @@ def tip_controller_parameters():
                   read_only=True),
         ParamSpec('tip_wrench_timeout', 1.0, 'a tip_wrench estimate older than this is '
                   'replaced by zero, s (0: never expires)', 0.0, 3600.0),
+        ParamSpec('tip_wrench_source', 'topic', 'where the tip load comes from: topic '
+                  '(tip_wrench, a force sensor or your estimator) or estimate '
+                  '(tip_wrench_estimate, from the tip_load_estimator node)', read_only=True,
+                  check=_check_wrench_source),
+        ParamSpec('stop_on_contact', False, 'a goal running when tip_contact turns true '
+                  '(the tip_load_estimator felt a contact) stops there and fails, naming it'),
         ParamSpec('max_state_age', 0.5, 'cable_states and tip_pose older than this mean a '
                   'dead driver or statics: goals are rejected or fail, s', 0.01, 60.0),
         ParamSpec('state_wait', 3.0, 'a goal that arrives while cable_states or tip_pose '
@@ -152,4 +175,37 @@ def cable_driver_parameters():
                   'the lifecycle transitions, e.g. from a lifecycle manager)', read_only=True),
         ParamSpec('reconnect_max_interval', 2.0, 'longest wait between two reconnection '
                   'attempts after a lost port or bus, s', 0.1, 60.0),
+        ParamSpec('sim_tip_wrench', [0.0] * 6, 'sim backend: a tip load [fx, fy, fz, mx, my, '
+                  'mz] (N, N m, base frame) on the simulated robot that no other node is told '
+                  'about (also the WrenchStamped topic sim_tip_wrench)', check=_six_finite),
+    ]
+
+
+def tip_load_estimator_parameters():
+    """Return the tip_load_estimator node's ParamSpecs."""
+    return [
+        robot_file_spec('rod, cables, tendon model, tip_marker'),
+        diagnostics_rate_spec(),
+        ParamSpec('rate', 100.0, 'most estimates per second (each on the newest '
+                  'measurements), Hz', 1.0, 1000.0, read_only=True),
+        ParamSpec('noise_length', 20e-6, 'standard deviation of a measured cable length '
+                  '(encoder, spool), m', 1e-9, 0.01),
+        ParamSpec('noise_tension', 0.05, 'standard deviation of a measured tension '
+                  '(cable_states effort), N', 1e-6, 100.0),
+        ParamSpec('noise_tension_percent', 0.0, 'tension noise as a percentage of each '
+                  'reading instead (0: noise_tension in N)', 0.0, 100.0),
+        ParamSpec('noise_tip_position', 0.5e-3, 'standard deviation of tip_pose_measured '
+                  '(the tracker), m', 1e-9, 0.1),
+        ParamSpec('noise_tip_angle', 0.01, "standard deviation of the tracker's "
+                  'orientation, rad', 1e-9, 1.0),
+        ParamSpec('use_tip_pose', True, 'use tip_pose_measured when it is fresh'),
+        ParamSpec('use_tip_orientation', False, "also use the tracker's orientation (a "
+                  'rigid-body tracker; a single marker gives position only)'),
+        ParamSpec('estimate_moment', False, 'estimate the tip moment too (needs a tracked '
+                  'orientation or many cables to be seen)', read_only=True),
+        ParamSpec('input_timeout', 0.5, 'cable_states and tip_pose_measured older than this '
+                  'are not used, s', 0.001, 60.0),
+        ParamSpec('contact_threshold', 0.0, 'tip_contact turns true when the force exceeds '
+                  'this with 3-sigma confidence, N (0: E I / L^2 of the rod, the force that '
+                  'bends it by about 30 degrees)', 0.0, 1e6),
     ]

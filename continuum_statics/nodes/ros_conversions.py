@@ -110,7 +110,7 @@ def check_frame(frame_id, base_frame_id, what):
                          % (what, frame_id, base_frame_id))
 
 
-def tip_load(msg, base_frame_id, max_force=math.inf, max_torque=math.inf):
+def tip_load(msg, base_frame_id, max_force=math.inf, max_torque=math.inf, what='tip_wrench'):
     """Return a WrenchStamped in the base frame as a finite (6,) array: force (N), torque (N m).
 
     Each component is checked for finiteness first, then the magnitudes with ``math.hypot``
@@ -118,21 +118,22 @@ def tip_load(msg, base_frame_id, max_force=math.inf, max_torque=math.inf):
 
     :param max_force: largest plausible force magnitude, N
     :param max_torque: largest plausible torque magnitude, N m
+    :param what: the topic's name, for the messages
     :raises ValueError: on another frame, a non-finite component or an implausible magnitude
     """
-    check_frame(msg.header.frame_id, base_frame_id, 'tip_wrench')
+    check_frame(msg.header.frame_id, base_frame_id, what)
     force, torque = msg.wrench.force, msg.wrench.torque
     values = (force.x, force.y, force.z, torque.x, torque.y, torque.z)
     if not all(math.isfinite(v) for v in values):
-        raise ValueError('tip_wrench has a non-finite component: force (%g, %g, %g), '
-                         'torque (%g, %g, %g)' % values)
+        raise ValueError('%s has a non-finite component: force (%g, %g, %g), '
+                         'torque (%g, %g, %g)' % ((what,) + values))
     force_norm, torque_norm = math.hypot(*values[:3]), math.hypot(*values[3:])
     if force_norm > max_force:
-        raise ValueError('tip_wrench force %.3g N is too large (max_tip_force %.3g N)'
-                         % (force_norm, max_force))
+        raise ValueError('%s force %.3g N is too large (max_tip_force %.3g N)'
+                         % (what, force_norm, max_force))
     if torque_norm > max_torque:
-        raise ValueError('tip_wrench torque %.3g N m is too large (max_tip_torque %.3g N m)'
-                         % (torque_norm, max_torque))
+        raise ValueError('%s torque %.3g N m is too large (max_tip_torque %.3g N m)'
+                         % (what, torque_norm, max_torque))
     return np.array(values)
 
 

@@ -59,7 +59,7 @@ from continuum_statics.core.tendons import full_circle_tension
 from continuum_statics.core.warmup import warm_up
 from continuum_statics.nodes import diagnostics_util as diag
 from continuum_statics.nodes.dedicated_intake import make_intake
-from continuum_statics.nodes.joint_state_parser import parse_joint_state
+from continuum_statics.nodes.joint_state_parser import check_cable_view, parse_joint_state
 from continuum_statics.nodes.marker_geometry import (
     guide_and_cable_points,
     section_layout,
@@ -70,6 +70,7 @@ from continuum_statics.nodes.node_params import (
     ParameterTable,
     load_robot_file,
     tip_wrench_limits,
+    tip_wrench_topic,
 )
 from continuum_statics.nodes.parameter_tables import statics_parameters
 from continuum_statics.nodes.pose_encoder import PoseSequenceEncoder, TransformEncoder
@@ -157,8 +158,8 @@ class StaticsNode(Node):
                 JointState, 'cable_states', self._on_cable_states, input_qos, raw=True,
                 max_lag=self._params['max_input_lag'], fallback_qos=LATEST_SENSOR_QOS)
             self._intake.start()
-        self.create_subscription(WrenchStamped, 'tip_wrench', self._on_tip_wrench,
-                                 LATEST_SENSOR_QOS)
+        self.create_subscription(WrenchStamped, tip_wrench_topic(self._params),
+                                 self._on_tip_wrench, LATEST_SENSOR_QOS)
         self._passive_load = None
         if self._passive:
             self._last['message'] = 'passive rod (no cables): shape from gravity and tip_wrench'
@@ -225,7 +226,6 @@ class StaticsNode(Node):
         """Solve one serialized JointState (raw subscription: parsed without a message object)."""
         start = time.perf_counter()
         self._input_rate.tick()
-        n_cables = len(self.cable_names)
         try:
             if not data:
                 self._empty_payloads += 1
@@ -233,18 +233,8 @@ class StaticsNode(Node):
             if view.name_bytes != self._name_bytes:
                 index = cable_index(view.names, self.cable_names)
                 self._name_bytes, self._index = view.name_bytes, index
+            check_cable_view(view, self._index, self.cable_names)
             positions = view.position
-            if positions.shape[0] != self._index.shape[0]:
-                raise ValueError('JointState has %d names but %d positions'
-                                 % (self._index.shape[0], positions.shape[0]))
-            for what, values in (('velocity', view.velocity), ('effort', view.effort)):
-                if values.shape[0] not in (0, n_cables):
-                    raise ValueError('JointState has %d names but %d %s values'
-                                     % (n_cables, values.shape[0], what))
-            if not (positions > 0.0).all():  # also false for NaN
-                raise ValueError('cable length not a positive finite number for %s' % ', '.join(
-                    self.cable_names[self._index[i]]
-                    for i in np.flatnonzero(~(positions > 0.0))))
         except ValueError as error:
             self._reject_input(error)
             return

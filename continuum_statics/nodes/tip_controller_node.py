@@ -48,7 +48,7 @@ from rclpy.callback_groups import MutuallyExclusiveCallbackGroup, ReentrantCallb
 from rclpy.node import Node
 from rclpy.serialization import deserialize_message
 from sensor_msgs.msg import JointState
-from std_msgs.msg import Header
+from std_msgs.msg import Bool, Header
 from visualization_msgs.msg import MarkerArray
 
 from continuum_statics.control.goal_run import (
@@ -73,13 +73,14 @@ from continuum_statics.core.warmup import warm_up
 from continuum_statics.core.workspace import reachable_tips
 from continuum_statics.nodes import diagnostics_util as diag
 from continuum_statics.nodes.dedicated_intake import make_intake
-from continuum_statics.nodes.joint_state_parser import parse_joint_state
+from continuum_statics.nodes.joint_state_parser import check_cable_view, parse_joint_state
 from continuum_statics.nodes.markers import workspace_markers
 from continuum_statics.nodes.move_tip_action import MoveTipServer, load_interface
 from continuum_statics.nodes.node_params import (
     ParameterTable,
     load_robot_file,
     tip_wrench_limits,
+    tip_wrench_topic,
 )
 from continuum_statics.nodes.parameter_tables import tip_controller_parameters
 from continuum_statics.nodes.qos import COMMAND_QOS, LATCHED_QOS, LATEST_SENSOR_QOS
@@ -173,12 +174,15 @@ class TipControllerNode(Node):
         self._intake.add(Path, 'backbone', self._on_backbone, LATCHED_QOS, raw=True)
         self._intake.add(JointState, 'cable_states', self._on_cable_states, LATEST_SENSOR_QOS,
                          raw=True)
-        self._intake.add(WrenchStamped, 'tip_wrench', self._on_tip_wrench, LATEST_SENSOR_QOS)
+        self._intake.add(WrenchStamped, tip_wrench_topic(self._params), self._on_tip_wrench,
+                         LATEST_SENSOR_QOS)
         # the driver says when it refuses commands (inactive, faulted, disconnected)
         self._driver_status_name = '%s/%s' % (self.get_namespace().rstrip('/'),
                                               self._params['cable_driver_name'])
         self._driver_status_name = self._driver_status_name.lstrip('/')
         self._intake.add(diag.DiagnosticArray, '/diagnostics', self._on_diagnostics, 10)
+        self._contact_since = None  # monotonic s tip_contact turned true, None without contact
+        self._intake.add(Bool, 'tip_contact', self._on_tip_contact, LATCHED_QOS)
         self._intake.start()
         self.create_subscription(TwistStamped, 'tip_twist', self._on_twist, COMMAND_QOS,
                                  callback_group=self._control_group)
@@ -299,11 +303,7 @@ class TipControllerNode(Node):
             if view.name_bytes != self._name_bytes:
                 self._index = cable_index(view.names, self.cable_names)
                 self._name_bytes = view.name_bytes
-            if view.position.shape[0] != self._index.shape[0]:
-                raise ValueError('JointState has %d names but %d positions'
-                                 % (self._index.shape[0], view.position.shape[0]))
-            if not np.isfinite(view.position).all():
-                raise ValueError('non-finite cable length')
+            check_cable_view(view, self._index, self.cable_names)
         except ValueError as error:
             self._name_bytes = None
             self._reject('cable_states', error)
@@ -332,6 +332,12 @@ class TipControllerNode(Node):
                     refusal = ('' if values['accepts_commands'] == 'True'
                                else values.get('refusal') or status.message)
                     self._driver_status = (refusal, time.monotonic())
+
+    def _on_tip_contact(self, msg):
+        if not msg.data:
+            self._contact_since = None
+        elif self._contact_since is None:
+            self._contact_since = time.monotonic()
 
     def driver_refusal(self):
         """Why cable_driver refuses cable_commands now (its fresh /diagnostics), or ''."""
@@ -704,6 +710,13 @@ class TipControllerNode(Node):
             self._run.finish(goal, False, 'cable_driver refuses cable_commands: %s' % refusal)
             self._report(goal)
             return None
+        contact = self._contact_since
+        if self._params['stop_on_contact'] and contact is not None and contact >= goal.started:
+            self._run.finish(goal, False, 'stopped on contact: tip_contact turned true %.2f s '
+                             'into the goal (stop_on_contact)' % (contact - goal.started))
+            self._report(goal)
+            measurement = self._measurement  # hold where the cables are
+            return None if measurement is None else measurement.lengths.copy()
         tip, tips, self._tip_source, warning = self._tracker.judged(
             now, self._measured_tip, self._measured_tips, self._tip, self._tips,
             self._params['max_state_age'], self._params['use_measured_tip'])

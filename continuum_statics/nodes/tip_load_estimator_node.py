@@ -1,0 +1,272 @@
+"""tip_load_estimator: the force on the tip from what the robot already measures.
+
+Subscribes ``cable_states`` (lengths m; ``effort`` = cable tensions N where the driver measures
+them) and, when a tracker publishes it, ``tip_pose_measured`` (geometry_msgs/PoseStamped of the
+robot file's ``tip_marker``, base frame). At up to ``rate`` Hz, on the newest measurements, it
+runs :meth:`Robot.estimate_tip_wrench` (warm-started from the previous estimate) and publishes:
+
+- ``tip_wrench_estimate`` (geometry_msgs/WrenchStamped, base frame, the cable_states stamp);
+  statics and tip_controller use it with ``tip_wrench_source: estimate``;
+- ``/diagnostics``: the force, its standard deviations, the directions the measurements do not
+  see (published as zero: never made up), timing;
+- ``tip_contact`` (std_msgs/Bool, latched): True while the force exceeds ``contact_threshold``
+  with 3-sigma confidence (:mod:`continuum_statics.control.contact`), with a WARN diagnostic.
+
+A robot whose cable_states carry no tensions and which has no tracker gives the estimator nothing
+that sees a load: it says so on /diagnostics (WARN) and publishes no estimate. Nothing
+non-finite is published; a failed estimate keeps the last good one and is counted.
+"""
+import sys
+import time
+
+from geometry_msgs.msg import PoseStamped, WrenchStamped
+import numpy as np
+from rclpy.node import Node
+from sensor_msgs.msg import JointState
+from std_msgs.msg import Bool
+
+from continuum_statics.control.contact import ContactDetector, force_along
+from continuum_statics.core.load_estimation import plausible_tip_load
+from continuum_statics.core.rotations import quaternion_to_rotation
+from continuum_statics.core.warmup import warm_up
+from continuum_statics.nodes import diagnostics_util as diag
+from continuum_statics.nodes.joint_state_parser import check_cable_view, parse_joint_state
+from continuum_statics.nodes.node_params import ParameterTable, load_robot_file
+from continuum_statics.nodes.parameter_tables import tip_load_estimator_parameters
+from continuum_statics.nodes.qos import LATCHED_QOS, LATEST_SENSOR_QOS
+from continuum_statics.nodes.ros_conversions import cable_index, check_frame
+from continuum_statics.nodes.timers import steady_timer
+
+THROTTLE_S = 2.0
+
+
+class TipLoadEstimatorNode(Node):
+    """Intrinsic force sensing at up to ``rate`` Hz: a thin layer over ``estimate_tip_wrench``."""
+
+    EXECUTOR = 'single'
+
+    def __init__(self, node_name='tip_load_estimator', **kwargs):
+        super().__init__(node_name, **kwargs)
+        self._params = ParameterTable(self, tip_load_estimator_parameters())
+        self.robot = load_robot_file(self._params['robot_file'], self.get_logger())
+        self._diagnostics = self.create_publisher(diag.DiagnosticArray, '/diagnostics', 10)
+        diag.publish_starting(self, self._diagnostics, self.robot.name, 'compiling kernels')
+        warm_up(self.robot, self.get_logger().info)
+        self.cable_names = tuple(self.robot.cable_names)
+        self.base_frame_id = self.robot.base_frame_id
+        self._name_bytes, self._index = None, None
+        self._cables = None  # (lengths, tensions or None, sec, nanosec, monotonic s)
+        self._tip = None  # (position, rotation, monotonic s) of tip_pose_measured
+        self._fresh = False  # a measurement arrived since the last estimate
+        self._estimate = None  # the last good WrenchEstimate (warm start)
+        self._published = None  # (force, sigma) last published
+        self._contact = ContactDetector(self._contact_threshold())
+        self._problems = diag.Problems()
+        self._failures = 0
+        self._times = diag.TimingWindow()
+        self._rate = diag.RateMeter()
+        self._no_input = ''
+        self._wrench_pub = self.create_publisher(WrenchStamped, 'tip_wrench_estimate', 10)
+        self._contact_pub = self.create_publisher(Bool, 'tip_contact', LATCHED_QOS)
+        self._contact_pub.publish(Bool(data=False))
+        self.create_subscription(JointState, 'cable_states', self._on_cable_states,
+                                 LATEST_SENSOR_QOS, raw=True)
+        self.create_subscription(PoseStamped, 'tip_pose_measured', self._on_tip_pose,
+                                 LATEST_SENSOR_QOS)
+        steady_timer(self, 1.0 / self._params['rate'], self._on_timer)
+        steady_timer(self, 1.0 / self._params['diagnostics_rate'], self._publish_diagnostics)
+        self._params.on_change = self._on_parameter_change
+        self.get_logger().info('tip_load_estimator: robot %r, %d cables, up to %g Hz, contact '
+                               'above %.3g N' % (self.robot.name, len(self.cable_names),
+                                                 self._params['rate'],
+                                                 self._contact.threshold))
+
+    # -- parameters and inputs -------------------------------------------------------------
+    def _contact_threshold(self):
+        """contact_threshold (N), or E I / L^2 of the rod when 0."""
+        return self._params['contact_threshold'] or plausible_tip_load(self.robot)[0] / 10.0
+
+    def _on_parameter_change(self, name, value):
+        if name == 'contact_threshold':
+            self._contact.threshold = value or plausible_tip_load(self.robot)[0] / 10.0
+
+    def _noise(self):
+        params = self._params
+        tension = (params['noise_tension'] if params['noise_tension_percent'] <= 0.0
+                   else '%g%%' % params['noise_tension_percent'])
+        return {'length': params['noise_length'], 'tension': tension,
+                'tip_position': params['noise_tip_position'],
+                'tip_angle': params['noise_tip_angle']}
+
+    def _reject(self, kind, reason):
+        self._problems.add(kind, reason)
+        self.get_logger().warning('dropped %s: %s' % (kind, reason),
+                                  throttle_duration_sec=THROTTLE_S)
+
+    def _on_cable_states(self, data):
+        try:
+            view = parse_joint_state(data, self._name_bytes)
+            if view.name_bytes != self._name_bytes:
+                self._index = cable_index(view.names, self.cable_names)
+                self._name_bytes = view.name_bytes
+            check_cable_view(view, self._index, self.cable_names)
+        except ValueError as error:
+            self._name_bytes = None
+            self._reject('cable_states', error)
+            return
+        lengths = np.empty(len(self.cable_names))
+        lengths[self._index] = view.position
+        tensions = None
+        if view.effort.shape[0]:
+            tensions = np.empty(len(self.cable_names))
+            tensions[self._index] = view.effort
+            if not (np.isfinite(tensions).all() and (tensions >= 0.0).all()):
+                self._reject('cable_states', 'effort (tensions) not finite and >= 0 N: %s'
+                             % np.round(tensions, 4).tolist())
+                tensions = None
+        self._cables = (lengths, tensions, view.sec, view.nanosec, time.monotonic())
+        self._fresh = True
+
+    def _on_tip_pose(self, msg):
+        try:
+            check_frame(msg.header.frame_id, self.base_frame_id, 'tip_pose_measured')
+            p, q = msg.pose.position, msg.pose.orientation
+            position = np.array([p.x, p.y, p.z])
+            quaternion = np.array([q.x, q.y, q.z, q.w])
+            if not (np.isfinite(position).all() and np.isfinite(quaternion).all()):
+                raise ValueError('non-finite pose')
+        except ValueError as error:
+            self._reject('tip_pose_measured', error)
+            return
+        rotation = None
+        if self._params['use_tip_orientation'] and abs(np.linalg.norm(quaternion) - 1.0) < 1e-3:
+            rotation = quaternion_to_rotation(quaternion)
+        self._tip = (position, rotation, time.monotonic())
+        self._fresh = True
+
+    # -- estimation --------------------------------------------------------------------------
+    def _measurements(self, now):
+        """Keyword arguments of estimate_tip_wrench from the fresh inputs, or a reason."""
+        params, kwargs = self._params, {}
+        cables = self._cables
+        if cables is not None and now - cables[4] <= params['input_timeout']:
+            kwargs['lengths'] = cables[0]
+            if cables[1] is not None:
+                kwargs['tensions'] = cables[1]
+        tip = self._tip
+        if tip is not None and params['use_tip_pose'] and now - tip[2] <= params['input_timeout']:
+            kwargs['tip_position'] = tip[0]
+            if tip[1] is not None:
+                kwargs['tip_rotation'] = tip[1]
+        if 'tensions' not in kwargs and 'tip_position' not in kwargs and \
+                ('lengths' not in kwargs or self.robot.tendons.is_ideal or
+                 'tip_position' not in kwargs):
+            if not self.cable_names:
+                return None, 'no tip_pose_measured: a rod without cables is sensed at its tip'
+            return None, ('no measurement that sees a tip load: cable_states carries no '
+                          'tensions (effort) and no tip_pose_measured arrives')
+        return kwargs, ''
+
+    def _on_timer(self):
+        if not self._fresh:
+            return
+        self._fresh = False
+        now = time.monotonic()
+        kwargs, self._no_input = self._measurements(now)
+        if kwargs is None:
+            return
+        start = time.perf_counter()
+        try:
+            estimate = self.robot.estimate_tip_wrench(
+                noise=self._noise(), moment=self._params['estimate_moment'],
+                warm_start=self._estimate, **kwargs)
+        except ValueError as error:
+            self._failures += 1
+            self._reject('estimate', error)
+            return
+        self._times.add(time.perf_counter() - start)
+        if not (np.isfinite(estimate.wrench).all() and np.isfinite(estimate.covariance).all()):
+            self._failures += 1
+            self._reject('estimate', 'non-finite estimate (kept the last good one)')
+            return
+        if not estimate.converged:
+            self._problems.add('estimate', estimate.message or 'not converged')
+        self._estimate = estimate
+        self._publish(estimate)
+
+    def _publish(self, estimate):
+        msg = WrenchStamped()
+        cables = self._cables
+        if cables is not None and (cables[2] or cables[3]):
+            msg.header.stamp.sec, msg.header.stamp.nanosec = cables[2], cables[3]
+        else:
+            msg.header.stamp = self.get_clock().now().to_msg()
+        msg.header.frame_id = self.base_frame_id
+        force, moment = estimate.force, estimate.moment
+        msg.wrench.force.x, msg.wrench.force.y, msg.wrench.force.z = (float(v) for v in force)
+        msg.wrench.torque.x, msg.wrench.torque.y, msg.wrench.torque.z = (
+            float(v) for v in moment)
+        self._wrench_pub.publish(msg)
+        self._rate.tick()
+        self._published = estimate
+        if self._contact.update(force, estimate.covariance):
+            self._contact_pub.publish(Bool(data=self._contact.in_contact))
+            magnitude, sigma = force_along(force, estimate.covariance)
+            if self._contact.in_contact:
+                self.get_logger().warning('contact on the tip: %.3g N (sigma %.2g N) above '
+                                          'contact_threshold %.3g N' % (
+                                              magnitude, sigma, self._contact.threshold))
+            else:
+                self.get_logger().info('contact ended: %.3g N' % magnitude)
+
+    # -- diagnostics ---------------------------------------------------------------------------
+    def _publish_diagnostics(self):
+        count, median, maximum = self._times.report()
+        rate = self._rate.report()
+        estimate = self._published
+        level, message = diag.OK, 'estimating'
+        values = {'state': 'ready' if estimate is not None else 'starting',
+                  'estimate_rate_hz': rate, 'estimates': count,
+                  'estimate_time_median_ms': median, 'estimate_time_max_ms': maximum,
+                  'failures_total': self._failures,
+                  'contact_threshold_n': self._contact.threshold,
+                  'in_contact': self._contact.in_contact}
+        if self._no_input:
+            level, message = diag.WARN, self._no_input
+        elif estimate is None:
+            message = 'waiting for cable_states or tip_pose_measured'
+        else:
+            sigma = estimate.sigma
+            values.update({
+                'force_n': ' '.join('%.4g' % v for v in estimate.force),
+                'force_sigma_n': ' '.join('%.3g' % v for v in sigma[:3]),
+                'converged': estimate.converged,
+                'chi2': estimate.chi2,
+                'unseen_directions': '; '.join(' '.join('%.2f' % v for v in d)
+                                               for d in estimate.unseen) or 'none',
+                'estimate_message': estimate.message or 'none',
+            })
+            if self._params['estimate_moment']:
+                values['moment_nm'] = ' '.join('%.4g' % v for v in estimate.moment)
+                values['moment_sigma_nm'] = ' '.join('%.3g' % v for v in sigma[3:])
+            if self._contact.in_contact:
+                magnitude, _ = force_along(estimate.force, estimate.covariance)
+                level, message = diag.WARN, 'contact on the tip: %.3g N' % magnitude
+            elif len(estimate.unseen):
+                message = 'estimating (%d direction(s) not seen)' % len(estimate.unseen)
+        if level == diag.OK and self._problems.recent(2.0):
+            level, message = diag.WARN, 'rejected ' + self._problems.last_reason
+        values.update(self._problems.values())
+        self._diagnostics.publish(diag.diagnostic_array(
+            self.get_clock().now().to_msg(), self.get_fully_qualified_name().lstrip('/'),
+            self.robot.name, level, message, values))
+
+
+def main(args=None):
+    """Run the tip_load_estimator node (``ros2 run continuum_statics tip_load_estimator``)."""
+    from continuum_statics.nodes.node_runner import run_nodes
+    return run_nodes([TipLoadEstimatorNode], args)
+
+
+if __name__ == '__main__':
+    sys.exit(main())

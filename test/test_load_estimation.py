@@ -1,0 +1,181 @@
+"""Tip-load estimation (``robot.estimate_tip_wrench``) against loads applied by forward solves.
+
+Truth: a known tip load applied with ``solve_tensions`` / ``solve_lengths`` / ``solve_bvp``
+(forward statics, not the estimator's inversion), measurements made from that equilibrium and
+perturbed by seeded Gaussian noise of the stated standard deviations. The estimator must land
+inside its own 3-sigma box in >= 95 % of the cases, and its reported standard deviations must
+match the scatter of its errors within a factor 2 in every direction the measurements see.
+"""
+import dataclasses
+
+from conftest import REPO
+import numpy as np
+import pytest
+
+from continuum_statics import load_robot
+from continuum_statics.core.load_estimation import DEFAULT_NOISE, plausible_tip_load
+from continuum_statics.core.robot import Robot
+from continuum_statics.core.tendons import full_circle_tension
+
+EXAMPLES = sorted(path.name for path in (REPO / 'config').glob('*.yaml')
+                  if not path.name.endswith('params.yaml'))
+CASES = 200
+SIGMA_LENGTH, SIGMA_TENSION, SIGMA_TIP = (DEFAULT_NOISE['length'], DEFAULT_NOISE['tension'],
+                                          DEFAULT_NOISE['tip_position'])
+
+
+def robot_with_model(name, model):
+    robot = load_robot(REPO / 'config' / name)
+    return Robot(dataclasses.replace(robot.description, cable_model=model))
+
+
+def load_scale(robot):
+    """E I / L^2 (N): test loads are 0.1-2 of it (0.05-1 N on the example robots)."""
+    return float(robot.c[0]) / robot.length ** 2
+
+
+def applied_case(robot, rng):
+    """Return (true force, measurements): a random load and tensions, measured with noise."""
+    n = len(robot.cable_names)
+    # loads that push along the rod stay below half the Euler buckling load pi^2 E I / (4 L^2):
+    # nearer, a rod bent by a push explains a tip as well as a lateral load (two branches)
+    while True:
+        direction = rng.normal(size=3)
+        force = direction / np.linalg.norm(direction) * rng.uniform(0.1, 2.0) * load_scale(robot)
+        if -force @ robot.base_rotation[:, 2] < 0.5 * np.pi ** 2 / 4.0 * load_scale(robot):
+            break
+    if n == 0:
+        shape = robot.solve_bvp(force)
+        tip = shape.tip_position + shape.tip_rotation @ robot.tip_marker
+        return force, {'tip_position': tip + rng.normal(0.0, SIGMA_TIP, 3)}
+    # taut cables, each at least 3 sigma above zero (a reading is never below zero)
+    low = robot.tendons.tension_limits[:, 0] + robot.tendons.pretension + 3.0 * SIGMA_TENSION
+    tensions = low + rng.uniform(0.0, 0.05 * full_circle_tension(robot), n)
+    shape = robot.solve_tensions(tensions, force)
+    paths = robot.cable_lengths(shape)
+    if robot.tendons.is_ideal:
+        lengths, measured = paths, tensions
+    else:  # the motors hold the lengths that give these tensions
+        free = paths / (1.0 + tensions * robot.tendons.compliance)
+        lengths = robot.tendons.lengths_for(free, robot.straight_cable_lengths)
+        solution = robot.solve_lengths(lengths, force)
+        assert solution.converged, solution.message
+        np.testing.assert_allclose(solution.tensions, tensions, rtol=1e-5, atol=1e-8)
+        measured = solution.tensions
+    return force, {'lengths': lengths + rng.normal(0.0, SIGMA_LENGTH, n),
+                   'tensions': np.maximum(measured + rng.normal(0.0, SIGMA_TENSION, n), 0.0)}
+
+
+@pytest.mark.parametrize('model', ['point_moment', 'distributed'])
+@pytest.mark.parametrize('name', EXAMPLES)
+def test_estimates_fall_inside_their_covariance(name, model):
+    robot = robot_with_model(name, model)
+    rng = np.random.default_rng(2024)
+    inside, errors, sigmas, converged = 0, [], [], 0
+    for _ in range(CASES):
+        force, measurements = applied_case(robot, rng)
+        estimate = robot.estimate_tip_wrench(**measurements)
+        assert np.all(np.isfinite(estimate.force)) and np.all(np.isfinite(estimate.covariance))
+        inside += bool(np.all(np.abs(estimate.force - force) <= 3.0 * estimate.sigma))
+        converged += estimate.converged
+        errors.append(estimate.force - force)
+        sigmas.append(estimate.sigma)
+    assert inside >= 0.95 * CASES, '%d of %d inside 3 sigma' % (inside, CASES)
+    assert converged >= 0.95 * CASES, '%d of %d converged' % (converged, CASES)
+    # where the measurements pin the load down (sigma below a quarter of E I / L^2, the scale
+    # of the loads applied here) the reported sigma is the scatter's (robust: 1.4826 median
+    # absolute deviation, so that the few cases outside 3 sigma do not set it); elsewhere the
+    # prior (10 E I / L^2, wider than these loads) speaks and sigma is larger than the scatter
+    errors = np.array(errors)
+    scatter = 1.4826 * np.median(np.abs(errors - np.median(errors, axis=0)), axis=0)
+    sigma = np.median(sigmas, axis=0)
+    seen = sigma < 0.25 * load_scale(robot)
+    assert np.all((0.5 * sigma <= scatter) & (scatter <= 2.0 * sigma) | ~seen), (scatter, sigma)
+    assert np.all(scatter <= 2.0 * sigma), (scatter, sigma)
+
+
+def test_tip_position_alone_gives_the_force_on_a_rod_without_cables():
+    rod = load_robot(REPO / 'config' / 'jones2009_nitinol_rod.yaml')
+    force = np.array([0.05, -0.08, 0.02])
+    shape = rod.solve_bvp(force)
+    estimate = rod.estimate_tip_wrench(tip_position=shape.tip_position,
+                                       noise={'tip_position': 1e-6})
+    assert estimate.converged, estimate.message
+    # the rod's axial stiffness hides the force along the tip's axis; the others: exact
+    seen = np.linalg.eigh(estimate.covariance)[1][:, :2]
+    np.testing.assert_allclose(seen.T @ estimate.force, seen.T @ force, atol=1e-4)
+    assert np.all(np.abs(estimate.force - force) <= 3.0 * estimate.sigma)
+
+
+def test_force_and_moment_from_a_tracked_tip_pose():
+    rod = load_robot(REPO / 'config' / 'jones2009_nitinol_rod.yaml')
+    force, moment = np.array([0.03, -0.02, 0.0]), np.array([0.0, 0.004, -0.002])
+    shape = rod.solve_bvp(force, moment)
+    estimate = rod.estimate_tip_wrench(tip_position=shape.tip_position,
+                                       tip_rotation=shape.tip_rotation, moment=True,
+                                       noise={'tip_position': 1e-7, 'tip_angle': 1e-6})
+    assert estimate.covariance.shape == (6, 6)
+    np.testing.assert_allclose(estimate.moment, moment, atol=1e-5)
+    lateral = [0, 1]
+    np.testing.assert_allclose(estimate.force[lateral], force[lateral], atol=1e-4)
+
+
+def test_the_unseen_direction_is_named_and_held_at_zero():
+    # a straight single-section robot: cable tensions and lengths cannot tell an axial push
+    robot = load_robot(REPO / 'config' / 'tendon_robot_real_tendons.yaml')
+    force = np.array([0.0, 0.0, -0.8])
+    solution = robot.solve_lengths(robot.straight_cable_lengths, force)
+    estimate = robot.estimate_tip_wrench(lengths=robot.straight_cable_lengths,
+                                         tensions=solution.tensions)
+    axial = robot.base_rotation[:, 2]
+    assert len(estimate.unseen) == 1
+    assert abs(estimate.unseen[0] @ axial) > 0.99
+    assert 'do not determine the tip force along' in estimate.message
+    assert abs(estimate.force @ axial) < 1e-3 * plausible_tip_load(robot)[0]
+    assert estimate.sigma @ np.abs(axial) > 0.5 * plausible_tip_load(robot)[0]
+
+
+def test_warm_estimates_follow_a_changing_load():
+    robot = load_robot(REPO / 'config' / 'three_section_robot_real_tendons.yaml')
+    rng = np.random.default_rng(5)
+    tensions = robot.tendons.pretension + rng.uniform(0.0, 1.0, len(robot.cable_names))
+    shape = robot.solve_tensions(tensions)
+    free = robot.cable_lengths(shape) / (1.0 + tensions * robot.tendons.compliance)
+    lengths = robot.tendons.lengths_for(free, robot.straight_cable_lengths)
+    warm, solution = None, None
+    for k in range(10):
+        force = np.array([0.02 * k, -0.01 * k, 0.0])
+        solution = robot.solve_lengths(lengths, force, warm_start=solution)
+        warm = robot.estimate_tip_wrench(lengths=lengths, tensions=solution.tensions,
+                                         warm_start=warm)
+        cold = robot.estimate_tip_wrench(lengths=lengths, tensions=solution.tensions)
+        assert warm.converged and cold.converged
+        assert warm.iterations <= cold.iterations
+        np.testing.assert_allclose(warm.force[:2], force[:2], atol=3.0 * warm.sigma[:2].max())
+        np.testing.assert_allclose(warm.force, cold.force, atol=0.1 * warm.sigma.max())
+
+
+def test_percent_tension_noise_scales_the_covariance():
+    robot = load_robot(REPO / 'config' / 'three_section_robot.yaml')
+    tensions = np.full(len(robot.cable_names), 2.0)
+    shape = robot.solve_tensions(tensions, [0.1, 0.0, 0.0])
+    lengths = robot.cable_lengths(shape)
+    small = robot.estimate_tip_wrench(lengths=lengths, tensions=tensions,
+                                      noise={'tension': '1%'})
+    large = robot.estimate_tip_wrench(lengths=lengths, tensions=tensions,
+                                      noise={'tension': '5%'})
+    assert np.all(large.sigma > small.sigma)
+
+
+@pytest.mark.parametrize('arguments, words', [
+    ({}, 'no measurement given'),
+    ({'tensions': [-1.0] * 9}, 'tensions must be >= 0'),
+    ({'tip_position': [0, 0, 0.3], 'noise': {'lenght': 1e-5}}, "unknown key 'lenght'"),
+    ({'tip_position': [0, 0, 0.3], 'noise': {'length': 0.0}}, 'noise length must be'),
+    ({'tip_rotation': np.ones((3, 3))}, '3x3 rotation matrix'),
+    ({'lengths': [0.3] * 4}, 'lengths must'),
+])
+def test_bad_arguments_name_the_problem(arguments, words):
+    robot = load_robot(REPO / 'config' / 'three_section_robot.yaml')
+    with pytest.raises(ValueError, match=words):
+        robot.estimate_tip_wrench(**arguments)
