@@ -1,0 +1,149 @@
+"""tip_load_estimator over DDS (one process, private context), with a load hidden in the sim driver.
+
+Truth: the simulated driver applies ``sim_tip_wrench`` to its own tendon model (no other node is
+told); the tip that load gives at the motors' final lengths is ``solve_lengths`` with it, offline.
+Decision logic without DDS: :class:`ContactDetector` and the sim backend's hidden load.
+"""
+from conftest import REPO
+from nodes_helpers import LATCHED, Collector, call, diagnostic_values, wait_until
+import numpy as np
+import pytest
+
+from continuum_statics import load_robot
+from continuum_statics.control.contact import ContactDetector
+from continuum_statics.drivers.sim import SimulatedCableBackend
+
+REAL_FILE = REPO / 'config' / 'tendon_robot_real_tendons.yaml'
+REAL = load_robot(REAL_FILE)
+HIDDEN = [0.12, -0.08, 0.0, 0.0, 0.0, 0.0]  # N, N m: lateral, felt through the tensions
+
+
+# -- without DDS -----------------------------------------------------------------------------
+
+def test_contact_needs_three_sigma_and_ends_below_the_threshold():
+    detector = ContactDetector(0.2)
+    narrow, wide = np.eye(3) * 0.01 ** 2, np.eye(3) * 0.05 ** 2
+    assert not detector.update([0.22, 0.0, 0.0], wide)  # 0.22 - 3 * 0.05 < 0.2
+    assert detector.update([0.25, 0.0, 0.0], narrow) and detector.in_contact
+    assert not detector.update([0.21, 0.0, 0.0], wide)  # still above: no toggling on noise
+    assert detector.update([0.0, 0.19, 0.0], narrow) and not detector.in_contact
+
+
+def test_the_sim_backend_holds_its_lengths_and_its_tensions_feel_the_hidden_load():
+    backend = SimulatedCableBackend(REAL.cable_names, REAL.cable_length_limits,
+                                    REAL.straight_cable_lengths, robot=REAL)
+    backend.start(0.0)
+    unloaded = backend.read(0.1)
+    backend.set_tip_wrench(HIDDEN)
+    loaded = backend.read(0.2)
+    np.testing.assert_array_equal(loaded.lengths, unloaded.lengths)
+    truth = REAL.solve_lengths(REAL.straight_cable_lengths, HIDDEN[:3])
+    np.testing.assert_allclose(loaded.tensions, truth.tensions, rtol=1e-7)  # solver tolerance
+    assert np.max(np.abs(loaded.tensions - unloaded.tensions)) > 0.3  # N: the load is felt
+    with pytest.raises(ValueError, match='6 finite numbers'):
+        backend.set_tip_wrench([0.0, float('nan'), 0.0, 0.0, 0.0, 0.0])
+
+
+# -- over DDS --------------------------------------------------------------------------------
+
+rclpy = pytest.importorskip('rclpy')
+from diagnostic_msgs.msg import DiagnosticArray  # noqa: E402
+from geometry_msgs.msg import PoseStamped, WrenchStamped  # noqa: E402
+from nav_msgs.srv import GetPlan  # noqa: E402
+from rclpy.qos import qos_profile_sensor_data  # noqa: E402
+from sensor_msgs.msg import JointState  # noqa: E402
+from std_msgs.msg import Bool  # noqa: E402
+
+from continuum_statics.nodes.cable_driver_node import CableDriverNode  # noqa: E402
+from continuum_statics.nodes.statics_node import StaticsNode  # noqa: E402
+from continuum_statics.nodes.tip_controller_node import TipControllerNode  # noqa: E402
+from continuum_statics.nodes.tip_load_estimator_node import TipLoadEstimatorNode  # noqa: E402
+
+
+def wrench_of(msg):
+    f = msg.wrench.force
+    return np.array([f.x, f.y, f.z])
+
+
+def sigma_of(values):
+    return np.array([float(v) for v in values['force_sigma_n'].split()])
+
+
+@pytest.mark.ros
+def test_the_estimator_finds_the_hidden_load_and_raises_contact(harness):
+    common = {'robot_file': str(REAL_FILE)}
+    harness.add(CableDriverNode, sim_tip_wrench=HIDDEN, **common)
+    harness.add(TipLoadEstimatorNode, contact_threshold=0.5, **common)
+    client = harness.client()
+    estimates = Collector(client, WrenchStamped, 'tip_wrench_estimate', 10)
+    contact = Collector(client, Bool, 'tip_contact', LATCHED)
+    diagnostics = Collector(client, DiagnosticArray, '/diagnostics', 10)
+
+    def values():
+        found = diagnostic_values(diagnostics, '/tip_load_estimator')
+        return found[0] if found else {}
+
+    wait_until(lambda: len(estimates) >= 20 and 'force_sigma_n' in values(), 20.0,
+               'estimates and their sigma')
+    force, sigma = wrench_of(estimates.last), sigma_of(values())
+    assert estimates.last.header.frame_id == REAL.base_frame_id
+    # the cables feel the lateral load (sigma: its coupling with the unseen push along the
+    # rod, whose prior is 10 E I / L^2 = 5 N); the push itself they do not see: held at zero
+    assert np.all(np.abs(force[:2] - HIDDEN[:2]) <= 3.0 * sigma[:2]), (force, sigma)
+    assert sigma[0] < 0.2 and sigma[1] < 0.2 and sigma[2] > 1.0, sigma
+    assert abs(force[2]) <= 0.05 and values()['unseen_directions'] != 'none'
+    assert contact.last is not None and contact.last.data is False
+    # a push past the threshold, through the topic: contact, WARN; released: no contact
+    load = client.create_publisher(WrenchStamped, 'sim_tip_wrench', 10)
+    msg = WrenchStamped()
+    msg.header.frame_id = REAL.base_frame_id
+    msg.wrench.force.x = 0.9
+
+    def pushed():
+        load.publish(msg)
+        return contact.last.data is True
+
+    wait_until(pushed, 15.0, 'tip_contact true under a 0.9 N push')
+    wait_until(lambda: 'contact on the tip' in (diagnostic_values(
+        diagnostics, '/tip_load_estimator') or ({}, None))[1].message, 5.0, 'a contact WARN')
+    msg.wrench.force.x = 0.0
+
+    def released():
+        load.publish(msg)
+        return contact.last.data is False
+
+    wait_until(released, 15.0, 'tip_contact false once the push is gone')
+
+
+@pytest.mark.ros
+def test_a_goal_with_the_estimated_load_lands_on_the_goal_while_the_load_is_on(harness):
+    common = {'robot_file': str(REAL_FILE)}
+    estimate = {'tip_wrench_source': 'estimate'}
+    harness.add(CableDriverNode, sim_tip_wrench=HIDDEN, **common)
+    harness.add(TipLoadEstimatorNode, **common)
+    harness.add(StaticsNode, marker_rate=0.0, **common, **estimate)
+    controller = harness.add(TipControllerNode, min_tension=1.0, **common, **estimate)
+    client = harness.client()
+    tip = Collector(client, PoseStamped, 'tip_pose', LATCHED)
+    states = Collector(client, JointState, 'cable_states', qos_profile_sensor_data)
+    estimates = Collector(client, WrenchStamped, 'tip_wrench_estimate', 10)
+    service = client.create_client(GetPlan, 'tip_goal')
+    assert service.wait_for_service(timeout_sec=10.0)
+    wait_until(lambda: tip.last is not None and len(estimates) >= 10, 20.0,
+               'tip_pose and estimates')
+    goal = REAL.solve_ivp([2.0, 0.5, 0.0]).tip_position
+    request = GetPlan.Request(tolerance=1e-3)
+    request.goal.header.frame_id = REAL.base_frame_id
+    p = request.goal.pose.position
+    p.x, p.y, p.z = (float(v) for v in goal)
+    request.goal.pose.orientation.w = 1.0
+    plan = call(service, request, 60.0).plan
+    assert len(plan.poses) > 0, controller._last_outcome
+    # where the simulated robot really is: its motors' lengths under the hidden load
+    lengths = np.array(states.last.position)
+    loaded = REAL.solve_lengths(lengths, HIDDEN[:3])
+    unloaded = REAL.solve_lengths(lengths)
+    assert loaded.converged and unloaded.converged
+    assert np.linalg.norm(loaded.shape.tip_position - goal) <= 1.5e-3
+    # and the load matters: the model without it puts that tip elsewhere
+    assert np.linalg.norm(unloaded.shape.tip_position - goal) > 3e-3
