@@ -1,6 +1,6 @@
 # The two commands of README.md: `make demo` (main job) and `make test` (whole suite).
 # Both create .venv on first use and reuse it afterwards.
-.PHONY: venv venv-jazzy demo test test-jazzy bench bench-nodes bench-drivers bench-tendons lint clean fuzz soak
+.PHONY: venv venv-jazzy demo test test-jazzy bench bench-nodes bench-drivers bench-tendons bench-load lint clean fuzz soak
 
 venv:
 	@scripts/setup_venv.sh
@@ -23,6 +23,7 @@ test-jazzy: venv venv-jazzy
 bench: venv
 	scripts/ros_env.sh .venv/bin/python -m continuum_statics bench
 	.venv/bin/python -m continuum_statics.tools.bench_tendons
+	.venv/bin/python -m continuum_statics.tools.bench_load
 
 bench-nodes: venv
 	scripts/ros_env.sh --private .venv/bin/python -m continuum_statics bench --nodes
@@ -50,5 +51,8 @@ clean:
 	rm -rf .venv .venv-jazzy build install log *.egg-info
 
 # Real tendons: solve_lengths warm/cold beside SciPy; with the v6 calibration (several minutes).
+bench-load: venv
+	.venv/bin/python -m continuum_statics.tools.bench_load --plot docs/images/tip_load_noise.png
+
 bench-tendons: venv
 	.venv/bin/python -m continuum_statics.tools.bench_tendons --calibration

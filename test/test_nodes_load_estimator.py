@@ -1,4 +1,4 @@
-"""tip_load_estimator over DDS (one process, private context), with a load hidden in the sim driver.
+"""tip_load_estimator over DDS (one process, private context), a load hidden in the sim driver.
 
 Truth: the simulated driver applies ``sim_tip_wrench`` to its own tendon model (no other node is
 told); the tip that load gives at the motors' final lengths is ``solve_lengths`` with it, offline.

@@ -59,3 +59,26 @@ def test_wrong_number_of_cable_values_is_a_clear_error(option):
     assert result.returncode == 1
     assert '%s needs 4 values, one per cable (cable_0, cable_1, cable_2, cable_3), got 2' % (
         option) in result.stderr
+
+
+def test_estimate_load_finds_the_force_that_bent_the_rod():
+    # tensions and the tip position of a known load: the JSON gives it back within 3 sigma
+    robot = load_robot(TENDON)
+    tensions = np.array([1.5, 0.4, 0.6, 1.1])
+    force = np.array([0.1, -0.2, 0.0])
+    shape = robot.solve_tensions(tensions, force)
+    result = solve('--estimate-load', '--tensions', *('%.9f' % t for t in tensions),
+                   '--tip-position', *('%.9f' % v for v in shape.tip_position),
+                   '--noise', 'tip_position', '1e-5', '--noise', 'tension', '1%', '--json')
+    assert result.returncode == 0, result.stderr
+    data = json.loads(result.stdout)
+    assert data['converged'] and data['frame_id'] == 'base_link'
+    error = np.array(data['force_n']) - force
+    assert np.all(np.abs(error) <= 3.0 * np.array(data['force_sigma_n'])), data
+    assert max(data['force_sigma_n'][:2]) < 0.05
+    human = solve('--estimate-load', '--tensions', *('%.9f' % t for t in tensions))
+    assert human.returncode == 0 and 'force  [N]' in human.stdout and 'sigma' in human.stdout
+    # tensions alone, no tip: nothing sees the load, and the output says so
+    assert 'do not determine the tip force' in human.stdout
+    wrong = solve('--tip-position', '0', '0', '0.3')
+    assert wrong.returncode == 1 and '--estimate-load' in wrong.stderr

@@ -184,6 +184,8 @@ class _Model:
         else:
             self.kind, self.inputs, self.input_sigma = 'rod', np.zeros(0), np.zeros(0)
             self.input_step = 0.0
+        if self.kind == 'lengths':
+            self.warm = _noise_deadband(robot, warm, lengths, levels['length'])
         self.predicts_cables = bool(outputs)
         if tip_position is not None:
             outputs.append(tip_position)
@@ -272,6 +274,20 @@ class _Model:
         return np.linalg.inv(np.linalg.cholesky(covariance))
 
 
+def _noise_deadband(robot, warm, lengths, sigma):
+    """Return the previous length solve as if cables that moved under 3 sigma had not moved.
+
+    Friction acts against each cable's last direction of motion (``solve_lengths`` reads it
+    from the warm start's free lengths); encoder noise is not motion, so it must not flip it.
+    """
+    previous = getattr(warm, 'free_lengths', None)
+    if previous is None or len(previous) != len(lengths):
+        return warm
+    free = robot.tendons.free_lengths(lengths, robot.straight_cable_lengths)
+    still = np.abs(free - previous) < 3.0 * sigma
+    return dataclasses.replace(warm, free_lengths=np.where(still, free, previous))
+
+
 def _angle(rotation):
     """Rotation vector (rad) of a rotation matrix (log map)."""
     cos = np.clip((np.trace(rotation) - 1.0) / 2.0, -1.0, 1.0)
@@ -350,6 +366,9 @@ def estimate_tip_wrench(robot, lengths=None, tensions=None, tip_position=None, t
         scaled = jacobian * prior  # d residual / d (w / prior)
         hessian = seen.T @ (scaled.T @ scaled + np.eye(size)) @ seen
         gradient = seen.T @ (scaled.T @ residual + load[:size] / prior)
+        if _sigmas(hessian, gradient) <= STEP_TOLERANCE:
+            converged = True  # already there (a warm start on an unchanged measurement)
+            break
         accepted = False
         for _ in range(10):
             # Levenberg's damping (identity in prior units): weakly seen directions move last
@@ -392,8 +411,7 @@ def estimate_tip_wrench(robot, lengths=None, tensions=None, tip_position=None, t
         # the fit no longer improves by a measurable amount (the solvers' resolution)
         residual = weights.whiten @ (predicted - model.measured)
         gradient = seen.T @ (scaled.T @ residual + load[:size] / prior)
-        following = np.linalg.solve(hessian, gradient)
-        if float(np.sqrt(max(float(following @ hessian @ following), 0.0))) <= STEP_TOLERANCE \
+        if _sigmas(hessian, gradient) <= STEP_TOLERANCE \
                 or (fresh and objective - trial_objective < OBJECTIVE_TOLERANCE):
             converged = True
             break
@@ -465,6 +483,13 @@ def _reused_weights(previous, model, load, prior):
             REWEIGH_INPUT * model.input_step:
         return None
     return weights
+
+
+def _sigmas(hessian, gradient):
+    """Size of the Gauss-Newton step -H^-1 g in standard deviations (sqrt of g^T H^-1 g)."""
+    if not gradient.size:
+        return 0.0
+    return float(np.sqrt(max(float(gradient @ np.linalg.solve(hessian, gradient)), 0.0)))
 
 
 def _moved(load, since, prior):

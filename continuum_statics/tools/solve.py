@@ -4,6 +4,9 @@ Without cable inputs: the boundary-value problem of the rod under a tip load (ca
 ``--tensions``: forward statics under cable tensions (N). ``--cable-lengths``: the shape
 estimated from measured cable lengths (m), as the statics node does (with ``--tensions`` too when
 the tensions are measured). ``--plot FILE.png`` draws the backbone in 3-D.
+``--estimate-load``: the tip force (and with ``--moment`` the moment) that explains the measured
+``--cable-lengths`` / ``--tensions`` / ``--tip-position`` (:meth:`Robot.estimate_tip_wrench`),
+with its standard deviations and the directions the measurements do not see.
 """
 import argparse
 import json
@@ -29,6 +32,18 @@ def solve_main(argv=None):
                         help='cable tensions (N, >= 0), one per cable in robot-file order')
     parser.add_argument('--cable-lengths', nargs='+', type=float, default=None, metavar='L',
                         help='measured cable lengths (m), one per cable in robot-file order')
+    parser.add_argument('--estimate-load', action='store_true',
+                        help='estimate the tip load from the measurements given instead '
+                        '(--cable-lengths, --tensions, --tip-position)')
+    parser.add_argument('--tip-position', nargs=3, type=float, default=None,
+                        metavar=('X', 'Y', 'Z'), help='measured tip position (the tracked '
+                        'point, tip_marker), base frame (m); with --estimate-load')
+    parser.add_argument('--moment', action='store_true',
+                        help='with --estimate-load: estimate the tip moment too')
+    parser.add_argument('--noise', nargs=2, action='append', default=[],
+                        metavar=('KIND', 'SIGMA'), help='with --estimate-load: a measurement '
+                        'standard deviation, KIND one of length (m), tension (N, or P%%), '
+                        'tip_position (m), tip_angle (rad); repeatable')
     parser.add_argument('--plot', default=None, metavar='FILE.png',
                         help='draw the backbone in 3-D into this PNG')
     parser.add_argument('--json', action='store_true', help='print the whole shape as JSON')
@@ -44,6 +59,10 @@ def solve_main(argv=None):
                 raise ValueError('%s needs %d values, one per cable (%s), got %d' % (
                     name, len(robot.cable_names), ', '.join(robot.cable_names) or 'none',
                     len(values)))
+        if args.estimate_load:
+            return _estimate_load(args, robot)
+        if args.tip_position is not None or args.moment or args.noise:
+            raise ValueError('--tip-position, --moment and --noise go with --estimate-load')
         start = time.perf_counter()
         if args.cable_lengths is not None:
             extra = {} if args.tensions is None else {'tensions': args.tensions}
@@ -94,6 +113,43 @@ def solve_main(argv=None):
     if args.plot:
         print('backbone drawn in %s' % args.plot)
     return 0
+
+
+def _estimate_load(args, robot):
+    """``--estimate-load``: print the tip wrench, its sigma and what the measurements miss."""
+    noise = {kind: (value if value.endswith('%') else float(value))
+             for kind, value in args.noise}
+    start = time.perf_counter()
+    estimate = robot.estimate_tip_wrench(lengths=args.cable_lengths, tensions=args.tensions,
+                                         tip_position=args.tip_position, noise=noise,
+                                         moment=args.moment)
+    elapsed = time.perf_counter() - start
+    sigma = estimate.sigma
+    if args.json:
+        print(json.dumps({
+            'robot': robot.name, 'frame_id': robot.base_frame_id,
+            'force_n': estimate.force.tolist(), 'force_sigma_n': sigma[:3].tolist(),
+            'moment_nm': estimate.moment.tolist(),
+            'moment_sigma_nm': sigma[3:].tolist() if args.moment else None,
+            'covariance': estimate.covariance.tolist(),
+            'unseen_directions': estimate.unseen.tolist(), 'converged': estimate.converged,
+            'chi2': estimate.chi2, 'iterations': estimate.iterations,
+            'tip_position': estimate.shape.tip_position.tolist(),
+            'message': estimate.message, 'elapsed_ms': elapsed * 1e3}))
+        return 0 if estimate.converged else 1
+    print('robot %s, frame %s: tip load estimated in %.1f ms (%d iterations)%s' % (
+        robot.name, robot.base_frame_id, elapsed * 1e3, estimate.iterations,
+        '' if estimate.converged else ', NOT converged'))
+    print('force  [N]    %s   sigma %s' % (_triple(estimate.force), _triple(sigma[:3])))
+    if args.moment:
+        print('moment [N m]  %s   sigma %s' % (_triple(estimate.moment), _triple(sigma[3:])))
+    print('chi2 per measurement %.3g%s' % (estimate.chi2, (
+        '\n' + estimate.message) if estimate.message else ''))
+    return 0 if estimate.converged else 1
+
+
+def _triple(values):
+    return ' '.join('%+.4g' % v for v in values)
 
 
 def _estimate_status(estimate):
