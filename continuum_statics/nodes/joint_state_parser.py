@@ -8,6 +8,8 @@ import struct
 import numpy as np
 from sensor_msgs.msg import JointState
 
+from continuum_statics.nodes.ros_conversions import cable_index
+
 
 class JointStateView:
     """A serialized sensor_msgs/JointState, read without building a Python message.
@@ -166,6 +168,32 @@ def check_cable_view(view, index, cable_names):
     if not (positions > 0.0).all():  # also false for NaN
         raise ValueError('cable length not a positive finite number for %s' % ', '.join(
             cable_names[index[i]] for i in np.flatnonzero(~(positions > 0.0))))
+
+
+class CableStatesReader:
+    """Serialized ``cable_states`` -> checked lengths in robot order (the nodes off the hot path).
+
+    Keeps the name index of the last good message, so a driver's stream decodes no names.
+    """
+
+    def __init__(self, cable_names):
+        self.cable_names = tuple(cable_names)
+        self._name_bytes, self.index = None, None
+
+    def read(self, data):
+        """Return (view, lengths (n,) m in robot order); ``ValueError`` says what is wrong."""
+        try:
+            view = parse_joint_state(data, self._name_bytes)
+            if view.name_bytes != self._name_bytes:
+                self.index = cable_index(view.names, self.cable_names)
+                self._name_bytes = view.name_bytes
+            check_cable_view(view, self.index, self.cable_names)
+        except ValueError:
+            self._name_bytes = None
+            raise
+        lengths = np.empty(len(self.cable_names))
+        lengths[self.index] = view.position
+        return view, lengths
 
 
 def _parse_with_rclpy(data):

@@ -73,7 +73,7 @@ from continuum_statics.core.warmup import warm_up
 from continuum_statics.core.workspace import reachable_tips
 from continuum_statics.nodes import diagnostics_util as diag
 from continuum_statics.nodes.dedicated_intake import make_intake
-from continuum_statics.nodes.joint_state_parser import check_cable_view, parse_joint_state
+from continuum_statics.nodes.joint_state_parser import CableStatesReader
 from continuum_statics.nodes.markers import workspace_markers
 from continuum_statics.nodes.move_tip_action import MoveTipServer, load_interface
 from continuum_statics.nodes.node_params import (
@@ -85,7 +85,6 @@ from continuum_statics.nodes.node_params import (
 from continuum_statics.nodes.parameter_tables import tip_controller_parameters
 from continuum_statics.nodes.qos import COMMAND_QOS, LATCHED_QOS, LATEST_SENSOR_QOS
 from continuum_statics.nodes.ros_conversions import (
-    cable_index,
     float32_value,
     goal_direction,
     goal_position,
@@ -146,8 +145,7 @@ class TipControllerNode(Node):
         self._measured_tips = deque(maxlen=4000)  # recent tracker TipSamples (tip, not marker)
         self._measured_tip = None
         self._tip_source = 'tip_pose'
-        self._name_bytes = None
-        self._index = None
+        self._cable_states = CableStatesReader(self.cable_names)
         self._backbone = None  # (stamp ns, serialized Path) of the newest backbone
         self._load = None  # newest TipLoad
         self._problems = diag.Problems()
@@ -299,17 +297,10 @@ class TipControllerNode(Node):
 
     def _on_cable_states(self, data):
         try:
-            view = parse_joint_state(data, self._name_bytes)
-            if view.name_bytes != self._name_bytes:
-                self._index = cable_index(view.names, self.cable_names)
-                self._name_bytes = view.name_bytes
-            check_cable_view(view, self._index, self.cable_names)
+            view, measured = self._cable_states.read(data)
         except ValueError as error:
-            self._name_bytes = None
             self._reject('cable_states', error)
             return
-        measured = np.empty(len(self.cable_names))
-        measured[self._index] = view.position
         self._measurement = Measurement(measured, view.sec * 1_000_000_000 + view.nanosec,
                                         time.monotonic())
         self._recent_lengths.append(self._measurement)

@@ -30,11 +30,11 @@ from continuum_statics.core.load_estimation import plausible_tip_load
 from continuum_statics.core.rotations import quaternion_to_rotation
 from continuum_statics.core.warmup import warm_up
 from continuum_statics.nodes import diagnostics_util as diag
-from continuum_statics.nodes.joint_state_parser import check_cable_view, parse_joint_state
+from continuum_statics.nodes.joint_state_parser import CableStatesReader
 from continuum_statics.nodes.node_params import ParameterTable, load_robot_file
 from continuum_statics.nodes.parameter_tables import tip_load_estimator_parameters
 from continuum_statics.nodes.qos import LATCHED_QOS, LATEST_SENSOR_QOS
-from continuum_statics.nodes.ros_conversions import cable_index, check_frame
+from continuum_statics.nodes.ros_conversions import check_frame
 from continuum_statics.nodes.timers import steady_timer
 
 THROTTLE_S = 2.0
@@ -54,7 +54,7 @@ class TipLoadEstimatorNode(Node):
         warm_up(self.robot, self.get_logger().info)
         self.cable_names = tuple(self.robot.cable_names)
         self.base_frame_id = self.robot.base_frame_id
-        self._name_bytes, self._index = None, None
+        self._cable_states = CableStatesReader(self.cable_names)
         self._cables = None  # (lengths, tensions or None, sec, nanosec, monotonic s)
         self._tip = None  # (position, rotation, monotonic s) of tip_pose_measured
         self._fresh = False  # a measurement arrived since the last estimate
@@ -105,21 +105,14 @@ class TipLoadEstimatorNode(Node):
 
     def _on_cable_states(self, data):
         try:
-            view = parse_joint_state(data, self._name_bytes)
-            if view.name_bytes != self._name_bytes:
-                self._index = cable_index(view.names, self.cable_names)
-                self._name_bytes = view.name_bytes
-            check_cable_view(view, self._index, self.cable_names)
+            view, lengths = self._cable_states.read(data)
         except ValueError as error:
-            self._name_bytes = None
             self._reject('cable_states', error)
             return
-        lengths = np.empty(len(self.cable_names))
-        lengths[self._index] = view.position
         tensions = None
         if view.effort.shape[0]:
             tensions = np.empty(len(self.cable_names))
-            tensions[self._index] = view.effort
+            tensions[self._cable_states.index] = view.effort
             if not (np.isfinite(tensions).all() and (tensions >= 0.0).all()):
                 self._reject('cable_states', 'effort (tensions) not finite and >= 0 N: %s'
                              % np.round(tensions, 4).tolist())
