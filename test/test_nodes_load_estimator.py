@@ -5,7 +5,14 @@ told); the tip that load gives at the motors' final lengths is ``solve_lengths``
 Decision logic without DDS: :class:`ContactDetector` and the sim backend's hidden load.
 """
 from conftest import REPO
-from nodes_helpers import LATCHED, Collector, call, diagnostic_values, wait_until
+from nodes_helpers import (
+    LATCHED,
+    Collector,
+    call,
+    diagnostic_values,
+    publish_until,
+    wait_until,
+)
 import numpy as np
 import pytest
 
@@ -147,3 +154,47 @@ def test_a_goal_with_the_estimated_load_lands_on_the_goal_while_the_load_is_on(h
     assert np.linalg.norm(loaded.shape.tip_position - goal) <= 1.5e-3
     # and the load matters: the model without it puts that tip elsewhere
     assert np.linalg.norm(unloaded.shape.tip_position - goal) > 3e-3
+
+
+@pytest.mark.ros
+def test_bad_input_is_rejected_the_last_estimate_kept_and_nothing_non_finite_published(harness):
+    harness.add(TipLoadEstimatorNode, robot_file=str(REAL_FILE))
+    client = harness.client()
+    estimates = Collector(client, WrenchStamped, 'tip_wrench_estimate', 10)
+    diagnostics = Collector(client, DiagnosticArray, '/diagnostics', 10)
+    states = client.create_publisher(JointState, 'cable_states', qos_profile_sensor_data)
+    tracker = client.create_publisher(PoseStamped, 'tip_pose_measured', 10)
+    held = REAL.solve_lengths(REAL.straight_cable_lengths, HIDDEN[:3])
+    good = JointState(name=list(REAL.cable_names),
+                      position=[float(v) for v in REAL.straight_cable_lengths],
+                      effort=[float(t) for t in held.tensions])
+
+    def values():
+        found = diagnostic_values(diagnostics, '/tip_load_estimator')
+        return found[0] if found else {}
+
+    def published():
+        states.publish(good)
+        return len(estimates) >= 5
+
+    wait_until(published, 15.0, 'estimates of good cable_states')
+    count = len(estimates)
+    bad = [JointState(name=list(REAL.cable_names), position=[float('nan')] * 4),
+           JointState(name=['cable_0', 'nope', 'cable_2', 'cable_3'], position=[0.3] * 4),
+           JointState(name=list(REAL.cable_names), position=[0.3] * 4,
+                      effort=[1.0, float('inf'), 1.0, -2.0])]
+    # the newest measurement only (sensor QoS): each bad one is sent until it is counted
+    for index, msg in enumerate(bad, start=1):
+        publish_until(states, msg, lambda: int(values().get('rejected_cable_states', 0))
+                      >= index, 10.0, 'rejection %d counted on /diagnostics' % index)
+    pose = PoseStamped()
+    pose.header.frame_id = 'elsewhere'
+    publish_until(tracker, pose, lambda: int(values().get('rejected_tip_pose_measured', 0))
+                  >= 1, 10.0, 'the tracker in another frame rejected')
+    assert 'elsewhere' in values()['last_rejection']
+    # the good stream goes on and every published wrench is finite
+    publish_until(states, good, lambda: len(estimates) > count + 3, 10.0, 'estimates again')
+    for msg in estimates.messages:
+        assert np.all(np.isfinite(wrench_of(msg)))
+    assert np.all(np.abs(wrench_of(estimates.last)[:2] - HIDDEN[:2])
+                  <= 3.0 * sigma_of(values())[:2])
