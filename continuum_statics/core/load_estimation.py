@@ -46,11 +46,11 @@ DEFAULT_NOISE = {'length': 20e-6, 'tension': 0.05, 'tip_position': 0.5e-3, 'tip_
 MAX_ITERATIONS = 25
 #: Refresh the residual's weights once the load moved by this fraction of its prior scale...
 REWEIGH = 0.1
+#: ... or an input by this many of its difference steps (3e-3 L of cable, 3e-2 E I / (L r)).
+REWEIGH_INPUT = 3000.0
 #: The load Jacobian is refreshed once the load moved by this fraction of the prior scale
 #: (a tenth of E I / L^2: the bend, and with it what couples to what, has changed).
 REJACOBIAN = 0.01
-#: ... or an input by this many of its difference steps (3e-3 L of cable, 3e-2 E I / (L r)).
-REWEIGH_INPUT = 3000.0
 #: Largest step, as a fraction of the prior scale (0.1: E I / L^2 of force).
 STEP_LIMIT = 0.1
 #: Converged when an iteration lowers the objective (a chi-square) by less than this.
