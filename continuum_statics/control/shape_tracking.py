@@ -1,14 +1,17 @@
 """Shape tracking: what statics decides for each measurement (paper sec. V.A, per cycle).
 
 One :meth:`ShapeTracker.update` per ``cable_states``: limits and tension plausibility, the
-warm-started estimate (at most ``max_iterations`` per measurement, finished at once when far
-off), tensions that disagree with the lengths set aside, and the residual judged against the
-thresholds: published as a shape, published as a best fit (warn), or dropped. No ROS.
+warm-started estimate (at most ``max_iterations`` and ``max_model_runs`` IVPs per measurement;
+one more such estimate when still far off; an unfinished one warm-starts the next
+measurement), tensions that disagree with the lengths set aside, and the residual judged against
+the thresholds: published as a shape, published as a best fit (warn), or dropped. No ROS.
 """
 from dataclasses import dataclass
 import math
 
 import numpy as np
+
+from continuum_statics.core.tracking import TRACK_RUNS
 
 
 @dataclass(frozen=True)
@@ -38,7 +41,8 @@ class TrackResult:
     :ivar rejection: why the measurement is dropped ('' when the shape is to be published)
     :ivar message: what limited the estimate, for diagnostics
     :ivar converged: stationary (or refined from one measurement to the next) and a good fit
-    :ivar capped: stopped at ``max_iterations``, refined with the next measurement
+    :ivar capped: stopped at ``max_iterations`` or ``max_model_runs``, refined with the next
+        measurement
     :ivar best_fit: residual above ``warn`` (published with WARN)
     :ivar tensions_used: the shape follows measured tensions
     :ivar distrust: why measured tensions were set aside ('' when not)
@@ -66,13 +70,14 @@ class TrackResult:
 class ShapeTracker:
     """The estimate of one robot, warm-started from the last published one."""
 
-    def __init__(self, robot, cable_names, max_iterations=0):
+    def __init__(self, robot, cable_names, max_iterations=0, max_model_runs=TRACK_RUNS):
         self.robot = robot
         self.cable_names = cable_names
         limits = np.asarray(robot.cable_length_limits, dtype=float).reshape(-1, 2)
         self.low, self.high = limits[:, 0].copy(), limits[:, 1].copy()
-        self.warm = None  # the last published estimate: warm start of the next
+        self.warm = None  # the last published (or unfinished) estimate: warm start of the next
         self.set_max_iterations(max_iterations)
+        self.max_model_runs = max_model_runs
 
     def set_max_iterations(self, max_iterations):
         """Cap the Gauss-Newton iterations per measurement (0: the robot file's)."""
@@ -109,7 +114,8 @@ class ShapeTracker:
                                              for i in high[:4])))
         notes = {'load_problem': '', 'distrust': ''}
         try:
-            estimate = self._estimate(self._tracking, lengths, load, tensions, self.warm, notes)
+            estimate = self._estimate(self._tracking, lengths, load, tensions, self.warm, notes,
+                                      self.max_model_runs)
             if tensions is not None and not estimate.residual <= thresholds.warn:
                 # tensions and lengths disagree: the lengths (encoders) are trusted, the
                 # tensions (a sensor, a current estimate) are not used for this shape
@@ -117,12 +123,17 @@ class ShapeTracker:
                                      'the tensions %.3g m RMS off them): shape from the lengths'
                                      % estimate.residual)
                 tensions = None
-                estimate = self._estimate(self._tracking, lengths, load, None, self.warm, notes)
-            capped = not estimate.converged and self._tracking is not self.robot
+                estimate = self._estimate(self._tracking, lengths, load, None, self.warm, notes,
+                                          self.max_model_runs)
+            capped = estimate.capped or (not estimate.converged
+                                         and self._tracking is not self.robot)
             if capped and not estimate.residual <= thresholds.drop:
-                # far from the last shape (a jump, a restart): finish the fit now
-                estimate = self._estimate(self.robot, lengths, load, tensions, estimate, notes)
-                capped = False
+                # far from the last shape (a jump, a restart): one more bounded estimate now
+                estimate = self._estimate(self.robot, lengths, load, tensions, estimate, notes,
+                                          self.max_model_runs)
+                capped = estimate.capped
+            if capped:  # the best state reached: the next measurement goes on from it
+                self.warm = estimate
         except ValueError as error:
             return TrackResult(rejection=str(error), load_problem=notes['load_problem'])
         residual = float(estimate.residual)
@@ -152,11 +163,12 @@ class ShapeTracker:
                            tensions_used=tensions is not None, **notes)
 
     @staticmethod
-    def _estimate(robot, lengths, load, tensions, warm, notes):
+    def _estimate(robot, lengths, load, tensions, warm, notes, max_model_runs=None):
         """Estimate; a tip load the model cannot take is replaced by zero (and noted)."""
         try:
             return robot.estimate_shape(lengths, tip_force=load[:3], tip_moment=load[3:],
-                                        tensions=tensions, warm_start=warm)
+                                        tensions=tensions, warm_start=warm,
+                                        max_model_runs=max_model_runs or None)
         except ValueError as error:
             if not np.any(load):
                 raise

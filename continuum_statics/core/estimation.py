@@ -36,6 +36,7 @@ BEST_FIT_NOTE = 1e-6
 #: (statics' default warn_residual: below it lag and encoder noise, above it a paid-out cable).
 SLACK_RESIDUAL = 1e-4
 _NO_JACOBIAN = np.zeros((0, 0))  # tells track to use finite-difference Jacobians
+_UNBOUNDED = 2 ** 62  # model runs: no budget (the iteration limits bound the work)
 
 
 @dataclass(frozen=True, eq=False)
@@ -52,6 +53,8 @@ class ShapeEstimate:
     :ivar jacobians: the solver's Jacobians at the estimate, reused by the next warm start
     :ivar model_runs: IVPs integrated (the cost of the estimate)
     :ivar tendons: the :class:`length_statics.LengthSolution` when the tendon model gave the shape
+    :ivar capped: a warm-started estimate that spent its per-call budget (``TRACK_RUNS`` IVPs)
+        before converging: the best state reached; the next call, warm-started from it, goes on
     """
 
     shape: Shape
@@ -64,6 +67,7 @@ class ShapeEstimate:
     jacobians: tuple = None
     model_runs: int = 0
     tendons: object = None
+    capped: bool = False
 
     @property
     def tensions(self):
@@ -82,14 +86,17 @@ class ShapeEstimate:
 
 
 def estimate_shape(robot, cable_lengths, tip_force=(0.0, 0.0, 0.0), tip_moment=(0.0, 0.0, 0.0),
-                   tensions=None, start=None, jacobians=None, previous=None):
+                   tensions=None, start=None, jacobians=None, previous=None,
+                   max_model_runs=None):
     """Estimate the shape from measured cable lengths (m, ``robot.cable_names`` order).
 
     ``tip_force`` (N) and ``tip_moment`` (N m) are the external tip load in the base frame.
     ``tensions`` (N, >= 0) when measured; ``start`` a solver state (the previous estimate when
     tracking; default the small-deflection passive solution) and ``jacobians`` the previous
     estimate's, to be reused (one model run per iteration instead of 1 + len(state));
-    ``previous`` the previous result itself (the tendon model's warm start and friction history).
+    ``previous`` the previous result itself (the tendon model's warm start and friction history);
+    ``max_model_runs`` the IVPs a warm-started least-squares estimate may integrate (None: until
+    it converges; else an estimate that needs more returns the best state reached, ``capped``).
     """
     n_cables = len(robot.cable_names)
     measured = as_vector(cable_lengths, n_cables, 'cable_lengths')
@@ -147,25 +154,36 @@ def estimate_shape(robot, cable_lengths, tip_force=(0.0, 0.0, 0.0), tip_moment=(
     runs = [0]
     args = robot.kernel_args(tip_force, tip_moment)
     if jacobians is not None:  # tracking: the previous Jacobians, Broyden-updated, compiled
+        budget = max_model_runs or _UNBOUNDED
         x, res, _, states, jac, con_jac, iterations, used, ok = track(
             *args, measured, start, jacobians[0], jacobians[1],
-            robot.solver.estimate_tolerance, robot.length, TRACK_ITERATIONS)
+            robot.solver.estimate_tolerance, robot.length, TRACK_ITERATIONS, robot.probe_runs,
+            budget)
         runs[0] = used
-        if ok and _rms(res) <= SLACK_RESIDUAL:
-            return _finish(robot, x, tip_force, states, res, True, iterations, observable,
-                           notes, (jac, con_jac), used)
-        start = x  # keep the progress; go on with fresh Jacobians
-    else:  # cold: the same compiled loop with finite-difference Jacobians at every evaluation
-        x, res, _, states, jac, con_jac, iterations, used, ok = track(
-            *args, measured, start, _NO_JACOBIAN, _NO_JACOBIAN,
-            robot.solver.estimate_tolerance, robot.length, robot.solver.max_iterations)
-        runs[0] = used * robot.probe_runs
         if ok:
             slack = _slack_estimate(robot, measured, tip_force, tip_moment, previous,
                                     observable, notes, _rms(res))
             return slack or _finish(robot, x, tip_force, states, res, True, iterations,
-                                    observable, notes, (jac, con_jac), runs[0])
-        start = x  # keep the progress; go on in Python (longer line search)
+                                    observable, notes, (jac, con_jac), used)
+        if max_model_runs:
+            # bounded work per measurement: the best state reached; the next call goes on
+            notes.insert(0, 'unfinished after %d model runs (max_model_runs %d): refined with '
+                            'the next measurement' % (used, max_model_runs))
+            estimate = _finish(robot, x, tip_force, states, res, True, iterations, observable,
+                               notes, (jac, con_jac), used)
+            return dataclasses.replace(estimate, converged=False, capped=True)
+        start = x  # keep the progress; go on as from a cold start
+    # cold: the same compiled loop with finite-difference Jacobians at every evaluation
+    x, res, _, states, jac, con_jac, iterations, used, ok = track(
+        *args, measured, start, _NO_JACOBIAN, _NO_JACOBIAN, robot.solver.estimate_tolerance,
+        robot.length, robot.solver.max_iterations, robot.probe_runs, _UNBOUNDED)
+    runs[0] += used
+    if ok:
+        slack = _slack_estimate(robot, measured, tip_force, tip_moment, previous, observable,
+                                notes, _rms(res))
+        return slack or _finish(robot, x, tip_force, states, res, True, iterations, observable,
+                                notes, (jac, con_jac), runs[0])
+    start = x  # keep the progress; go on in Python (longer line search)
 
     def evaluate(x):
         runs[0] += robot.probe_runs

@@ -24,15 +24,14 @@ run from the motor to the base disk is straight and folded into EA, and sticking
 holding any tension in the band) is represented by the last sliding direction.
 """
 from dataclasses import dataclass
-import warnings
 
 import numpy as np
-from scipy.linalg import LinAlgWarning, lu_factor, lu_solve
 
 from continuum_statics.core import bvp
 from continuum_statics.core.inputs import as_vector
 from continuum_statics.core.kernel import POINT_MOMENT
 from continuum_statics.core.layout import ProbeRows
+from continuum_statics.core.length_tracking import BALANCE_TOLERANCE, chord
 from continuum_statics.core.shape import Shape
 from continuum_statics.core.tendon_kernel import path_stretch
 
@@ -40,8 +39,6 @@ from continuum_statics.core.tendon_kernel import path_stretch
 MOTION_THRESHOLD = 1e-7
 #: Chord steps on a warm start's Jacobian before a fresh Newton solve.
 CHORD_ITERATIONS = 6
-#: Balance tolerance (relative) of a converged solve; cable rows: solver.estimate_tolerance (m).
-BALANCE_TOLERANCE = 1e-9
 #: End tension (relative to E I / (L r)) at or below which a cable counts as slack.
 SLACK_TENSION = 1e-9
 
@@ -104,6 +101,9 @@ class _Problem:
                                      np.full(self.n, self.t_ref)])
         self.moment_map = (robot.tension_moment_map if robot.model_code == POINT_MOMENT
                            else None)
+        # the compiled chord reads an array of that shape whatever the model
+        self.kernel_moment_map = (self.moment_map if self.moment_map is not None
+                                  else np.zeros((robot.state_size - 3, self.n)))
 
     def state_of(self, z):
         """Solver state x and fixed tensions of z (the robot's solver-state convention)."""
@@ -213,11 +213,7 @@ def solve_lengths(robot, lengths, tip_force=(0.0, 0.0, 0.0), tip_moment=(0.0, 0.
                          % [name for name, f in zip(robot.cable_names, free) if f <= 0.0])
     motion = motion_since(robot, free, warm_start)
     problem = _Problem(robot, free, motion, tip_force, tip_moment)
-    starts = []
     warm = _warm_z(robot, warm_start)
-    if warm is not None:
-        starts.append(warm)
-    starts.append(np.concatenate([bvp.linear_guess(robot, tip_force, tip_moment), np.zeros(n)]))
     total = 0
     parts = getattr(warm_start, 'jacobian_parts', None)
     if warm is not None and parts is not None and parts[0].shape == (3, 3 + n):
@@ -225,7 +221,9 @@ def solve_lengths(robot, lengths, tip_force=(0.0, 0.0, 0.0), tip_moment=(0.0, 0.
         total += iterations
         if ok:
             return _solution(robot, problem, z, info, True, total, '', parts)
-        starts[0] = z  # keep the progress
+        warm = z  # keep the progress
+    starts = [] if warm is None else [warm]
+    starts.append(np.concatenate([bvp.linear_guess(robot, tip_force, tip_moment), np.zeros(n)]))
     for z0 in starts:
         z, ok, iterations, info, parts = _newton(problem, z0)
         total += iterations
@@ -255,61 +253,22 @@ def _warm_z(robot, warm_start):
 
 
 def _chord(problem, z0, parts):
-    """Quasi-Newton steps from the previous solve's Jacobian (one IVP each).
+    """Quasi-Newton steps from the previous solve's Jacobian (one IVP each, compiled).
 
     A tracking sequence moves little between calls, so the last Jacobian (with each cable's
     branch of now), corrected by a Broyden update after every step, still contracts the error;
-    it gives up as soon as a step gains less than half. Returns (z, ok, iterations, info, parts):
-    the updated Jacobian pieces start the next call.
+    it gives up as soon as a step gains less than half (:func:`length_tracking.chord`).
+    Returns (z, ok, iterations, info, parts): the updated Jacobian pieces start the next call.
     """
-    z = np.array(z0, dtype=float)
-    res, _, info, _ = problem.evaluate(z, parts)
-    error = float(res @ res)
-    for iteration in range(CHORD_ITERATIONS):
-        if _done(problem, res):
-            return z, True, iteration, info, parts
-        taut = info[5]
-        jacobian = problem.jacobian(parts, taut)
-        scaled = -_solve(_factorise(jacobian), res)
-        trial_res, _, trial_info, _ = problem.evaluate(z + scaled * problem.scale, parts)
-        trial_error = float(trial_res @ trial_res)
-        if not trial_error <= 0.25 * error:
-            return z, False, iteration + 1, info, parts
-        parts = _broyden(problem, parts, taut, jacobian, scaled, trial_res - res)
-        z, res, info, error = z + scaled * problem.scale, trial_res, trial_info, trial_error
-    return z, _done(problem, res), CHORD_ITERATIONS, info, parts
-
-
-def _broyden(problem, parts, taut, jacobian, step, change):
-    """Jacobian pieces after Broyden's rank-one update for a scaled step and residual change.
-
-    The update of the assembled (scaled) Jacobian goes back into the pieces it was made of:
-    the balance rows and the taut cables' rows (a slack cable's row is exact).
-    """
-    update = np.outer(change - jacobian @ step, step) / float(step @ step)
-    balance, d_consumed = parts
-    balance = balance + update[:3] / problem.scale
-    d_consumed = d_consumed.copy()
-    d_consumed[taut] -= update[3:][taut] * problem.radius / problem.scale
-    return balance, d_consumed
-
-
-def _factorise(jacobian):
-    """LU factors of a Jacobian, or the matrix itself when singular (least-norm steps)."""
-    with warnings.catch_warnings():
-        warnings.simplefilter('error', LinAlgWarning)
-        try:
-            factors = lu_factor(jacobian, check_finite=False)
-        except (LinAlgWarning, ValueError):
-            return jacobian
-    return factors if np.all(np.isfinite(factors[0])) else jacobian
-
-
-def _solve(factors, rhs):
-    """Solve J x = rhs with :func:`_factorise`'s result (least norm for a singular J)."""
-    if isinstance(factors, tuple):
-        return lu_solve(factors, rhs, check_finite=False)
-    return np.linalg.lstsq(factors, rhs, rcond=1e-12)[0]
+    robot = problem.robot
+    args = robot.kernel_args(problem.tip_force, problem.tip_moment)
+    (z, ok, iterations, _, x, fixed, states, motor, gap, taut, balance, d_consumed) = chord(
+        *args[:6], *args[7:], np.asarray(z0, dtype=float), problem.kernel_moment_map,
+        problem.free, problem.friction, problem.compliance, problem.base_axis, problem.kappa,
+        problem.radius, problem.scale, parts[0], parts[1], robot.solver.estimate_tolerance,
+        CHORD_ITERATIONS)
+    info = (x, None if problem.moment_map is not None else fixed, states, motor, gap, taut)
+    return z, ok, iterations, info, (balance, d_consumed)
 
 
 def _newton(problem, z0, max_iterations=None):

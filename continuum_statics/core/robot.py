@@ -382,15 +382,20 @@ class Robot:
     # -- inverse problems ------------------------------------------------------------------
     def estimate_shape(self, cable_lengths, tip_force=(0.0, 0.0, 0.0),
                        tip_moment=(0.0, 0.0, 0.0), tensions=None, warm_start=None,
-                       u0_guess=None):
-        """Shape from measured cable lengths (m) and a tip load (N, N m); :mod:`estimation`."""
+                       u0_guess=None, max_model_runs=None):
+        """Shape from measured cable lengths (m) and a tip load (N, N m); :mod:`estimation`.
+
+        ``max_model_runs``: IVPs a warm-started estimate may integrate (a node's per-cycle
+        budget; the result is then ``capped`` and the next call goes on from it); None: until
+        it converges.
+        """
         jacobians = getattr(warm_start, 'jacobians', None)
         if jacobians is not None and jacobians[0].shape != (len(self.cable_names),
                                                             self.state_size):
             jacobians = None
         return estimation.estimate_shape(self, cable_lengths, tip_force, tip_moment, tensions,
                                          _warm_or_guess(self, warm_start, u0_guess), jacobians,
-                                         warm_start)
+                                         warm_start, max_model_runs)
 
     def estimate_tip_wrench(self, lengths=None, tensions=None, tip_position=None,
                             tip_rotation=None, noise=None, moment=False, warm_start=None):

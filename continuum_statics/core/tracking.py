@@ -3,11 +3,15 @@
 The same constrained Gauss-Newton as :func:`least_squares.constrained_gauss_newton` (lengths in
 the least-squares sense, the tip moment balance exactly, second-order correction), but on the
 Jacobians of the previous estimate, corrected by Broyden updates instead of recomputed: one model
-run per iteration, and no Python between them. It gives up (``ok`` False) after a few iterations
-or a failed step, and the caller then solves afresh with finite-difference Jacobians. The cold
-estimate runs the same loop with finite-difference Jacobians at every evaluation (one compiled
-call instead of a Python loop over the kernels), and falls back to
-:func:`least_squares.constrained_gauss_newton` from where it stopped if it gives up.
+run per iteration, and no Python between them. When a step fails on those Jacobians they are
+refreshed once by finite differences at the current state: on lengths no shape fits exactly (real
+encoders) the minimum has a nonzero residual, where a secant Jacobian's step points nowhere
+useful, and only the model's own Jacobian tells that the fit is stationary. The work of one call
+is bounded (``max_runs`` IVPs): a call that would need more returns its best state (``ok``
+False), and the next measurement continues from it. The cold estimate runs the same loop with
+finite-difference Jacobians at every evaluation (one compiled call instead of a Python loop over
+the kernels), and falls back to :func:`least_squares.constrained_gauss_newton` from where it
+stopped if it gives up.
 """
 import numba
 import numpy as np
@@ -15,8 +19,15 @@ import numpy as np
 from continuum_statics.core.kernel import probe
 from continuum_statics.core.least_squares import constrained_step
 
-#: Iterations on reused Jacobians before the caller solves afresh.
+#: Iterations of a warm-started estimate (one IVP each when the steps succeed).
 TRACK_ITERATIONS = 6
+#: IVPs a node's warm-started estimate may integrate per measurement by default (statics'
+#: ``max_model_runs``): its iterations, line searches and Jacobian refreshes (``probe_runs``
+#: IVPs each); 0.3-0.8 ms on the example robots at most.
+TRACK_RUNS = 32
+#: A step the model's own (finite-difference) Jacobian predicts to change the lengths by less than
+#: this fraction of the misfit is taken as stationary: the size of the Jacobian's own error.
+STATIONARY_FRACTION = 1e-4
 
 
 @numba.njit(cache=True)
@@ -40,10 +51,10 @@ def _evaluate(model_args, x, measured, n_free):
 def track(s_grid, params, model, tip_force, tip_moment, step, fixed, section_state_index,
           section_bases, section_ranks, section_cables, section_cable_count, cable_offsets,
           guide_nodes, cable_last_guide, cable_end_node, section_end_node, measured, x0, jac0,
-          con_jac0, tolerance, weight, max_iterations):
+          con_jac0, tolerance, weight, max_iterations, probe_runs, max_runs):
     """Estimate from ``x0``: (x, residual, balance, states, jac, con_jac, iterations, runs, ok).
 
-    ``runs`` counts model evaluations. The first 17 arguments are those of :func:`kernel.probe`
+    ``runs`` counts IVPs integrated. The first 17 arguments are those of :func:`kernel.probe`
     but ``x`` and ``n_free`` (flat: a tuple argument would cost numba's dispatcher ~80 us per
     call to type).
     :param measured: (n_cables,) measured lengths (m)
@@ -53,58 +64,84 @@ def track(s_grid, params, model, tip_force, tip_moment, step, fixed, section_sta
     :param tolerance: stop when the predicted change of the lengths is below this (m)
     :param weight: tip balance -> length units in the merit function (m)
     :param max_iterations: iterations before giving up (``ok`` False)
+    :param probe_runs: IVPs of one finite-difference Jacobian (``Robot.probe_runs``)
+    :param max_runs: IVPs before giving up with the best state reached (``ok`` False)
     """
     model_args = (s_grid, params, model, tip_force, tip_moment, step, fixed, section_state_index,
                   section_bases, section_ranks, section_cables, section_cable_count,
                   cable_offsets, guide_nodes, cable_last_guide, cable_end_node, section_end_node)
-    fresh = jac0.shape[0] == 0 and con_jac0.shape[0] == 0
-    n_free = x0.shape[0] if fresh else 0
+    fresh = jac0.shape[0] == 0 and con_jac0.shape[0] == 0  # the model's own Jacobians
+    n_all = x0.shape[0]
     x = x0.copy()
-    res, con, states, jac, con_jac = _evaluate(model_args, x, measured, n_free)
+    res, con, states, jac, con_jac = _evaluate(model_args, x, measured, n_all if fresh else 0)
+    runs = probe_runs if fresh else 1
     if not fresh:
         jac = jac0.copy()
         con_jac = con_jac0.copy()
-    runs = 1
     penalty = (1e3 * weight) ** 2
     current = res @ res + penalty * (con @ con)
     damping = 1e-6
     no_residual = np.zeros(0)
     no_jacobian = np.zeros((0, x.shape[0]))
-    for iteration in range(1, max_iterations + 1):
-        step, predicted = constrained_step(res, jac, con, con_jac, damping)
-        if (predicted @ predicted <= tolerance ** 2
-                and weight ** 2 * (con @ con) <= tolerance ** 2):
-            return x, res, con, states, jac, con_jac, iteration, runs, True
-        accepted = False
-        for _ in range(6):
-            trial = x + step
-            t_res, t_con, t_states, t_jac, t_con_jac = _evaluate(model_args, trial, measured,
-                                                                 n_free)
-            runs += 1
-            t_merit = t_res @ t_res + penalty * (t_con @ t_con)
-            if not (np.isfinite(t_merit) and t_merit < current):
-                # second-order correction by chord iterations back onto the tip balance
-                c_trial, c_con, c_con_jac = trial, t_con, t_con_jac if fresh else con_jac
-                for _ in range(3):
-                    correction, _ = constrained_step(no_residual, no_jacobian, c_con, c_con_jac,
-                                                     0.0)
-                    c_trial = c_trial + correction
-                    c_res, c_con, c_states, c_jac, c_jac_con = _evaluate(model_args, c_trial,
-                                                                         measured, n_free)
-                    runs += 1
-                    c_merit = c_res @ c_res + penalty * (c_con @ c_con)
-                    if np.isfinite(c_merit) and c_merit < current:
-                        trial, t_res, t_con, t_states, t_merit = (c_trial, c_res, c_con,
-                                                                   c_states, c_merit)
-                        t_jac, t_con_jac = c_jac, c_jac_con
-                        break
-            if np.isfinite(t_merit) and t_merit < current:
-                accepted = True
-                break
-            damping *= 8.0
+    iteration = 0
+    limit = max_iterations
+    while True:
+        refresh = iteration >= limit
+        if not refresh:
+            iteration += 1
             step, predicted = constrained_step(res, jac, con, con_jac, damping)
-        if not accepted:
-            return x, res, con, states, jac, con_jac, iteration, runs, False
+            small = tolerance ** 2
+            if fresh:
+                small = max(small, STATIONARY_FRACTION ** 2 * (res @ res))
+            if predicted @ predicted <= small and weight ** 2 * (con @ con) <= tolerance ** 2:
+                return x, res, con, states, jac, con_jac, iteration, runs, True
+            accepted = False
+            n_free = n_all if fresh else 0
+            # a secant Jacobian gets one try (its damped steps rarely help): then the model's own
+            for _ in range(6 if fresh else 1):
+                if runs >= max_runs:
+                    break
+                trial = x + step
+                t_res, t_con, t_states, t_jac, t_con_jac = _evaluate(model_args, trial,
+                                                                     measured, n_free)
+                runs += probe_runs if fresh else 1
+                t_merit = t_res @ t_res + penalty * (t_con @ t_con)
+                if not (np.isfinite(t_merit) and t_merit < current):
+                    # second-order correction by chord iterations back onto the tip balance
+                    c_trial, c_con, c_con_jac = trial, t_con, t_con_jac if fresh else con_jac
+                    for _ in range(3):
+                        if runs >= max_runs:
+                            break
+                        correction, _ = constrained_step(no_residual, no_jacobian, c_con,
+                                                         c_con_jac, 0.0)
+                        c_trial = c_trial + correction
+                        c_res, c_con, c_states, c_jac, c_jac_con = _evaluate(
+                            model_args, c_trial, measured, n_free)
+                        runs += probe_runs if fresh else 1
+                        c_merit = c_res @ c_res + penalty * (c_con @ c_con)
+                        if np.isfinite(c_merit) and c_merit < current:
+                            trial, t_res, t_con, t_states, t_merit = (c_trial, c_res, c_con,
+                                                                       c_states, c_merit)
+                            t_jac, t_con_jac = c_jac, c_jac_con
+                            break
+                if np.isfinite(t_merit) and t_merit < current:
+                    accepted = True
+                    break
+                damping *= 8.0
+                step, predicted = constrained_step(res, jac, con, con_jac, damping)
+            refresh = not accepted
+        if refresh:
+            # out of iterations, or no step lowers the misfit: with secant Jacobians, go on with
+            # the model's own from x (they alone tell a stationary nonzero misfit); else, or
+            # when the budget is spent, the caller goes on from here (the next measurement)
+            if fresh or runs + probe_runs > max_runs:
+                return x, res, con, states, jac, con_jac, iteration, runs, False
+            res, con, states, jac, con_jac = _evaluate(model_args, x, measured, n_all)
+            runs += probe_runs
+            fresh = True
+            damping = 1e-6
+            limit = iteration + max_iterations
+            continue
         if fresh:
             jac, con_jac = t_jac, t_con_jac
         else:  # Broyden: the secant condition J dx = df for both row blocks
@@ -114,4 +151,3 @@ def track(s_grid, params, model, tip_force, tip_moment, step, fixed, section_sta
             con_jac += np.outer(t_con - con - con_jac @ dx, dx) * scale
         x, res, con, states, current = trial, t_res, t_con, t_states, t_merit
         damping = max(damping / 4.0, 1e-9)
-    return x, res, con, states, jac, con_jac, max_iterations, runs, False

@@ -99,7 +99,8 @@ class StaticsNode(Node):
         warm_up(self.robot, self.get_logger().info)
         self.cable_names = tuple(self.robot.cable_names)
         self._passive = not self.cable_names
-        self._tracker = ShapeTracker(self.robot, self.cable_names, self._params['max_iterations'])
+        self._tracker = ShapeTracker(self.robot, self.cable_names, self._params['max_iterations'],
+                                     self._params['max_model_runs'])
         self.base_frame_id = self.robot.base_frame_id
         self._disk_diameter = 2.0 * float(np.max(np.linalg.norm(
             np.asarray(self.robot.cable_offsets, dtype=float).reshape(-1, 3), axis=1),
@@ -129,7 +130,7 @@ class StaticsNode(Node):
                       'message': 'waiting for cable_states', 'time': None, 'tensions': False}
         self._residuals = diag.ValueWindow()
         self._best_fits = 0  # published with a residual above the warn threshold
-        self._capped = 0  # estimates that hit max_iterations (refined with the next one)
+        self._capped = 0  # estimates that hit max_iterations/max_model_runs (refined next)
         self._empty_payloads = 0
         self._limit_rejections = 0
         self._solve_times = diag.TimingWindow()
@@ -179,6 +180,8 @@ class StaticsNode(Node):
             self._set_marker_timer(value)
         elif name == 'max_iterations':
             self._tracker.set_max_iterations(value)
+        elif name == 'max_model_runs':
+            self._tracker.max_model_runs = value
 
     def _set_marker_timer(self, rate):
         if self._marker_timer is not None:

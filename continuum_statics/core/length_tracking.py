@@ -1,0 +1,188 @@
+"""Compiled warm-started solve of the displacement-driven statics (what a node runs per cycle).
+
+The quasi-Newton chord iteration of :func:`length_statics.solve_lengths` on the previous solve's
+Jacobian pieces, Broyden-updated after every step, as one compiled call: the residual of
+:class:`length_statics._Problem` (tip balance; per cable the semismooth min(kappa t, g)) from one
+IVP per iteration, the Jacobian assembled for each cable's branch of now, and no Python between
+the iterations. It gives up (``ok`` False) as soon as a step gains less than half, and the
+caller then solves afresh (:func:`length_statics._newton`).
+"""
+import numba
+import numpy as np
+
+from continuum_statics.core.kernel import POINT_MOMENT, probe
+from continuum_statics.core.tendon_kernel import path_stretch
+
+#: Balance tolerance (relative) of a converged solve; cable rows: the estimate tolerance (m).
+BALANCE_TOLERANCE = 1e-9
+#: What :func:`chord` returns, in order (x, fixed, states, motor, gap, taut: ``_Problem``'s info).
+CHORD_RESULT = ('z', 'ok', 'iterations', 'residual', 'x', 'fixed', 'states', 'motor', 'gap',
+                'taut', 'balance', 'd_consumed')
+
+
+@numba.njit(cache=True)
+def _solve_linear(matrix, rhs):
+    """Solve matrix x = rhs: LU with partial pivoting, least norm when (nearly) singular."""
+    n = rhs.shape[0]
+    a = matrix.copy()
+    b = rhs.copy()
+    largest = np.max(np.abs(a))
+    for k in range(n):
+        pivot = k + np.argmax(np.abs(a[k:, k]))
+        if not abs(a[pivot, k]) > 1e-13 * largest:
+            return np.linalg.lstsq(matrix, rhs, rcond=1e-12)[0]
+        if pivot != k:
+            for c in range(n):
+                a[k, c], a[pivot, c] = a[pivot, c], a[k, c]
+            b[k], b[pivot] = b[pivot], b[k]
+        for r in range(k + 1, n):
+            factor = a[r, k] / a[k, k]
+            if factor != 0.0:
+                for c in range(k, n):
+                    a[r, c] -= factor * a[k, c]
+                b[r] -= factor * b[k]
+    x = np.empty(n)
+    for k in range(n - 1, -1, -1):
+        acc = b[k]
+        for c in range(k + 1, n):
+            acc -= a[k, c] * x[c]
+        x[k] = acc / a[k, k]
+    return x
+
+
+@numba.njit(cache=True)
+def _evaluate(s_grid, params, model, tip_force, tip_moment, step, section_state_index,
+              section_bases, section_ranks, section_cables, section_cable_count, cable_offsets,
+              guide_nodes, cable_last_guide, cable_end_node, section_end_node, z, moment_map,
+              free, friction, compliance, base_axis, kappa, radius):
+    """Residual F(z) (3 + n, scaled as ``_Problem.evaluate``), state, tensions, states, gap, taut.
+
+    Returns (residual, x, fixed, states, motor, gap, taut).
+    """
+    n = cable_offsets.shape[0]
+    x = np.zeros(moment_map.shape[0] + 3)
+    fixed = np.zeros(n)
+    for i in range(3):
+        x[i] = z[i]
+    if model == POINT_MOMENT:
+        for r in range(moment_map.shape[0]):
+            acc = 0.0
+            for j in range(n):
+                acc += moment_map[r, j] * z[3 + j]
+            x[3 + r] = acc
+    else:
+        for j in range(n):
+            fixed[j] = z[3 + j]
+    values, _, states = probe(s_grid, params, model, tip_force, tip_moment, x, 0, step, fixed,
+                              section_state_index, section_bases, section_ranks, section_cables,
+                              section_cable_count, cable_offsets, guide_nodes, cable_last_guide,
+                              cable_end_node, section_end_node)
+    tensions = np.ascontiguousarray(z[3:])
+    consumed = np.empty(n)
+    motor = np.empty(n)
+    mean = np.empty(n)
+    with_friction = False
+    for j in range(n):
+        with_friction = with_friction or friction[j] != 0.0
+    if with_friction:
+        path_stretch(states, guide_nodes, cable_last_guide, cable_offsets, base_axis, tensions,
+                     friction, compliance, consumed, motor, mean)
+    else:
+        for j in range(n):
+            consumed[j] = values[6 + j] / (1.0 + tensions[j] * compliance[j])
+            motor[j] = tensions[j]
+    residual = np.empty(3 + n)
+    gap = np.empty(n)
+    taut = np.empty(n, dtype=np.bool_)
+    for i in range(3):
+        residual[i] = values[6 + n + i]  # rows: core/layout.py ProbeRows
+    for j in range(n):
+        gap[j] = free[j] - consumed[j]
+        taut[j] = kappa * tensions[j] >= gap[j]
+        residual[3 + j] = (gap[j] if taut[j] else kappa * tensions[j]) / radius
+    return residual, x, fixed, states, motor, gap, taut
+
+
+@numba.njit(cache=True)
+def _jacobian(balance, d_consumed, taut, kappa, radius, scale):
+    """Jacobian in scaled z for the cables' branches ``taut`` (``_Problem.jacobian``)."""
+    n = taut.shape[0]
+    size = 3 + n
+    jacobian = np.zeros((size, size))
+    for c in range(size):
+        for i in range(3):
+            jacobian[i, c] = balance[i, c] * scale[c]
+        for j in range(n):
+            if taut[j]:
+                jacobian[3 + j, c] = -d_consumed[j, c] / radius * scale[c]
+    for j in range(n):
+        if not taut[j]:
+            jacobian[3 + j, 3 + j] = kappa / radius * scale[3 + j]
+    return jacobian
+
+
+@numba.njit(cache=True)
+def _done(residual, radius, tolerance):
+    n = residual.shape[0]
+    for i in range(3):
+        if not abs(residual[i]) <= BALANCE_TOLERANCE:
+            return False
+    for i in range(3, n):
+        if not abs(residual[i]) * radius <= tolerance:
+            return False
+    return True
+
+
+@numba.njit(cache=True)
+def chord(s_grid, params, model, tip_force, tip_moment, step, section_state_index,
+          section_bases, section_ranks, section_cables, section_cable_count, cable_offsets,
+          guide_nodes, cable_last_guide, cable_end_node, section_end_node, z0, moment_map, free,
+          friction, compliance, base_axis, kappa, radius, scale, balance0, d_consumed0,
+          tolerance, max_iterations):
+    """Chord steps from ``z0``; returns the record :data:`CHORD_RESULT` names.
+
+    The arguments up to ``section_end_node`` are those of :func:`kernel.probe` without the
+    state, ``n_free`` and the fixed tensions (flat: a tuple argument costs numba's dispatcher
+    time to type). ``z0`` = [u(0) (1/m); end tensions (N)]; ``moment_map`` the robot's
+    ``tension_moment_map`` (point-moment model; any array of its shape otherwise); ``free``
+    (n,) free lengths Lf (m); ``friction`` (n,) mu times the sign of motion; ``compliance`` 1/EA
+    (1/N); ``kappa`` (m/N), ``radius`` (m) and ``scale`` (3 + n) the problem's scales;
+    ``balance0`` (3, 3 + n) and ``d_consumed0`` (n, 3 + n) the previous Jacobian pieces (m per
+    unscaled z), returned Broyden-updated; ``tolerance`` on the cable rows (m).
+    """
+    args = (s_grid, params, model, tip_force, tip_moment, step, section_state_index,
+            section_bases, section_ranks, section_cables, section_cable_count, cable_offsets,
+            guide_nodes, cable_last_guide, cable_end_node, section_end_node)
+    n = cable_offsets.shape[0]
+    balance = balance0.copy()
+    d_consumed = d_consumed0.copy()
+    z = z0.copy()
+    res, x, fixed, states, motor, gap, taut = _evaluate(
+        *args, z, moment_map, free, friction, compliance, base_axis, kappa, radius)
+    error = res @ res
+    for iteration in range(max_iterations):
+        if _done(res, radius, tolerance):
+            return (z, True, iteration, res, x, fixed, states, motor, gap, taut, balance,
+                    d_consumed)
+        jacobian = _jacobian(balance, d_consumed, taut, kappa, radius, scale)
+        scaled = -_solve_linear(jacobian, res)
+        trial = z + scaled * scale
+        t_res, t_x, t_fixed, t_states, t_motor, t_gap, t_taut = _evaluate(
+            *args, trial, moment_map, free, friction, compliance, base_axis, kappa, radius)
+        t_error = t_res @ t_res
+        if not t_error <= 0.25 * error:
+            return (z, False, iteration + 1, res, x, fixed, states, motor, gap, taut, balance,
+                    d_consumed)
+        # Broyden's rank-one update of the assembled Jacobian, put back into its pieces: the
+        # balance rows and the taut cables' rows (a slack cable's row is exact)
+        update = np.outer(t_res - res - jacobian @ scaled, scaled) / (scaled @ scaled)
+        for c in range(3 + n):
+            for i in range(3):
+                balance[i, c] += update[i, c] / scale[c]
+            for j in range(n):
+                if taut[j]:
+                    d_consumed[j, c] -= update[3 + j, c] * radius / scale[c]
+        z, res, x, fixed, states, motor, gap, taut, error = (
+            trial, t_res, t_x, t_fixed, t_states, t_motor, t_gap, t_taut, t_error)
+    return (z, _done(res, radius, tolerance), max_iterations, res, x, fixed, states, motor, gap,
+            taut, balance, d_consumed)
