@@ -1,6 +1,6 @@
 # The two commands of README.md: `make demo` (main job) and `make test` (whole suite).
 # Both create .venv on first use and reuse it afterwards.
-.PHONY: venv venv-jazzy demo test test-jazzy bench bench-nodes bench-drivers bench-tendons bench-load lint clean fuzz soak
+.PHONY: venv venv-jazzy demo test test-jazzy bench bench-nodes bench-nodes-noisy bench-drivers bench-tendons bench-load lint clean fuzz soak
 
 venv:
 	@scripts/setup_venv.sh
@@ -24,9 +24,17 @@ bench: venv
 	scripts/ros_env.sh .venv/bin/python -m continuum_statics bench
 	.venv/bin/python -m continuum_statics.tools.bench_tendons
 	.venv/bin/python -m continuum_statics.tools.bench_load
+	.venv/bin/python -m continuum_statics.tools.bench_noisy
 
 bench-nodes: venv
 	scripts/ros_env.sh --private .venv/bin/python -m continuum_statics bench --nodes
+
+# statics at 1 kHz fed lengths with 20 um encoder noise, on every example robot with cables
+bench-nodes-noisy: venv
+	for robot in tendon_robot tendon_robot_real_tendons two_section_robot three_section_robot \
+	        three_section_robot_real_tendons ftdcr_v6_robot ftdcr_v6_calibrated; do \
+	    scripts/ros_env.sh --private .venv/bin/python -m continuum_statics bench --nodes \
+	        --skip-goals --noise 2e-5 --robot config/$$robot.yaml || exit 1; done
 
 # Dynamixel backend against the Protocol 2.0 emulator on a simulated 1 Mbps wire: sync write +
 # sync read cycle and the highest cable_driver publish_rate, for 4 and 9 servos.

@@ -29,6 +29,7 @@ ENTRY_POINTS = (
     'continuum_statics.core.kernel.probe',
     'continuum_statics.core.kernel.tip_jacobian',
     'continuum_statics.core.tracking.track',
+    'continuum_statics.core.length_tracking.chord',
     'continuum_statics.core.least_squares.constrained_step',
     'continuum_statics.core.rotations._quaternions',
     'continuum_statics.core.backbone_sampling._sample',
@@ -39,6 +40,7 @@ ENTRY_POINTS = (
 KERNEL_MODULES = (
     'continuum_statics.core.kernel',
     'continuum_statics.core.tracking',
+    'continuum_statics.core.length_tracking',
     'continuum_statics.core.least_squares',
     'continuum_statics.core.rotations',
     'continuum_statics.core.backbone_sampling',
@@ -118,6 +120,8 @@ def _exercise(robot):
     # tracking: warm start with the previous Jacobians (the compiled Broyden path)
     robot.estimate_shape(lengths + 1e-5, tip_force=load[:3], tip_moment=load[3:],
                          warm_start=estimate)
+    robot.estimate_shape(lengths + 2e-5, tip_force=load[:3], tip_moment=load[3:],
+                         warm_start=estimate, max_model_runs=32)  # statics' per-cycle budget
     tensions = np.full(len(robot.cable_names), 0.1)
     robot.estimate_shape(lengths, tip_force=load[:3], tip_moment=load[3:], tensions=tensions,
                          warm_start=estimate)

@@ -44,6 +44,15 @@ def measurement_lengths(robot, count, rate):
     return lengths
 
 
+def noisy_lengths(sigma, seed=0):
+    """Return a lengths source: :func:`measurement_lengths` plus seeded Gaussian noise (m)."""
+    def source(robot, count, rate):
+        exact = np.array(measurement_lengths(robot, count, rate))
+        noise = np.random.default_rng(seed).normal(0.0, sigma, exact.shape)
+        return (exact + noise).tolist()
+    return source
+
+
 def bench_statics(robot_file, rate, duration, warmup=2.0, parameters=(),
                   lengths_source=None):
     """Publish cable_states at ``rate`` to a statics process; return the figures as a dict."""
@@ -216,13 +225,17 @@ def main(argv=None):
     parser.add_argument('--skip-goals', action='store_true', help='only the statics part')
     parser.add_argument('--statics-param', action='append', default=[], metavar='NAME:=VALUE',
                         help='parameter for the statics process (repeatable)')
+    parser.add_argument('--noise', type=float, default=0.0, metavar='SIGMA',
+                        help='Gaussian encoder noise added to every length, m (seeded)')
     options = parser.parse_args(list(sys.argv[1:] if argv is None else argv))
     ros_environment()
     robot_file = os.path.abspath(options.robot)
-    print('statics: cable_states at %g Hz for %g s (robot %s) ...'
-          % (options.rate, options.duration, os.path.basename(robot_file)), flush=True)
+    print('statics: cable_states at %g Hz for %g s (robot %s, noise sigma %g m) ...'
+          % (options.rate, options.duration, os.path.basename(robot_file), options.noise),
+          flush=True)
     statics = bench_statics(robot_file, options.rate, options.duration,
-                            parameters=options.statics_param)
+                            parameters=options.statics_param,
+                            lengths_source=noisy_lengths(options.noise))
     print('  sent %(sent)d, processed %(processed)d, dropped %(dropped)d' % statics)
     print('  statics counted (window +-1 s): %(statics_received)d solved, %(statics_published)d '
           'published, %(statics_skipped)d skipped as stale, %(statics_lost)d lost before the '
