@@ -36,6 +36,7 @@ BEST_FIT_NOTE = 1e-6
 #: (statics' default warn_residual: below it lag and encoder noise, above it a paid-out cable).
 SLACK_RESIDUAL = 1e-4
 _NO_JACOBIAN = np.zeros((0, 0))  # tells track to use finite-difference Jacobians
+DAMPING = 1e-6  # Levenberg-Marquardt damping a solve starts with (relative to the normal matrix)
 _UNBOUNDED = 2 ** 62  # model runs: no budget (the iteration limits bound the work)
 
 
@@ -50,7 +51,8 @@ class ShapeEstimate:
     :ivar iterations: Gauss-Newton (or shooting) iterations used
     :ivar observable_bending: bending directions the cables observe (2 per section at most)
     :ivar message: what limited the estimate, empty when nothing did
-    :ivar jacobians: the solver's Jacobians at the estimate, reused by the next warm start
+    :ivar jacobians: the solver's Jacobians at the estimate, reused by the next warm start (and,
+        when capped, the damping it had reached)
     :ivar model_runs: IVPs integrated (the cost of the estimate)
     :ivar tendons: the :class:`length_statics.LengthSolution` when the tendon model gave the shape
     :ivar capped: a warm-started estimate that spent its per-call budget (``TRACK_RUNS`` IVPs)
@@ -155,8 +157,9 @@ def estimate_shape(robot, cable_lengths, tip_force=(0.0, 0.0, 0.0), tip_moment=(
     args = robot.kernel_args(tip_force, tip_moment)
     if jacobians is not None:  # tracking: the previous Jacobians, Broyden-updated, compiled
         budget = max_model_runs or _UNBOUNDED
-        x, res, _, states, jac, con_jac, iterations, used, ok = track(
-            *args, measured, start, jacobians[0], jacobians[1],
+        damping = jacobians[2] if len(jacobians) > 2 else DAMPING
+        x, res, _, states, jac, con_jac, iterations, used, ok, damping = track(
+            *args, measured, start, jacobians[0], jacobians[1], damping,
             robot.solver.estimate_tolerance, robot.length, TRACK_ITERATIONS, robot.probe_runs,
             budget)
         runs[0] = used
@@ -170,12 +173,13 @@ def estimate_shape(robot, cable_lengths, tip_force=(0.0, 0.0, 0.0), tip_moment=(
             notes.insert(0, 'unfinished after %d model runs (max_model_runs %d): refined with '
                             'the next measurement' % (used, max_model_runs))
             estimate = _finish(robot, x, tip_force, states, res, True, iterations, observable,
-                               notes, (jac, con_jac), used)
+                               notes, (jac, con_jac, damping), used)
             return dataclasses.replace(estimate, converged=False, capped=True)
         start = x  # keep the progress; go on as from a cold start
     # cold: the same compiled loop with finite-difference Jacobians at every evaluation
-    x, res, _, states, jac, con_jac, iterations, used, ok = track(
-        *args, measured, start, _NO_JACOBIAN, _NO_JACOBIAN, robot.solver.estimate_tolerance,
+    x, res, _, states, jac, con_jac, iterations, used, ok, _ = track(
+        *args, measured, start, _NO_JACOBIAN, _NO_JACOBIAN, DAMPING,
+        robot.solver.estimate_tolerance,
         robot.length, robot.solver.max_iterations, robot.probe_runs, _UNBOUNDED)
     runs[0] += used
     if ok:

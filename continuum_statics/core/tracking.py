@@ -51,21 +51,24 @@ def _evaluate(model_args, x, measured, n_free):
 def track(s_grid, params, model, tip_force, tip_moment, step, fixed, section_state_index,
           section_bases, section_ranks, section_cables, section_cable_count, cable_offsets,
           guide_nodes, cable_last_guide, cable_end_node, section_end_node, measured, x0, jac0,
-          con_jac0, tolerance, weight, max_iterations, probe_runs, max_runs):
-    """Estimate from ``x0``: (x, residual, balance, states, jac, con_jac, iterations, runs, ok).
+          con_jac0, damping0, tolerance, weight, max_iterations, probe_runs, max_runs):
+    """Estimate from ``x0``; returns (x, residual, balance, states, jac, con_jac, ...).
 
-    ``runs`` counts IVPs integrated. The first 17 arguments are those of :func:`kernel.probe`
-    but ``x`` and ``n_free`` (flat: a tuple argument would cost numba's dispatcher ~80 us per
-    call to type).
+    The rest of the record: iterations, runs, ok, damping. ``runs`` counts IVPs integrated. The
+    first 17 arguments are those of :func:`kernel.probe` but ``x`` and ``n_free`` (flat: a tuple
+    argument would cost numba's dispatcher ~80 us per call to type).
     :param measured: (n_cables,) measured lengths (m)
     :param x0: start state; ``jac0``, ``con_jac0`` its Jacobians (lengths, balance), Broyden-
         updated (one IVP per evaluation); empty (0 rows): finite-difference Jacobians at every
         evaluation instead (the cold estimate, ``probe_runs`` IVPs per evaluation)
+    :param damping0: Levenberg-Marquardt damping to start with (a capped call's, returned, lets
+        the next call go on with the step size it had reached)
     :param tolerance: stop when the predicted change of the lengths is below this (m)
     :param weight: tip balance -> length units in the merit function (m)
     :param max_iterations: iterations before giving up (``ok`` False)
     :param probe_runs: IVPs of one finite-difference Jacobian (``Robot.probe_runs``)
-    :param max_runs: IVPs before giving up with the best state reached (``ok`` False)
+    :param max_runs: IVPs before giving up with the best state reached (``ok`` False); a model
+        evaluation or Jacobian refresh begun inside it may overrun it by ``probe_runs``
     """
     model_args = (s_grid, params, model, tip_force, tip_moment, step, fixed, section_state_index,
                   section_bases, section_ranks, section_cables, section_cable_count,
@@ -78,9 +81,10 @@ def track(s_grid, params, model, tip_force, tip_moment, step, fixed, section_sta
     if not fresh:
         jac = jac0.copy()
         con_jac = con_jac0.copy()
+    exact = fresh  # jac, con_jac are the model's own at x (not Broyden-updated)
     penalty = (1e3 * weight) ** 2
     current = res @ res + penalty * (con @ con)
-    damping = 1e-6
+    damping = damping0
     no_residual = np.zeros(0)
     no_jacobian = np.zeros((0, x.shape[0]))
     iteration = 0
@@ -91,38 +95,41 @@ def track(s_grid, params, model, tip_force, tip_moment, step, fixed, section_sta
             iteration += 1
             step, predicted = constrained_step(res, jac, con, con_jac, damping)
             small = tolerance ** 2
-            if fresh:
+            if exact:
                 small = max(small, STATIONARY_FRACTION ** 2 * (res @ res))
             if predicted @ predicted <= small and weight ** 2 * (con @ con) <= tolerance ** 2:
-                return x, res, con, states, jac, con_jac, iteration, runs, True
+                return x, res, con, states, jac, con_jac, iteration, runs, True, damping
             accepted = False
-            n_free = n_all if fresh else 0
-            # a secant Jacobian gets one try (its damped steps rarely help): then the model's own
-            for _ in range(6 if fresh else 1):
+            with_jacobian = False  # whether t_jac, t_con_jac are the model's own at the trial
+            # a secant Jacobian gets two tries (its damped steps rarely help): then the model's
+            # own; with those, the first try comes with its Jacobians (the usual accepted
+            # step), damped ones and corrections with one IVP each
+            for attempt in range(12 if fresh else 2):
                 if runs >= max_runs:
                     break
                 trial = x + step
-                t_res, t_con, t_states, t_jac, t_con_jac = _evaluate(model_args, trial,
-                                                                     measured, n_free)
-                runs += probe_runs if fresh else 1
+                with_jacobian = fresh and attempt == 0
+                t_res, t_con, t_states, t_jac, t_con_jac = _evaluate(
+                    model_args, trial, measured, n_all if with_jacobian else 0)
+                runs += probe_runs if with_jacobian else 1
                 t_merit = t_res @ t_res + penalty * (t_con @ t_con)
                 if not (np.isfinite(t_merit) and t_merit < current):
                     # second-order correction by chord iterations back onto the tip balance
-                    c_trial, c_con, c_con_jac = trial, t_con, t_con_jac if fresh else con_jac
+                    c_trial, c_con = trial, t_con
                     for _ in range(3):
                         if runs >= max_runs:
                             break
                         correction, _ = constrained_step(no_residual, no_jacobian, c_con,
-                                                         c_con_jac, 0.0)
+                                                         con_jac, 0.0)
                         c_trial = c_trial + correction
                         c_res, c_con, c_states, c_jac, c_jac_con = _evaluate(
-                            model_args, c_trial, measured, n_free)
-                        runs += probe_runs if fresh else 1
+                            model_args, c_trial, measured, 0)
+                        runs += 1
                         c_merit = c_res @ c_res + penalty * (c_con @ c_con)
                         if np.isfinite(c_merit) and c_merit < current:
                             trial, t_res, t_con, t_states, t_merit = (c_trial, c_res, c_con,
                                                                        c_states, c_merit)
-                            t_jac, t_con_jac = c_jac, c_jac_con
+                            with_jacobian = False
                             break
                 if np.isfinite(t_merit) and t_merit < current:
                     accepted = True
@@ -134,16 +141,20 @@ def track(s_grid, params, model, tip_force, tip_moment, step, fixed, section_sta
             # out of iterations, or no step lowers the misfit: with secant Jacobians, go on with
             # the model's own from x (they alone tell a stationary nonzero misfit); else, or
             # when the budget is spent, the caller goes on from here (the next measurement)
-            if fresh or runs + probe_runs > max_runs:
-                return x, res, con, states, jac, con_jac, iteration, runs, False
+            if fresh or runs >= max_runs:
+                return x, res, con, states, jac, con_jac, iteration, runs, False, damping
+            # (the refresh may overrun the budget: the next call must start on good Jacobians)
             res, con, states, jac, con_jac = _evaluate(model_args, x, measured, n_all)
             runs += probe_runs
-            fresh = True
-            damping = 1e-6
+            fresh = exact = True
             limit = iteration + max_iterations
             continue
-        if fresh:
+        exact = with_jacobian or (fresh and runs < max_runs)
+        if with_jacobian:
             jac, con_jac = t_jac, t_con_jac
+        elif exact:
+            _, _, _, jac, con_jac = _evaluate(model_args, trial, measured, n_all)
+            runs += probe_runs
         else:  # Broyden: the secant condition J dx = df for both row blocks
             dx = trial - x
             scale = 1.0 / (dx @ dx)

@@ -147,7 +147,10 @@ def _exercise_tendons(robot, lengths, goal):
         Tendons.default(n), stiffness=np.full(n, 1e3), friction=np.full(n, 0.05))))
     for each in (robot, real):
         first = each.solve_lengths(lengths - 1e-4)
-        each.solve_lengths(lengths - 2e-4, warm_start=first)
+        second = each.solve_lengths(lengths - 2e-4, warm_start=first)  # compiled chord steps
+        # Newton in Python with the friction of a known motion (a chord that gave up)
+        each.solve_lengths(lengths - 3e-4, warm_start=dataclasses.replace(
+            second, jacobian_parts=None))
         each.estimate_shape(lengths, warm_start=first)
         command_for(each, goal.shape, min_tension=0.1)
 
