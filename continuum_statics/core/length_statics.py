@@ -39,6 +39,8 @@ from continuum_statics.core.tendon_kernel import path_stretch
 MOTION_THRESHOLD = 1e-7
 #: Chord steps on a warm start's Jacobian before a fresh Newton solve.
 CHORD_ITERATIONS = 6
+#: Jacobian refreshes (4 + n IVPs each, compiled) a warm solve may take before that Newton solve.
+CHORD_REFRESHES = 1
 #: End tension (relative to E I / (L r)) at or below which a cable counts as slack.
 SLACK_TENSION = 1e-9
 
@@ -262,11 +264,11 @@ def _chord(problem, z0, parts):
     """
     robot = problem.robot
     args = robot.kernel_args(problem.tip_force, problem.tip_moment)
-    (z, ok, iterations, _, x, fixed, states, motor, gap, taut, balance, d_consumed) = chord(
+    (z, ok, iterations, _, x, fixed, states, motor, gap, taut, balance, d_consumed, _) = chord(
         *args[:6], *args[7:], np.asarray(z0, dtype=float), problem.kernel_moment_map,
         problem.free, problem.friction, problem.compliance, problem.base_axis, problem.kappa,
         problem.radius, problem.scale, parts[0], parts[1], robot.solver.estimate_tolerance,
-        CHORD_ITERATIONS)
+        CHORD_ITERATIONS, CHORD_REFRESHES)
     info = (x, None if problem.moment_map is not None else fixed, states, motor, gap, taut)
     return z, ok, iterations, info, (balance, d_consumed)
 

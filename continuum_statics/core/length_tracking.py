@@ -10,14 +10,20 @@ caller then solves afresh (:func:`length_statics._newton`).
 import numba
 import numpy as np
 
-from continuum_statics.core.kernel import POINT_MOMENT, probe
+from continuum_statics.core.kernel import (
+    POINT_MOMENT,
+    cable_lengths_batch,
+    integrate_batch,
+    loads_from_state,
+    probe,
+)
 from continuum_statics.core.tendon_kernel import path_stretch
 
 #: Balance tolerance (relative) of a converged solve; cable rows: the estimate tolerance (m).
 BALANCE_TOLERANCE = 1e-9
 #: What :func:`chord` returns, in order (x, fixed, states, motor, gap, taut: ``_Problem``'s info).
 CHORD_RESULT = ('z', 'ok', 'iterations', 'residual', 'x', 'fixed', 'states', 'motor', 'gap',
-                'taut', 'balance', 'd_consumed')
+                'taut', 'balance', 'd_consumed', 'runs')
 
 
 @numba.njit(cache=True)
@@ -57,22 +63,13 @@ def _evaluate(s_grid, params, model, tip_force, tip_moment, step, section_state_
               free, friction, compliance, base_axis, kappa, radius):
     """Residual F(z) (3 + n, scaled as ``_Problem.evaluate``), state, tensions, states, gap, taut.
 
-    Returns (residual, x, fixed, states, motor, gap, taut).
+    Returns (residual, x, fixed, states, motor, gap, taut, mean): ``mean`` each cable's mean
+    tension (N), what its stretch follows.
     """
     n = cable_offsets.shape[0]
-    x = np.zeros(moment_map.shape[0] + 3)
-    fixed = np.zeros(n)
-    for i in range(3):
-        x[i] = z[i]
-    if model == POINT_MOMENT:
-        for r in range(moment_map.shape[0]):
-            acc = 0.0
-            for j in range(n):
-                acc += moment_map[r, j] * z[3 + j]
-            x[3 + r] = acc
-    else:
-        for j in range(n):
-            fixed[j] = z[3 + j]
+    x = np.empty(moment_map.shape[0] + 3)
+    fixed = np.empty(n)
+    _state_of(z, model, moment_map, x, fixed)
     values, _, states = probe(s_grid, params, model, tip_force, tip_moment, x, 0, step, fixed,
                               section_state_index, section_bases, section_ranks, section_cables,
                               section_cable_count, cable_offsets, guide_nodes, cable_last_guide,
@@ -91,6 +88,7 @@ def _evaluate(s_grid, params, model, tip_force, tip_moment, step, section_state_
         for j in range(n):
             consumed[j] = values[6 + j] / (1.0 + tensions[j] * compliance[j])
             motor[j] = tensions[j]
+            mean[j] = tensions[j]
     residual = np.empty(3 + n)
     gap = np.empty(n)
     taut = np.empty(n, dtype=np.bool_)
@@ -100,7 +98,79 @@ def _evaluate(s_grid, params, model, tip_force, tip_moment, step, section_state_
         gap[j] = free[j] - consumed[j]
         taut[j] = kappa * tensions[j] >= gap[j]
         residual[3 + j] = (gap[j] if taut[j] else kappa * tensions[j]) / radius
-    return residual, x, fixed, states, motor, gap, taut
+    return residual, x, fixed, states, motor, gap, taut, mean
+
+
+@numba.njit(cache=True)
+def _state_of(z, model, moment_map, x, fixed):
+    """Fill the solver state x and fixed tensions of z (``_Problem.state_of``)."""
+    n = fixed.shape[0]
+    x[:] = 0.0
+    fixed[:] = 0.0
+    for i in range(3):
+        x[i] = z[i]
+    if model == POINT_MOMENT:
+        for r in range(moment_map.shape[0]):
+            acc = 0.0
+            for j in range(n):
+                acc += moment_map[r, j] * z[3 + j]
+            x[3 + r] = acc
+    else:
+        for j in range(n):
+            fixed[j] = z[3 + j]
+
+
+@numba.njit(cache=True)
+def jacobian_pieces(s_grid, params, model, tip_force, tip_moment, step, section_state_index,
+                    section_bases, section_ranks, section_cables, section_cable_count,
+                    cable_offsets, guide_nodes, cable_last_guide, cable_end_node,
+                    section_end_node, z, moment_map, compliance, mean, tension_step):
+    """Return the Jacobian pieces (balance (3, 3 + n), d_consumed (n, 3 + n)) at z.
+
+    Forward differences, every column in one batch of 4 + n IVPs (``_Problem.evaluate``'s
+    pieces, the friction profile held: ``mean`` the cables' mean tensions at z, N); ``step``
+    for u(0) (1/m), ``tension_step`` for tensions (N).
+    """
+    n = cable_offsets.shape[0]
+    size = 3 + n
+    n_sections = section_bases.shape[0]
+    batch = 1 + size
+    forces = np.empty((batch, 3))
+    bendings = np.empty((batch, 3))
+    moments = np.empty((batch, n_sections, 3))
+    tensions = np.empty((batch, n))
+    x = np.empty(moment_map.shape[0] + 3)
+    fixed = np.empty(n)
+    trial = np.empty(size)
+    for b in range(batch):
+        trial[:] = z
+        if b > 0:
+            trial[b - 1] += step if b <= 3 else tension_step
+        _state_of(trial, model, moment_map, x, fixed)
+        loads_from_state(x, fixed, model, section_bases, section_ranks, params[0],
+                         section_cables, section_cable_count, cable_offsets, moments[b],
+                         tensions[b])
+        for i in range(3):
+            forces[b, i] = tip_force[i]
+            bendings[b, i] = x[i]
+    states = integrate_batch(s_grid, params, model, forces, bendings, moments, tensions,
+                             cable_offsets, cable_end_node, section_end_node)
+    lengths = cable_lengths_batch(states, guide_nodes, cable_offsets, cable_last_guide)
+    tip = s_grid.shape[0] - 1
+    scale = s_grid[tip] / params[0]  # balance rows: (M_end - tau) L / (E I), as kernel.probe
+    balance = np.empty((3, size))
+    d_consumed = np.empty((n, size))
+    for c in range(size):
+        h = step if c < 3 else tension_step
+        for i in range(3):
+            balance[i, c] = (states[1 + c, tip, 18 + i] - states[0, tip, 18 + i]) * scale / h
+        for j in range(n):
+            stretch = 1.0 + mean[j] * compliance[j]
+            d_consumed[j, c] = (lengths[1 + c, j] - lengths[0, j]) / h / stretch
+    for j in range(n):
+        stretch = 1.0 + mean[j] * compliance[j]
+        d_consumed[j, 3 + j] -= lengths[0, j] * compliance[j] / (stretch * stretch)
+    return balance, d_consumed
 
 
 @numba.njit(cache=True)
@@ -138,7 +208,7 @@ def chord(s_grid, params, model, tip_force, tip_moment, step, section_state_inde
           section_bases, section_ranks, section_cables, section_cable_count, cable_offsets,
           guide_nodes, cable_last_guide, cable_end_node, section_end_node, z0, moment_map, free,
           friction, compliance, base_axis, kappa, radius, scale, balance0, d_consumed0,
-          tolerance, max_iterations):
+          tolerance, max_iterations, refreshes):
     """Chord steps from ``z0``; returns the record :data:`CHORD_RESULT` names.
 
     The arguments up to ``section_end_node`` are those of :func:`kernel.probe` without the
@@ -148,7 +218,10 @@ def chord(s_grid, params, model, tip_force, tip_moment, step, section_state_inde
     (n,) free lengths Lf (m); ``friction`` (n,) mu times the sign of motion; ``compliance`` 1/EA
     (1/N); ``kappa`` (m/N), ``radius`` (m) and ``scale`` (3 + n) the problem's scales;
     ``balance0`` (3, 3 + n) and ``d_consumed0`` (n, 3 + n) the previous Jacobian pieces (m per
-    unscaled z), returned Broyden-updated; ``tolerance`` on the cable rows (m).
+    unscaled z), returned Broyden-updated; ``tolerance`` on the cable rows (m). A step that
+    gains less than half is retried on Jacobian pieces refreshed by forward differences at z
+    (:func:`jacobian_pieces`, 4 + n IVPs), at most ``refreshes`` times; then ``ok`` is False.
+    The record ends with the IVPs integrated.
     """
     args = (s_grid, params, model, tip_force, tip_moment, step, section_state_index,
             section_bases, section_ranks, section_cables, section_cable_count, cable_offsets,
@@ -157,22 +230,36 @@ def chord(s_grid, params, model, tip_force, tip_moment, step, section_state_inde
     balance = balance0.copy()
     d_consumed = d_consumed0.copy()
     z = z0.copy()
-    res, x, fixed, states, motor, gap, taut = _evaluate(
+    res, x, fixed, states, motor, gap, taut, mean = _evaluate(
         *args, z, moment_map, free, friction, compliance, base_axis, kappa, radius)
+    runs = 1
     error = res @ res
-    for iteration in range(max_iterations):
+    iteration = 0
+    limit = max_iterations
+    while iteration < limit:
         if _done(res, radius, tolerance):
             return (z, True, iteration, res, x, fixed, states, motor, gap, taut, balance,
-                    d_consumed)
+                    d_consumed, runs)
+        iteration += 1
         jacobian = _jacobian(balance, d_consumed, taut, kappa, radius, scale)
         scaled = -_solve_linear(jacobian, res)
         trial = z + scaled * scale
-        t_res, t_x, t_fixed, t_states, t_motor, t_gap, t_taut = _evaluate(
+        t_res, t_x, t_fixed, t_states, t_motor, t_gap, t_taut, t_mean = _evaluate(
             *args, trial, moment_map, free, friction, compliance, base_axis, kappa, radius)
+        runs += 1
         t_error = t_res @ t_res
         if not t_error <= 0.25 * error:
-            return (z, False, iteration + 1, res, x, fixed, states, motor, gap, taut, balance,
-                    d_consumed)
+            if refreshes == 0:
+                return (z, False, iteration, res, x, fixed, states, motor, gap, taut, balance,
+                        d_consumed, runs)
+            # the secant pieces point nowhere useful: the model's own at z, then retry
+            refreshes -= 1
+            tension_step = 1e-7 * scale[3] if n else 1.0
+            balance, d_consumed = jacobian_pieces(*args, z, moment_map, compliance, mean,
+                                                  tension_step)
+            runs += 4 + n
+            limit = iteration + max_iterations
+            continue
         # Broyden's rank-one update of the assembled Jacobian, put back into its pieces: the
         # balance rows and the taut cables' rows (a slack cable's row is exact)
         update = np.outer(t_res - res - jacobian @ scaled, scaled) / (scaled @ scaled)
@@ -182,7 +269,7 @@ def chord(s_grid, params, model, tip_force, tip_moment, step, section_state_inde
             for j in range(n):
                 if taut[j]:
                     d_consumed[j, c] -= update[3 + j, c] * radius / scale[c]
-        z, res, x, fixed, states, motor, gap, taut, error = (
-            trial, t_res, t_x, t_fixed, t_states, t_motor, t_gap, t_taut, t_error)
-    return (z, _done(res, radius, tolerance), max_iterations, res, x, fixed, states, motor, gap,
-            taut, balance, d_consumed)
+        z, res, x, fixed, states, motor, gap, taut, mean, error = (
+            trial, t_res, t_x, t_fixed, t_states, t_motor, t_gap, t_taut, t_mean, t_error)
+    return (z, _done(res, radius, tolerance), iteration, res, x, fixed, states, motor, gap,
+            taut, balance, d_consumed, runs)
