@@ -28,7 +28,13 @@ from continuum_statics.core.layout import ProbeRows
 from continuum_statics.core.least_squares import constrained_gauss_newton
 from continuum_statics.core.shape import Shape
 from continuum_statics.core.tendons import full_circle_tension
-from continuum_statics.core.tracking import TRACK_ITERATIONS, track
+from continuum_statics.core.tracking import (
+    DAMPING,
+    SECANT_FRACTION,
+    TRACK_ITERATIONS,
+    WarmStart,
+    track,
+)
 
 #: RMS length residual (m) above which an estimate says in its message that it is a best fit.
 BEST_FIT_NOTE = 1e-6
@@ -36,7 +42,7 @@ BEST_FIT_NOTE = 1e-6
 #: (statics' default warn_residual: below it lag and encoder noise, above it a paid-out cable).
 SLACK_RESIDUAL = 1e-4
 _NO_JACOBIAN = np.zeros((0, 0))  # tells track to use finite-difference Jacobians
-DAMPING = 1e-6  # Levenberg-Marquardt damping a solve starts with (relative to the normal matrix)
+_NO_VALUES, _NO_STATES = np.zeros(0), np.zeros((0, 0))  # tells track to integrate at the start
 _UNBOUNDED = 2 ** 62  # model runs: no budget (the iteration limits bound the work)
 
 
@@ -51,8 +57,8 @@ class ShapeEstimate:
     :ivar iterations: Gauss-Newton (or shooting) iterations used
     :ivar observable_bending: bending directions the cables observe (2 per section at most)
     :ivar message: what limited the estimate, empty when nothing did
-    :ivar jacobians: the solver's Jacobians at the estimate, reused by the next warm start (and,
-        when capped, the damping it had reached)
+    :ivar jacobians: a :class:`tracking.WarmStart`: the solver's Jacobians at the estimate (and
+        the model there, the damping reached), reused by the next warm start
     :ivar model_runs: IVPs integrated (the cost of the estimate)
     :ivar tendons: the :class:`length_statics.LengthSolution` when the tendon model gave the shape
     :ivar capped: a warm-started estimate that spent its per-call budget (``TRACK_RUNS`` IVPs)
@@ -155,38 +161,45 @@ def estimate_shape(robot, cable_lengths, tip_force=(0.0, 0.0, 0.0), tip_moment=(
 
     runs = [0]
     args = robot.kernel_args(tip_force, tip_moment)
+    load = np.concatenate([tip_force, tip_moment])
     if jacobians is not None:  # tracking: the previous Jacobians, Broyden-updated, compiled
         budget = max_model_runs or _UNBOUNDED
-        damping = jacobians[2] if len(jacobians) > 2 else DAMPING
-        x, res, _, states, jac, con_jac, iterations, used, ok, damping = track(
-            *args, measured, start, jacobians[0], jacobians[1], damping,
+        carry = WarmStart(*jacobians)
+        known = carry.values.shape[0] and np.array_equal(carry.load, load)
+        x, res, con, states, jac, con_jac, iterations, used, ok, damping, age = track(
+            *args, measured, start, carry.jac, carry.con_jac, carry.damping,
+            carry.values if known else _NO_VALUES, carry.states, carry.age,
             robot.solver.estimate_tolerance, robot.length, TRACK_ITERATIONS, robot.probe_runs,
-            budget)
+            budget, SECANT_FRACTION if max_model_runs else 0.0)
         runs[0] = used
         if ok:
             slack = _slack_estimate(robot, measured, tip_force, tip_moment, previous,
                                     observable, notes, _rms(res))
             return slack or _finish(robot, x, tip_force, states, res, True, iterations,
-                                    observable, notes, (jac, con_jac), used)
+                                    observable, notes, _carry(jac, con_jac, DAMPING, res,
+                                                              measured, con, states, load, age),
+                                    used)
         if max_model_runs:
             # bounded work per measurement: the best state reached; the next call goes on
             notes.insert(0, 'unfinished after %d model runs (max_model_runs %d): refined with '
                             'the next measurement' % (used, max_model_runs))
             estimate = _finish(robot, x, tip_force, states, res, True, iterations, observable,
-                               notes, (jac, con_jac, damping), used)
+                               notes, _carry(jac, con_jac, damping, res, measured, con, states,
+                                             load, age), used)
             return dataclasses.replace(estimate, converged=False, capped=True)
         start = x  # keep the progress; go on as from a cold start
     # cold: the same compiled loop with finite-difference Jacobians at every evaluation
-    x, res, _, states, jac, con_jac, iterations, used, ok, _ = track(
-        *args, measured, start, _NO_JACOBIAN, _NO_JACOBIAN, DAMPING,
-        robot.solver.estimate_tolerance,
-        robot.length, robot.solver.max_iterations, robot.probe_runs, _UNBOUNDED)
+    x, res, con, states, jac, con_jac, iterations, used, ok, _, _ = track(
+        *args, measured, start, _NO_JACOBIAN, _NO_JACOBIAN, DAMPING, _NO_VALUES, _NO_STATES, 0,
+        robot.solver.estimate_tolerance, robot.length, robot.solver.max_iterations,
+        robot.probe_runs, _UNBOUNDED, 0.0)
     runs[0] += used
     if ok:
         slack = _slack_estimate(robot, measured, tip_force, tip_moment, previous, observable,
                                 notes, _rms(res))
         return slack or _finish(robot, x, tip_force, states, res, True, iterations, observable,
-                                notes, (jac, con_jac), runs[0])
+                                notes, _carry(jac, con_jac, DAMPING, res, measured, con, states,
+                                              load, 0), runs[0])
     start = x  # keep the progress; go on in Python (longer line search)
 
     def evaluate(x):
@@ -202,8 +215,8 @@ def estimate_shape(robot, cable_lengths, tip_force=(0.0, 0.0, 0.0), tip_moment=(
     if slack is not None:
         return slack
     return _finish(robot, result.x, tip_force, result.evaluation, result.residual,
-                   result.stationary, result.iterations, observable, notes, result.jacobians,
-                   runs[0])
+                   result.stationary, result.iterations, observable, notes,
+                   WarmStart(*result.jacobians), runs[0])
 
 
 def _finish(robot, x, tip_force, states, length_residual, stationary, iterations, observable,
@@ -258,6 +271,12 @@ def _tendon_estimate(robot, measured, tip_force, tip_moment, previous, observabl
     estimate = _result(solution.shape, solution.converged, solution.residual,
                        solution.iterations, observable, notes)
     return dataclasses.replace(estimate, tendons=solution)
+
+
+def _carry(jac, con_jac, damping, res, measured, con, states, load, age):
+    """Return the :class:`WarmStart` of an estimate (its model values save the next an IVP)."""
+    return WarmStart(jac, con_jac, damping, np.concatenate([res + measured, con]), states.copy(),
+                     load, age)
 
 
 def _rms(values):

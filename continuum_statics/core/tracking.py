@@ -13,11 +13,31 @@ finite-difference Jacobians at every evaluation (one compiled call instead of a 
 the kernels), and falls back to :func:`least_squares.constrained_gauss_newton` from where it
 stopped if it gives up.
 """
+from typing import NamedTuple
+
 import numba
 import numpy as np
 
 from continuum_statics.core.kernel import probe
 from continuum_statics.core.least_squares import constrained_step
+
+#: Levenberg-Marquardt damping a solve starts with (relative to the normal matrix's diagonal).
+DAMPING = 1e-6
+_NONE = np.zeros(0)
+_NO_STATES = np.zeros((0, 0))
+
+
+class WarmStart(NamedTuple):
+    """What an estimate hands the next one (``ShapeEstimate.jacobians``)."""
+
+    jac: np.ndarray  #: (n_cables, state size) d lengths / d x at the estimate (m per unit x)
+    con_jac: np.ndarray  #: (3, state size) d balance / d x
+    damping: float = DAMPING  #: the damping reached (a capped estimate's step size goes on)
+    values: np.ndarray = _NONE  #: (n_cables + 3,) model lengths (m) and balance at the state
+    states: np.ndarray = _NO_STATES  #: (N, 21) node states there (writable: a numba argument)
+    load: np.ndarray = _NONE  #: (6,) the tip force and moment ``values`` hold for
+    age: int = 0  #: secant updates of ``jac`` since it was the model's own
+
 
 #: Iterations of a warm-started estimate (one IVP each when the steps succeed).
 TRACK_ITERATIONS = 6
@@ -28,6 +48,13 @@ TRACK_RUNS = 32
 #: A step the model's own (finite-difference) Jacobian predicts to change the lengths by less than
 #: this fraction of the misfit is taken as stationary: the size of the Jacobian's own error.
 STATIONARY_FRACTION = 1e-4
+#: With a per-call budget (a node tracking the robot: the next measurement goes on from here), a
+#: secant step predicted to change the lengths by less than this fraction of the misfit ends the
+#: call: a secant Jacobian is ~1 % off, so closer is not known without the model's own (a
+#: refresh, probe_runs IVPs), and the remainder is far below what the misfit (noise) moves.
+SECANT_FRACTION = 1e-2
+#: Secant updates after which a Jacobian is no longer trusted for that test (refreshed instead).
+SECANT_AGE = 200
 
 
 @numba.njit(cache=True)
@@ -51,16 +78,22 @@ def _evaluate(model_args, x, measured, n_free):
 def track(s_grid, params, model, tip_force, tip_moment, step, fixed, section_state_index,
           section_bases, section_ranks, section_cables, section_cable_count, cable_offsets,
           guide_nodes, cable_last_guide, cable_end_node, section_end_node, measured, x0, jac0,
-          con_jac0, damping0, tolerance, weight, max_iterations, probe_runs, max_runs):
+          con_jac0, damping0, values0, states0, age0, tolerance, weight, max_iterations,
+          probe_runs, max_runs, secant_fraction):
     """Estimate from ``x0``; returns (x, residual, balance, states, jac, con_jac, ...).
 
-    The rest of the record: iterations, runs, ok, damping. ``runs`` counts IVPs integrated. The
+    The rest: iterations, runs, ok, damping, age. ``runs`` counts IVPs integrated. The
     first 17 arguments are those of :func:`kernel.probe` but ``x`` and ``n_free`` (flat: a tuple
     argument would cost numba's dispatcher ~80 us per call to type).
     :param measured: (n_cables,) measured lengths (m)
     :param x0: start state; ``jac0``, ``con_jac0`` its Jacobians (lengths, balance), Broyden-
         updated (one IVP per evaluation); empty (0 rows): finite-difference Jacobians at every
         evaluation instead (the cold estimate, ``probe_runs`` IVPs per evaluation)
+    :param values0: (n_cables + 3,) model lengths and balance at ``x0`` (with ``states0`` its node
+        states) when known from the call before (a warm start under the same tip load): the
+        first IVP is then saved; empty: integrate it
+    :param age0: secant updates ``jac0`` has had since it was the model's own (returned updated)
+    :param secant_fraction: 0, or the :data:`SECANT_FRACTION` test of a budgeted call
     :param damping0: Levenberg-Marquardt damping to start with (a capped call's, returned, lets
         the next call go on with the step size it had reached)
     :param tolerance: stop when the predicted change of the lengths is below this (m)
@@ -76,12 +109,22 @@ def track(s_grid, params, model, tip_force, tip_moment, step, fixed, section_sta
     fresh = jac0.shape[0] == 0 and con_jac0.shape[0] == 0  # the model's own Jacobians
     n_all = x0.shape[0]
     x = x0.copy()
-    res, con, states, jac, con_jac = _evaluate(model_args, x, measured, n_all if fresh else 0)
-    runs = probe_runs if fresh else 1
+    if values0.shape[0] > 0 and not fresh:
+        n = measured.shape[0]
+        res = values0[:n] - measured
+        con = values0[n:].copy()
+        states = states0
+        jac, con_jac = jac0, con_jac0
+        runs = 0
+    else:
+        res, con, states, jac, con_jac = _evaluate(model_args, x, measured,
+                                                   n_all if fresh else 0)
+        runs = probe_runs if fresh else 1
     if not fresh:
         jac = jac0.copy()
         con_jac = con_jac0.copy()
     exact = fresh  # jac, con_jac are the model's own at x (not Broyden-updated)
+    age = 0 if fresh else age0
     penalty = (1e3 * weight) ** 2
     current = res @ res + penalty * (con @ con)
     damping = damping0
@@ -97,8 +140,10 @@ def track(s_grid, params, model, tip_force, tip_moment, step, fixed, section_sta
             small = tolerance ** 2
             if exact:
                 small = max(small, STATIONARY_FRACTION ** 2 * (res @ res))
+            elif age <= SECANT_AGE:
+                small = max(small, secant_fraction ** 2 * (res @ res))
             if predicted @ predicted <= small and weight ** 2 * (con @ con) <= tolerance ** 2:
-                return x, res, con, states, jac, con_jac, iteration, runs, True, damping
+                return x, res, con, states, jac, con_jac, iteration, runs, True, damping, age
             accepted = False
             with_jacobian = False  # whether t_jac, t_con_jac are the model's own at the trial
             # a secant Jacobian gets two tries (its damped steps rarely help): then the model's
@@ -142,11 +187,12 @@ def track(s_grid, params, model, tip_force, tip_moment, step, fixed, section_sta
             # the model's own from x (they alone tell a stationary nonzero misfit); else, or
             # when the budget is spent, the caller goes on from here (the next measurement)
             if fresh or runs >= max_runs:
-                return x, res, con, states, jac, con_jac, iteration, runs, False, damping
+                return x, res, con, states, jac, con_jac, iteration, runs, False, damping, age
             # (the refresh may overrun the budget: the next call must start on good Jacobians)
             res, con, states, jac, con_jac = _evaluate(model_args, x, measured, n_all)
             runs += probe_runs
             fresh = exact = True
+            age = 0
             limit = iteration + max_iterations
             continue
         exact = with_jacobian or (fresh and runs < max_runs)
@@ -156,6 +202,7 @@ def track(s_grid, params, model, tip_force, tip_moment, step, fixed, section_sta
             _, _, _, jac, con_jac = _evaluate(model_args, trial, measured, n_all)
             runs += probe_runs
         else:  # Broyden: the secant condition J dx = df for both row blocks
+            age += 1
             dx = trial - x
             scale = 1.0 / (dx @ dx)
             jac += np.outer(t_res - res - jac @ dx, dx) * scale
