@@ -268,9 +268,8 @@ def _tendon_estimate(robot, measured, tip_force, tip_moment, previous, observabl
     if np.any(solution.slack):
         notes.append('slack: %s' % ', '.join(
             name for name, slack in zip(robot.cable_names, solution.slack) if slack))
-    estimate = _result(solution.shape, solution.converged, solution.residual,
-                       solution.iterations, observable, notes)
-    return dataclasses.replace(estimate, tendons=solution)
+    return _result(solution.shape, solution.converged, solution.residual, solution.iterations,
+                   observable, notes, tendons=solution)
 
 
 def _carry(jac, con_jac, damping, res, measured, con, states, load, age):
@@ -283,7 +282,9 @@ def _rms(values):
     return float(np.sqrt(np.mean(values ** 2))) if len(values) else 0.0
 
 
-def _result(shape, converged, residual, iterations, observable, notes, jacobians=None, runs=0):
+def _result(shape, converged, residual, iterations, observable, notes, jacobians=None, runs=0,
+            tendons=None):
     return ShapeEstimate(shape=shape, u0=shape.u0, converged=bool(converged), residual=residual,
                          iterations=iterations, observable_bending=observable,
-                         message='; '.join(notes), jacobians=jacobians, model_runs=runs)
+                         message='; '.join(notes), jacobians=jacobians, model_runs=runs,
+                         tendons=tendons)

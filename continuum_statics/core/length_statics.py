@@ -24,6 +24,8 @@ run from the motor to the base disk is straight and folded into EA, and sticking
 holding any tension in the band) is represented by the last sliding direction.
 """
 from dataclasses import dataclass
+import functools
+from typing import NamedTuple
 
 import numpy as np
 
@@ -35,6 +37,7 @@ from continuum_statics.core.length_tracking import BALANCE_TOLERANCE, chord
 from continuum_statics.core.shape import Shape
 from continuum_statics.core.tendon_kernel import path_stretch
 
+_NO_VALUES, _NO_STATES = np.zeros(0), np.zeros((0, 0))  # tell chord to integrate at its start
 #: Free-length change (m) below which a cable is taken as not moving (its friction sign is kept).
 MOTION_THRESHOLD = 1e-7
 #: Chord steps on a warm start's Jacobian before a fresh Newton solve.
@@ -73,6 +76,7 @@ class LengthSolution:
     residual: float = 0.0
     jacobian_parts: tuple = None  # the last Jacobian pieces: the next warm call starts on them
     slack_lengths: np.ndarray = None  # (n,) m by which each cable is longer than its path
+    model_at: object = None  # the model at the solution (:class:`ModelAt`), for the next call
 
     @property
     def state(self):
@@ -86,26 +90,13 @@ class _Problem:
     def __init__(self, robot, free_lengths, motion, tip_force, tip_moment):
         self.robot = robot
         self.n = len(robot.cable_names)
-        self.rows = ProbeRows(self.n)
         self.free = free_lengths
         self.motion = motion
         self.tip_force, self.tip_moment = tip_force, tip_moment
-        self.compliance = robot.tendons.compliance
         self.friction = robot.tendons.friction * motion
         self.with_friction = bool(np.any(self.friction != 0.0))
-        self.base_axis = np.ascontiguousarray(robot.base_rotation[:, 2])
-        radius = np.hypot(robot.cable_offsets[:, 0], robot.cable_offsets[:, 1])
-        # scales: u(0) L, t / t_ref and lengths / r are O(angle) for bends of O(1 rad)
-        self.radius = float(np.mean(radius)) if self.n else 1.0
-        self.t_ref = robot.c[0] / (robot.length * self.radius)
-        self.kappa = self.radius / self.t_ref  # m per N in min(kappa t, g)
-        self.scale = np.concatenate([np.full(3, 1.0 / robot.length),
-                                     np.full(self.n, self.t_ref)])
-        self.moment_map = (robot.tension_moment_map if robot.model_code == POINT_MOMENT
-                           else None)
-        # the compiled chord reads an array of that shape whatever the model
-        self.kernel_moment_map = (self.moment_map if self.moment_map is not None
-                                  else np.zeros((robot.state_size - 3, self.n)))
+        (self.rows, self.compliance, self.base_axis, self.radius, self.t_ref, self.kappa,
+         self.scale, self.moment_map, self.kernel_moment_map) = _constants(robot)
 
     def state_of(self, z):
         """Solver state x and fixed tensions of z (the robot's solver-state convention)."""
@@ -182,6 +173,25 @@ class _Problem:
         return consumed, motor, mean
 
 
+@functools.lru_cache(maxsize=16)
+def _constants(robot):
+    """Return a robot's fixed problem data (per call it cost more than the compiled solve)."""
+    n = len(robot.cable_names)
+    base_axis = np.ascontiguousarray(robot.base_rotation[:, 2])
+    radius = np.hypot(robot.cable_offsets[:, 0], robot.cable_offsets[:, 1])
+    # scales: u(0) L, t / t_ref and lengths / r are O(angle) for bends of O(1 rad)
+    radius = float(np.mean(radius)) if n else 1.0
+    t_ref = robot.c[0] / (robot.length * radius)
+    kappa = radius / t_ref  # m per N in min(kappa t, g)
+    scale = np.concatenate([np.full(3, 1.0 / robot.length), np.full(n, t_ref)])
+    moment_map = robot.tension_moment_map if robot.model_code == POINT_MOMENT else None
+    # the compiled chord reads an array of that shape whatever the model
+    kernel_map = (moment_map if moment_map is not None
+                  else np.zeros((robot.state_size - 3, n)))
+    return (ProbeRows(n), robot.tendons.compliance, base_axis, radius, t_ref, kappa, scale,
+            moment_map, kernel_map)
+
+
 def motion_since(robot, free_lengths, warm_start):
     """Each cable's friction sign: +1 pulled since ``warm_start``, -1 paid out, else its last."""
     previous = getattr(warm_start, 'free_lengths', None)
@@ -219,10 +229,10 @@ def solve_lengths(robot, lengths, tip_force=(0.0, 0.0, 0.0), tip_moment=(0.0, 0.
     total = 0
     parts = getattr(warm_start, 'jacobian_parts', None)
     if warm is not None and parts is not None and parts[0].shape == (3, 3 + n):
-        z, ok, iterations, info, parts = _chord(problem, warm, parts)
+        z, ok, iterations, info, parts, model = _chord(problem, warm, parts, warm_start)
         total += iterations
         if ok:
-            return _solution(robot, problem, z, info, True, total, '', parts)
+            return _solution(robot, problem, z, info, True, total, '', parts, model)
         warm = z  # keep the progress
     starts = [] if warm is None else [warm]
     starts.append(np.concatenate([bvp.linear_guess(robot, tip_force, tip_moment), np.zeros(n)]))
@@ -254,23 +264,50 @@ def _warm_z(robot, warm_start):
     return np.concatenate([state[:3], tensions])
 
 
-def _chord(problem, z0, parts):
+def _chord(problem, z0, parts, warm_start):
     """Quasi-Newton steps from the previous solve's Jacobian (one IVP each, compiled).
 
     A tracking sequence moves little between calls, so the last Jacobian (with each cable's
     branch of now), corrected by a Broyden update after every step, still contracts the error;
     it gives up as soon as a step gains less than half (:func:`length_tracking.chord`).
-    Returns (z, ok, iterations, info, parts): the updated Jacobian pieces start the next call.
+    Returns (z, ok, iterations, info, parts, model): the updated Jacobian pieces start the next
+    call, and so does the model at z (:class:`ModelAt`) when its load and friction are the same.
     """
     robot = problem.robot
     args = robot.kernel_args(problem.tip_force, problem.tip_moment)
-    (z, ok, iterations, _, x, fixed, states, motor, gap, taut, balance, d_consumed, _) = chord(
-        *args[:6], *args[7:], np.asarray(z0, dtype=float), problem.kernel_moment_map,
-        problem.free, problem.friction, problem.compliance, problem.base_axis, problem.kappa,
-        problem.radius, problem.scale, parts[0], parts[1], robot.solver.estimate_tolerance,
-        CHORD_ITERATIONS, CHORD_REFRESHES)
+    known = getattr(warm_start, 'model_at', None)
+    if known is not None and not known.holds_for(problem):
+        known = None
+    if known is not None:
+        z0 = known.z  # the z the model was integrated at (a slack tension reads 0 elsewhere)
+    (z, ok, iterations, _, x, fixed, states, motor, gap, taut, balance, d_consumed, _,
+     values) = chord(*args[:6], *args[7:], np.asarray(z0, dtype=float),
+                     problem.kernel_moment_map, problem.free, problem.friction,
+                     problem.compliance, problem.base_axis, problem.kappa, problem.radius,
+                     problem.scale, parts[0], parts[1], robot.solver.estimate_tolerance,
+                     CHORD_ITERATIONS, CHORD_REFRESHES,
+                     _NO_VALUES if known is None else known.values,
+                     _NO_STATES if known is None else known.states)
     info = (x, None if problem.moment_map is not None else fixed, states, motor, gap, taut)
-    return z, ok, iterations, info, (balance, d_consumed)
+    model = ModelAt(z.copy(), values, np.array(states), problem.friction.copy(),
+                    np.concatenate([problem.tip_force, problem.tip_moment]))
+    return z, ok, iterations, info, (balance, d_consumed), model
+
+
+class ModelAt(NamedTuple):
+    """The model at a solution's z, which the next warm solve starts from without an IVP."""
+
+    z: np.ndarray  #: (3 + n,) the unknowns it holds for
+    values: np.ndarray  #: (3 + 3 n,) :data:`length_tracking.MODEL_VALUES`
+    states: np.ndarray  #: (N, 21) node states (writable: a numba argument)
+    friction: np.ndarray  #: (n,) mu times the sign of motion it was integrated with
+    load: np.ndarray  #: (6,) tip force and moment
+
+    def holds_for(self, problem):
+        """Whether a problem has this model's load and friction directions."""
+        return (np.array_equal(self.friction, problem.friction)
+                and np.array_equal(self.load[:3], problem.tip_force)
+                and np.array_equal(self.load[3:], problem.tip_moment))
 
 
 def _newton(problem, z0, max_iterations=None):
@@ -335,7 +372,7 @@ def _cable_residual(info):
     return float(np.max(np.abs(np.where(taut, gap, 0.0)), initial=0.0))
 
 
-def _solution(robot, problem, z, info, converged, iterations, message, parts=None):
+def _solution(robot, problem, z, info, converged, iterations, message, parts=None, model=None):
     x, fixed, states, motor, gap, taut = info
     slack = z[3:] <= SLACK_TENSION * problem.t_ref
     tensions = np.where(slack, 0.0, z[3:])  # a slack cable carries exactly nothing
@@ -350,4 +387,5 @@ def _solution(robot, problem, z, info, converged, iterations, message, parts=Non
                           converged=bool(converged), message='; '.join(notes),
                           free_lengths=problem.free.copy(), motion=problem.motion.copy(),
                           iterations=iterations, residual=_cable_residual(info),
-                          jacobian_parts=parts, slack_lengths=np.where(slack, gap, 0.0))
+                          jacobian_parts=parts, slack_lengths=np.where(slack, gap, 0.0),
+                          model_at=model)

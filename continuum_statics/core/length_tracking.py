@@ -23,7 +23,10 @@ from continuum_statics.core.tendon_kernel import path_stretch
 BALANCE_TOLERANCE = 1e-9
 #: What :func:`chord` returns, in order (x, fixed, states, motor, gap, taut: ``_Problem``'s info).
 CHORD_RESULT = ('z', 'ok', 'iterations', 'residual', 'x', 'fixed', 'states', 'motor', 'gap',
-                'taut', 'balance', 'd_consumed', 'runs')
+                'taut', 'balance', 'd_consumed', 'runs', 'model_values')
+#: Layout of ``model_values`` (3 + 3 n): tip balance (3), then per cable the free length its path
+#: takes (m), its motor-side and its mean tension (N): the model at z, whatever the free lengths.
+MODEL_VALUES = ('balance', 'consumed', 'motor', 'mean')
 
 
 @numba.njit(cache=True)
@@ -63,8 +66,9 @@ def _evaluate(s_grid, params, model, tip_force, tip_moment, step, section_state_
               free, friction, compliance, base_axis, kappa, radius):
     """Residual F(z) (3 + n, scaled as ``_Problem.evaluate``), state, tensions, states, gap, taut.
 
-    Returns (residual, x, fixed, states, motor, gap, taut, mean): ``mean`` each cable's mean
-    tension (N), what its stretch follows.
+    Returns (residual, x, fixed, states, motor, gap, taut, mean, model_values): ``mean`` each
+    cable's mean tension (N), what its stretch follows; ``model_values`` what the residual at
+    any free lengths follows from (:data:`MODEL_VALUES`).
     """
     n = cable_offsets.shape[0]
     x = np.empty(moment_map.shape[0] + 3)
@@ -89,16 +93,31 @@ def _evaluate(s_grid, params, model, tip_force, tip_moment, step, section_state_
             consumed[j] = values[6 + j] / (1.0 + tensions[j] * compliance[j])
             motor[j] = tensions[j]
             mean[j] = tensions[j]
+    model_values = np.empty(3 + 3 * n)
+    for i in range(3):
+        model_values[i] = values[6 + n + i]  # rows: core/layout.py ProbeRows
+    model_values[3:3 + n] = consumed
+    model_values[3 + n:3 + 2 * n] = motor
+    model_values[3 + 2 * n:] = mean
+    residual, gap, taut = _residual(z, model_values, free, kappa, radius)
+    return residual, x, fixed, states, motor, gap, taut, mean, model_values
+
+
+@numba.njit(cache=True)
+def _residual(z, model_values, free, kappa, radius):
+    """Residual, gap (m) and taut of z from the model there (:data:`MODEL_VALUES` layout)."""
+    n = free.shape[0]
     residual = np.empty(3 + n)
     gap = np.empty(n)
     taut = np.empty(n, dtype=np.bool_)
     for i in range(3):
-        residual[i] = values[6 + n + i]  # rows: core/layout.py ProbeRows
+        residual[i] = model_values[i]
     for j in range(n):
-        gap[j] = free[j] - consumed[j]
-        taut[j] = kappa * tensions[j] >= gap[j]
-        residual[3 + j] = (gap[j] if taut[j] else kappa * tensions[j]) / radius
-    return residual, x, fixed, states, motor, gap, taut, mean
+        t = z[3 + j]
+        gap[j] = free[j] - model_values[3 + j]
+        taut[j] = kappa * t >= gap[j]
+        residual[3 + j] = (gap[j] if taut[j] else kappa * t) / radius
+    return residual, gap, taut
 
 
 @numba.njit(cache=True)
@@ -208,7 +227,7 @@ def chord(s_grid, params, model, tip_force, tip_moment, step, section_state_inde
           section_bases, section_ranks, section_cables, section_cable_count, cable_offsets,
           guide_nodes, cable_last_guide, cable_end_node, section_end_node, z0, moment_map, free,
           friction, compliance, base_axis, kappa, radius, scale, balance0, d_consumed0,
-          tolerance, max_iterations, refreshes):
+          tolerance, max_iterations, refreshes, start_values, start_states):
     """Chord steps from ``z0``; returns the record :data:`CHORD_RESULT` names.
 
     The arguments up to ``section_end_node`` are those of :func:`kernel.probe` without the
@@ -221,7 +240,9 @@ def chord(s_grid, params, model, tip_force, tip_moment, step, section_state_inde
     unscaled z), returned Broyden-updated; ``tolerance`` on the cable rows (m). A step that
     gains less than half is retried on Jacobian pieces refreshed by forward differences at z
     (:func:`jacobian_pieces`, 4 + n IVPs), at most ``refreshes`` times; then ``ok`` is False.
-    The record ends with the IVPs integrated.
+    ``start_values`` (:data:`MODEL_VALUES`) and ``start_states`` the model at ``z0`` when known
+    from the solve before (same tip load and friction directions): the first IVP is saved;
+    empty: integrate it. The record ends with the IVPs integrated and the model at z.
     """
     args = (s_grid, params, model, tip_force, tip_moment, step, section_state_index,
             section_bases, section_ranks, section_cables, section_cable_count, cable_offsets,
@@ -230,28 +251,39 @@ def chord(s_grid, params, model, tip_force, tip_moment, step, section_state_inde
     balance = balance0.copy()
     d_consumed = d_consumed0.copy()
     z = z0.copy()
-    res, x, fixed, states, motor, gap, taut, mean = _evaluate(
-        *args, z, moment_map, free, friction, compliance, base_axis, kappa, radius)
-    runs = 1
+    if start_values.shape[0] == 3 + 3 * n:
+        model_values = start_values
+        states = start_states
+        x = np.empty(moment_map.shape[0] + 3)
+        fixed = np.empty(n)
+        _state_of(z, model, moment_map, x, fixed)
+        res, gap, taut = _residual(z, model_values, free, kappa, radius)
+        motor = model_values[3 + n:3 + 2 * n].copy()
+        mean = model_values[3 + 2 * n:].copy()
+        runs = 0
+    else:
+        res, x, fixed, states, motor, gap, taut, mean, model_values = _evaluate(
+            *args, z, moment_map, free, friction, compliance, base_axis, kappa, radius)
+        runs = 1
     error = res @ res
     iteration = 0
     limit = max_iterations
     while iteration < limit:
         if _done(res, radius, tolerance):
             return (z, True, iteration, res, x, fixed, states, motor, gap, taut, balance,
-                    d_consumed, runs)
+                    d_consumed, runs, model_values)
         iteration += 1
         jacobian = _jacobian(balance, d_consumed, taut, kappa, radius, scale)
         scaled = -_solve_linear(jacobian, res)
         trial = z + scaled * scale
-        t_res, t_x, t_fixed, t_states, t_motor, t_gap, t_taut, t_mean = _evaluate(
+        t_res, t_x, t_fixed, t_states, t_motor, t_gap, t_taut, t_mean, t_values = _evaluate(
             *args, trial, moment_map, free, friction, compliance, base_axis, kappa, radius)
         runs += 1
         t_error = t_res @ t_res
         if not t_error <= 0.25 * error:
             if refreshes == 0:
                 return (z, False, iteration, res, x, fixed, states, motor, gap, taut, balance,
-                        d_consumed, runs)
+                        d_consumed, runs, model_values)
             # the secant pieces point nowhere useful: the model's own at z, then retry
             refreshes -= 1
             tension_step = 1e-7 * scale[3] if n else 1.0
@@ -269,7 +301,8 @@ def chord(s_grid, params, model, tip_force, tip_moment, step, section_state_inde
             for j in range(n):
                 if taut[j]:
                     d_consumed[j, c] -= update[3 + j, c] * radius / scale[c]
-        z, res, x, fixed, states, motor, gap, taut, mean, error = (
-            trial, t_res, t_x, t_fixed, t_states, t_motor, t_gap, t_taut, t_mean, t_error)
+        z, res, x, fixed, states, motor, gap, taut, mean, error, model_values = (
+            trial, t_res, t_x, t_fixed, t_states, t_motor, t_gap, t_taut, t_mean, t_error,
+            t_values)
     return (z, _done(res, radius, tolerance), iteration, res, x, fixed, states, motor, gap,
-            taut, balance, d_consumed, runs)
+            taut, balance, d_consumed, runs, model_values)

@@ -13,6 +13,7 @@ the default) is taut with p = Lf and any tension >= 0. The equilibrium of rod an
 lengths is :mod:`continuum_statics.core.length_statics`.
 """
 from dataclasses import dataclass
+import functools
 
 import numpy as np
 
@@ -54,12 +55,12 @@ class Tendons:
         return cls(np.full(n_cables, np.inf), np.zeros(n_cables), np.zeros(n_cables), limits,
                    np.zeros(n_cables))
 
-    @property
+    @functools.cached_property
     def compliance(self):
         """1 / EA (1/N), 0 for inextensible cables."""
         return 1.0 / self.stiffness
 
-    @property
+    @functools.cached_property
     def is_ideal(self):
         """Inextensible, frictionless, no pretension or zero offset: lengths are paths."""
         return bool(np.all(np.isinf(self.stiffness)) and not np.any(self.pretension)
