@@ -19,6 +19,7 @@ its shape is taken when it explains the lengths with some cables slack.
 """
 import dataclasses
 from dataclasses import dataclass
+import functools
 
 import numpy as np
 
@@ -153,13 +154,19 @@ def estimate_shape(robot, cable_lengths, tip_force=(0.0, 0.0, 0.0), tip_moment=(
                                  list(notes))
         if _plausible(robot, slack):
             return slack
-    if start is None:
+    runs = [0]
+    if start is None and jacobians is None:
+        # cold: tracked from the passive rod, whose model and Jacobians are known per robot and
+        # load (most cold starts are near it; a bent one refreshes them on the way)
+        misses = _passive_start.cache_info().misses
+        start, jacobians = _passive_start(robot, tuple(tip_force), tuple(tip_moment))
+        if _passive_start.cache_info().misses > misses:
+            runs[0] += robot.probe_runs  # integrated now for this robot and load
+    elif start is None:
         start = robot.passive_state(bvp.linear_guess(robot, tip_force, tip_moment))
     rows = ProbeRows(n_cables)
     cables, balance = rows.lengths, rows.balance
     size = robot.state_size
-
-    runs = [0]
     args = robot.kernel_args(tip_force, tip_moment)
     load = np.concatenate([tip_force, tip_moment])
     if jacobians is not None:  # tracking: the previous Jacobians, Broyden-updated, compiled
@@ -171,7 +178,8 @@ def estimate_shape(robot, cable_lengths, tip_force=(0.0, 0.0, 0.0), tip_moment=(
             carry.values if known else _NO_VALUES, carry.states, carry.age,
             robot.solver.estimate_tolerance, robot.length, TRACK_ITERATIONS, robot.probe_runs,
             budget, SECANT_FRACTION if max_model_runs else 0.0)
-        runs[0] = used
+        runs[0] += used
+        used = runs[0]
         if ok:
             slack = _slack_estimate(robot, measured, tip_force, tip_moment, previous,
                                     observable, notes, _rms(res))
@@ -270,6 +278,19 @@ def _tendon_estimate(robot, measured, tip_force, tip_moment, previous, observabl
             name for name, slack in zip(robot.cable_names, solution.slack) if slack))
     return _result(solution.shape, solution.converged, solution.residual, solution.iterations,
                    observable, notes, tendons=solution)
+
+
+@functools.lru_cache(maxsize=32)
+def _passive_start(robot, tip_force, tip_moment):
+    """Return the passive rod's state under a tip load and its :class:`WarmStart`."""
+    force, moment = np.array(tip_force), np.array(tip_moment)
+    state = robot.passive_state(bvp.linear_guess(robot, force, moment))
+    rows = ProbeRows(len(robot.cable_names))
+    values, jac, states = robot.probe(state, robot.state_size, force, moment)
+    model = np.concatenate([values[rows.lengths], values[rows.balance]])
+    return state, WarmStart(np.ascontiguousarray(jac[rows.lengths]),
+                            np.ascontiguousarray(jac[rows.balance]), DAMPING, model,
+                            states.copy(), np.concatenate([force, moment]))
 
 
 def _carry(jac, con_jac, damping, res, measured, con, states, load, age):

@@ -253,7 +253,7 @@ def chord(s_grid, params, model, tip_force, tip_moment, step, section_state_inde
     z = z0.copy()
     if start_values.shape[0] == 3 + 3 * n:
         model_values = start_values
-        states = start_states
+        states = start_states.copy()  # the caller's stays writable (a Shape of it would not be)
         x = np.empty(moment_map.shape[0] + 3)
         fixed = np.empty(n)
         _state_of(z, model, moment_map, x, fixed)

@@ -316,6 +316,14 @@ def rms(errors):
     return float(np.sqrt(np.mean(np.sum(errors ** 2, axis=1))))
 
 
+def rms_aligned(errors):
+    """RMS of point errors (n, 3) after removing their mean (m).
+
+    From rms^2 = rms_aligned^2 + |mean|^2, so it never exceeds :func:`rms` by round-off.
+    """
+    return float(np.sqrt(max(rms(errors) ** 2 - np.sum(errors.mean(axis=0) ** 2), 0.0)))
+
+
 def scan_rotations(model, x0, log=print, steps=SCAN_STEPS, rows=SCAN_ROWS):
     """Start each section's pattern rotation at the best of ``steps`` angles around the circle.
 
@@ -452,7 +460,7 @@ def calibrate_run(robot_file, data_file, fit_names, column_map, output=None, val
         'model': 'solve_lengths (recorded run replayed row by row)',
         'fit': list(model.fit), 'fitted': _fitted(model, x),
         'rms_before': before[0], 'rms_after': rms(errors),
-        'rms_aligned_after': rms(errors - errors.mean(axis=0)),
+        'rms_aligned_after': rms_aligned(errors),
         'max_after': float(np.max(np.linalg.norm(errors, axis=1))),
         'unconverged_rows': int(np.count_nonzero(failed)),
         'registration': {'position': model.position.tolist(),
@@ -467,7 +475,7 @@ def calibrate_run(robot_file, data_file, fit_names, column_map, output=None, val
         errors, failed = errors_of(model, x, held_out)
         summary.update(validate=str(validate), validate_rows=int(len(held_out.tips)),
                        validate_rms=rms(errors),
-                       validate_rms_aligned=rms(errors - errors.mean(axis=0)),
+                       validate_rms_aligned=rms_aligned(errors),
                        validate_max=float(np.max(np.linalg.norm(errors, axis=1))),
                        validate_unconverged_rows=int(np.count_nonzero(failed)))
     if output is not None:
@@ -477,7 +485,7 @@ def calibrate_run(robot_file, data_file, fit_names, column_map, output=None, val
 
 def _summary_errors(errors):
     errors = np.nan_to_num(errors, nan=FAILED_ROW_ERROR)
-    return rms(errors), rms(errors - errors.mean(axis=0))
+    return rms(errors), rms_aligned(errors)
 
 
 def _fitted(model, x):
