@@ -115,7 +115,7 @@ class ShapeTracker:
         notes = {'load_problem': '', 'distrust': ''}
         try:
             estimate = self._estimate(self._tracking, lengths, load, tensions, self.warm, notes,
-                                      self.max_model_runs)
+                                      self.max_model_runs, thresholds.warn)
             if tensions is not None and not estimate.residual <= thresholds.warn:
                 # tensions and lengths disagree: the lengths (encoders) are trusted, the
                 # tensions (a sensor, a current estimate) are not used for this shape
@@ -124,13 +124,13 @@ class ShapeTracker:
                                      % estimate.residual)
                 tensions = None
                 estimate = self._estimate(self._tracking, lengths, load, None, self.warm, notes,
-                                          self.max_model_runs)
+                                          self.max_model_runs, thresholds.warn)
             capped = estimate.capped or (not estimate.converged
                                          and self._tracking is not self.robot)
             if capped and not estimate.residual <= thresholds.drop:
                 # far from the last shape (a jump, a restart): one more bounded estimate now
                 estimate = self._estimate(self.robot, lengths, load, tensions, estimate, notes,
-                                          self.max_model_runs)
+                                          self.max_model_runs, thresholds.warn)
                 capped = estimate.capped
             if capped:  # the best state reached: the next measurement goes on from it
                 self.warm = estimate
@@ -163,12 +163,17 @@ class ShapeTracker:
                            tensions_used=tensions is not None, **notes)
 
     @staticmethod
-    def _estimate(robot, lengths, load, tensions, warm, notes, max_model_runs=None):
-        """Estimate; a tip load the model cannot take is replaced by zero (and noted)."""
+    def _estimate(robot, lengths, load, tensions, warm, notes, max_model_runs=None,
+                  slack_residual=None):
+        """Estimate; a tip load the model cannot take is replaced by zero (and noted).
+
+        ``slack_residual``: the warn threshold (m), above which ideal cables are tried as slack.
+        """
         try:
             return robot.estimate_shape(lengths, tip_force=load[:3], tip_moment=load[3:],
                                         tensions=tensions, warm_start=warm,
-                                        max_model_runs=max_model_runs or None)
+                                        max_model_runs=max_model_runs or None,
+                                        slack_residual=slack_residual)
         except ValueError as error:
             if not np.any(load):
                 raise

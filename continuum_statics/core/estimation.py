@@ -37,6 +37,8 @@ from continuum_statics.core.tracking import (
     track,
 )
 
+#: Newton iterations a node's per-cycle tendon-model estimate may take after its chord steps.
+TENDON_NEWTON = 2
 #: RMS length residual (m) above which an estimate says in its message that it is a best fit.
 BEST_FIT_NOTE = 1e-6
 #: RMS length residual (m) of the least-squares fit above which ideal cables are tried as slack
@@ -96,7 +98,7 @@ class ShapeEstimate:
 
 def estimate_shape(robot, cable_lengths, tip_force=(0.0, 0.0, 0.0), tip_moment=(0.0, 0.0, 0.0),
                    tensions=None, start=None, jacobians=None, previous=None,
-                   max_model_runs=None):
+                   max_model_runs=None, slack_residual=SLACK_RESIDUAL):
     """Estimate the shape from measured cable lengths (m, ``robot.cable_names`` order).
 
     ``tip_force`` (N) and ``tip_moment`` (N m) are the external tip load in the base frame.
@@ -105,7 +107,9 @@ def estimate_shape(robot, cable_lengths, tip_force=(0.0, 0.0, 0.0), tip_moment=(
     estimate's, to be reused (one model run per iteration instead of 1 + len(state));
     ``previous`` the previous result itself (the tendon model's warm start and friction history);
     ``max_model_runs`` the IVPs a warm-started least-squares estimate may integrate (None: until
-    it converges; else an estimate that needs more returns the best state reached, ``capped``).
+    it converges; else an estimate that needs more returns the best state reached, ``capped``);
+    ``slack_residual`` the RMS misfit (m) above which ideal cables are tried as slack (a node
+    passes its warn threshold, at least 3 sigma of its encoders).
     """
     n_cables = len(robot.cable_names)
     measured = as_vector(cable_lengths, n_cables, 'cable_lengths')
@@ -124,7 +128,7 @@ def estimate_shape(robot, cable_lengths, tip_force=(0.0, 0.0, 0.0), tip_moment=(
         # the motor-held lengths decide the shape (stretch, slack, friction); measured
         # tensions are compared with the model's
         estimate = _tendon_estimate(robot, measured, tip_force, tip_moment, previous,
-                                    observable, notes)
+                                    observable, notes, bool(max_model_runs))
         if tensions is not None:
             off = _rms(estimate.tendons.tensions - tensions)
             estimate = dataclasses.replace(estimate, message='; '.join(
@@ -146,12 +150,12 @@ def estimate_shape(robot, cable_lengths, tip_force=(0.0, 0.0, 0.0), tip_moment=(
         return _result(shape, converged, residual, 0, observable, notes)
 
     paid_out = getattr(getattr(previous, 'tendons', None), 'slack_lengths', None)
-    if paid_out is not None and np.any(paid_out > SLACK_RESIDUAL):
+    if paid_out is not None and np.any(paid_out > slack_residual):
         # still slack, most likely: the tendon model first, kept only when it explains the
         # lengths (ideal cables that all end up shorter than any shape allows have no
         # equilibrium: then the least-squares fit below, as without slack)
         slack = _tendon_estimate(robot, measured, tip_force, tip_moment, previous, observable,
-                                 list(notes))
+                                 list(notes), bool(max_model_runs))
         if _plausible(robot, slack):
             return slack
     runs = [0]
@@ -182,7 +186,8 @@ def estimate_shape(robot, cable_lengths, tip_force=(0.0, 0.0, 0.0), tip_moment=(
         used = runs[0]
         if ok:
             slack = _slack_estimate(robot, measured, tip_force, tip_moment, previous,
-                                    observable, notes, _rms(res))
+                                    observable, notes, _rms(res), bool(max_model_runs),
+                                    slack_residual)
             return slack or _finish(robot, x, tip_force, states, res, True, iterations,
                                     observable, notes, _carry(jac, con_jac, DAMPING, res,
                                                               measured, con, states, load, age),
@@ -204,7 +209,7 @@ def estimate_shape(robot, cable_lengths, tip_force=(0.0, 0.0, 0.0), tip_moment=(
     runs[0] += used
     if ok:
         slack = _slack_estimate(robot, measured, tip_force, tip_moment, previous, observable,
-                                notes, _rms(res))
+                                notes, _rms(res), False, slack_residual)
         return slack or _finish(robot, x, tip_force, states, res, True, iterations, observable,
                                 notes, _carry(jac, con_jac, DAMPING, res, measured, con, states,
                                               load, 0), runs[0])
@@ -219,7 +224,7 @@ def estimate_shape(robot, cable_lengths, tip_force=(0.0, 0.0, 0.0), tip_moment=(
         evaluate, start, robot.solver.max_iterations, robot.solver.estimate_tolerance,
         constraint_weight=robot.length)
     slack = _slack_estimate(robot, measured, tip_force, tip_moment, previous, observable,
-                            notes, _rms(result.residual))
+                            notes, _rms(result.residual), False, slack_residual)
     if slack is not None:
         return slack
     return _finish(robot, result.x, tip_force, result.evaluation, result.residual,
@@ -240,18 +245,18 @@ def _finish(robot, x, tip_force, states, length_residual, stationary, iterations
 
 
 def _slack_estimate(robot, measured, tip_force, tip_moment, previous, observable, notes,
-                    residual):
+                    residual, bounded, slack_residual):
     """Return the tendon model's estimate when it explains lengths least squares missed.
 
-    Returns None when the least-squares fit was within :data:`SLACK_RESIDUAL` or the tendon
+    Returns None when the least-squares fit was within ``slack_residual`` or the tendon
     model did no better (lengths no taut-or-slack shape has either: noise, a wrong file), or
     only with tensions no cable takes (inextensible cables pulled in against the rod's axial
     stiffness: above the full-circle tension or a tension limit).
     """
-    if residual <= SLACK_RESIDUAL or not len(measured):
+    if residual <= slack_residual or not len(measured):
         return None
     slack = _tendon_estimate(robot, measured, tip_force, tip_moment, previous, observable,
-                             list(notes))
+                             list(notes), bounded)
     return slack if _plausible(robot, slack) and slack.residual < residual else None
 
 
@@ -265,19 +270,28 @@ def _plausible(robot, estimate):
     return estimate.converged and np.max(estimate.tensions, initial=0.0) <= limit
 
 
-def _tendon_estimate(robot, measured, tip_force, tip_moment, previous, observable, notes):
-    """Return the estimate of the displacement-driven statics (slack, stretch, friction)."""
+def _tendon_estimate(robot, measured, tip_force, tip_moment, previous, observable, notes,
+                     bounded=False):
+    """Return the estimate of the displacement-driven statics (slack, stretch, friction).
+
+    ``bounded``: a node's per-cycle call (:data:`TENDON_NEWTON` Newton iterations at most after
+    the chord steps; an unfinished result is ``capped``).
+    """
     warm = getattr(previous, 'tendons', None) or previous
     # ideal cables only try it (the least squares are the fallback): no slow last resort
     solution = length_statics.solve_lengths(robot, measured, tip_force, tip_moment, warm,
-                                            continuation=not robot.tendons.is_ideal)
+                                            continuation=not robot.tendons.is_ideal,
+                                            max_newton=TENDON_NEWTON if bounded else None)
     if solution.message:
         notes.insert(0, solution.message)
     if np.any(solution.slack):
         notes.append('slack: %s' % ', '.join(
             name for name, slack in zip(robot.cable_names, solution.slack) if slack))
-    return _result(solution.shape, solution.converged, solution.residual, solution.iterations,
-                   observable, notes, tendons=solution)
+    estimate = _result(solution.shape, solution.converged, solution.residual,
+                       solution.iterations, observable, notes, tendons=solution)
+    if bounded and not solution.converged and warm is not None:
+        return dataclasses.replace(estimate, capped=True)
+    return estimate
 
 
 @functools.lru_cache(maxsize=32)

@@ -33,7 +33,7 @@ from continuum_statics.core import bvp
 from continuum_statics.core.inputs import as_vector
 from continuum_statics.core.kernel import POINT_MOMENT
 from continuum_statics.core.layout import ProbeRows
-from continuum_statics.core.length_tracking import BALANCE_TOLERANCE, chord
+from continuum_statics.core.length_tracking import BALANCE_TOLERANCE, chord, jacobian_pieces
 from continuum_statics.core.shape import Shape
 from continuum_statics.core.tendon_kernel import path_stretch
 
@@ -42,6 +42,8 @@ _NO_VALUES, _NO_STATES = np.zeros(0), np.zeros((0, 0))  # tell chord to integrat
 MOTION_THRESHOLD = 1e-7
 #: Chord steps on a warm start's Jacobian before a fresh Newton solve.
 CHORD_ITERATIONS = 6
+#: Step halvings per Newton iteration of a bounded (per-cycle) call.
+BOUNDED_BACKTRACKS = 4
 #: Jacobian refreshes (4 + n IVPs each, compiled) a warm solve may take before that Newton solve.
 CHORD_REFRESHES = 1
 #: End tension (relative to E I / (L r)) at or below which a cable counts as slack.
@@ -114,40 +116,33 @@ class _Problem:
         """
         robot, n, rows = self.robot, self.n, self.rows
         x, fixed = self.state_of(z)
-        if parts is not None:
-            values, _, states = robot.probe(x, 0, self.tip_force, self.tip_moment, fixed)
-            jac = None
-        elif fixed is None:
-            values, jac_x, states = robot.probe(x, robot.state_size, self.tip_force,
-                                                self.tip_moment)
-            jac = np.empty((jac_x.shape[0], 3 + n))
-            jac[:, :3] = jac_x[:, :3]
-            jac[:, 3:] = jac_x[:, 3:] @ self.moment_map
-        else:
-            values, jac_x, states = robot.probe(x, 3, self.tip_force, self.tip_moment, fixed)
-            jac = np.empty((jac_x.shape[0], 3 + n))
-            jac[:, :3] = jac_x
-            step = 1e-7 * self.t_ref
-            for j in range(n):
-                trial = fixed.copy()
-                trial[j] += step
-                shifted, _, _ = robot.probe(x, 0, self.tip_force, self.tip_moment, trial)
-                jac[:, 3 + j] = (shifted - values) / step
+        point_columns = parts is None and fixed is None  # the point model's, with the nominal
+        values, jac_x, states = robot.probe(x, robot.state_size if point_columns else 0,
+                                            self.tip_force, self.tip_moment, fixed)
         t = z[3:]
         paths = values[rows.lengths]
         consumed, motor, mean = self.consumed(states, paths, t)
         gap = self.free - consumed
-        if jac is not None:
+        chord = parts is not None
+        if point_columns:
+            jac = np.empty((jac_x.shape[0], 3 + n))
+            jac[:, :3] = jac_x[:, :3]
+            jac[:, 3:] = jac_x[:, 3:] @ self.moment_map
             # d consumed / dz with the friction profile held (exact without friction)
             stretch = 1.0 + mean * self.compliance
             d_consumed = jac[rows.lengths] / stretch[:, None]
             d_consumed[:, 3:] -= np.diag(paths * self.compliance / stretch ** 2)
             parts = (jac[rows.balance], d_consumed)
+        elif not chord:  # tension columns too: one compiled batch of 4 + n IVPs
+            args = robot.kernel_args(self.tip_force, self.tip_moment)
+            parts = jacobian_pieces(*args[:6], *args[7:], np.asarray(z, dtype=float),
+                                    self.kernel_moment_map, self.compliance, mean,
+                                    1e-7 * self.t_ref)
         taut = self.kappa * t >= gap
         residual = np.concatenate([values[rows.balance],
                                    np.where(taut, gap, self.kappa * t) / self.radius])
         # a chord step (parts given) assembles its Jacobian itself, when the branches change
-        jacobian = self.jacobian(parts, taut) if jac is not None else None
+        jacobian = None if chord else self.jacobian(parts, taut)
         return residual, jacobian, (x, fixed, states, motor, gap, taut), parts
 
     def jacobian(self, parts, taut):
@@ -206,7 +201,7 @@ def motion_since(robot, free_lengths, warm_start):
 
 
 def solve_lengths(robot, lengths, tip_force=(0.0, 0.0, 0.0), tip_moment=(0.0, 0.0, 0.0),
-                  warm_start=None, continuation=True):
+                  warm_start=None, continuation=True, max_newton=None):
     """Equilibrium when the motors hold cable ``lengths`` (m, motor side, cable_names order).
 
     ``tip_force`` (N) and ``tip_moment`` (N m) in the base frame; ``warm_start`` the previous
@@ -214,6 +209,9 @@ def solve_lengths(robot, lengths, tip_force=(0.0, 0.0, 0.0), tip_moment=(0.0, 0.
     give each cable's direction of motion for friction). Never raises for a failed solve: then
     ``converged`` is False and ``message`` says why; bad arguments raise ``ValueError``.
     ``continuation`` False skips the slow last resort (a try whose failure has a fallback).
+    ``max_newton`` bounds the work of a warm-started call (a node's per-cycle budget): after the
+    chord steps at most that many Newton iterations from the warm start and nothing else; the
+    next call goes on from the result.
     """
     n = len(robot.cable_names)
     lengths = as_vector(lengths, n, 'lengths')
@@ -235,12 +233,20 @@ def solve_lengths(robot, lengths, tip_force=(0.0, 0.0, 0.0), tip_moment=(0.0, 0.
             return _solution(robot, problem, z, info, True, total, '', parts, model)
         warm = z  # keep the progress
     starts = [] if warm is None else [warm]
-    starts.append(np.concatenate([bvp.linear_guess(robot, tip_force, tip_moment), np.zeros(n)]))
+    bounded = max_newton is not None and warm is not None
+    if not bounded:
+        starts.append(np.concatenate([bvp.linear_guess(robot, tip_force, tip_moment),
+                                      np.zeros(n)]))
     for z0 in starts:
-        z, ok, iterations, info, parts = _newton(problem, z0)
+        z, ok, iterations, info, parts = (_newton(problem, z0, max_newton, BOUNDED_BACKTRACKS)
+                                          if bounded else _newton(problem, z0))
         total += iterations
         if ok:
             return _solution(robot, problem, z, info, True, total, '', parts)
+    if bounded:
+        return _solution(robot, problem, z, info, False, total,
+                         'unfinished after %d Newton iterations (the per-call bound): refined '
+                         'with the next measurement' % max_newton, parts)
     if not continuation:
         return _solution(robot, problem, z, info, False, total,
                          'no equilibrium found from the warm or the small-deflection start',
@@ -310,7 +316,7 @@ class ModelAt(NamedTuple):
                 and np.array_equal(self.load[3:], problem.tip_moment))
 
 
-def _newton(problem, z0, max_iterations=None):
+def _newton(problem, z0, max_iterations=None, backtracks=16):
     """Semismooth Newton with backtracking; (z, converged, iterations, info, parts)."""
     robot = problem.robot
     max_iterations = max_iterations or robot.solver.max_iterations
@@ -324,15 +330,20 @@ def _newton(problem, z0, max_iterations=None):
             break
         step = -np.linalg.lstsq(jac, res, rcond=1e-12)[0] * problem.scale
         alpha = 1.0
-        for _ in range(16):
+        for attempt in range(backtracks):
             trial = z + alpha * step
-            trial_res, trial_jac, trial_info, trial_parts = problem.evaluate(trial)
+            # the full step comes with its Jacobian (the usual accepted one), shorter ones
+            # without (one IVP each): it is made where one is accepted
+            trial_res, trial_jac, trial_info, trial_parts = problem.evaluate(
+                trial, None if attempt == 0 else parts)
             trial_error = float(trial_res @ trial_res)
             if trial_error <= (1.0 - 1e-4 * alpha) * error or _done(problem, trial_res):
                 break
             alpha *= 0.5
         else:
             return z, False, iteration + 1, info, parts
+        if trial_jac is None:
+            trial_res, trial_jac, trial_info, trial_parts = problem.evaluate(trial)
         z, res, jac, info, parts = trial, trial_res, trial_jac, trial_info, trial_parts
     return z, _done(problem, res), max_iterations, info, parts
 

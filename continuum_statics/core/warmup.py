@@ -30,6 +30,7 @@ ENTRY_POINTS = (
     'continuum_statics.core.kernel.tip_jacobian',
     'continuum_statics.core.tracking.track',
     'continuum_statics.core.length_tracking.chord',
+    'continuum_statics.core.length_tracking.jacobian_pieces',
     'continuum_statics.core.least_squares.constrained_step',
     'continuum_statics.core.rotations._quaternions',
     'continuum_statics.core.backbone_sampling._sample',
@@ -145,6 +146,9 @@ def _exercise_tendons(robot, lengths, goal):
     n = len(robot.cable_names)
     real = Robot(dataclasses.replace(robot.description, tendons=dataclasses.replace(
         Tendons.default(n), stiffness=np.full(n, 1e3), friction=np.full(n, 0.05))))
+    other = 'point_moment' if robot.cable_model == 'distributed' else 'distributed'
+    # Newton's tension columns are a compiled batch in the distributed model, from Python
+    Robot(dataclasses.replace(robot.description, cable_model=other)).solve_lengths(lengths)
     for each in (robot, real):
         first = each.solve_lengths(lengths - 1e-4)
         second = each.solve_lengths(lengths - 2e-4, warm_start=first)  # compiled chord steps
