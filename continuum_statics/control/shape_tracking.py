@@ -114,8 +114,10 @@ class ShapeTracker:
                                              for i in high[:4])))
         notes = {'load_problem': '', 'distrust': ''}
         try:
+            # the first measurement (nothing to track from yet) is solved to the end, once
+            budget = self.max_model_runs if self.warm is not None else None
             estimate = self._estimate(self._tracking, lengths, load, tensions, self.warm, notes,
-                                      self.max_model_runs, thresholds.warn)
+                                      budget, thresholds.warn)
             if tensions is not None and not estimate.residual <= thresholds.warn:
                 # tensions and lengths disagree: the lengths (encoders) are trusted, the
                 # tensions (a sensor, a current estimate) are not used for this shape
@@ -124,7 +126,7 @@ class ShapeTracker:
                                      % estimate.residual)
                 tensions = None
                 estimate = self._estimate(self._tracking, lengths, load, None, self.warm, notes,
-                                          self.max_model_runs, thresholds.warn)
+                                          budget, thresholds.warn)
             capped = estimate.capped or (not estimate.converged
                                          and self._tracking is not self.robot)
             if capped and not estimate.residual <= thresholds.drop:

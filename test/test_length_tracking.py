@@ -1,0 +1,103 @@
+"""The compiled warm solve of the displacement-driven statics (core/length_tracking.py).
+
+Against independent references: the Jacobian pieces of one compiled batch equal plain forward
+differences through the public probe, one column at a time in Python (the formulation the solver
+used before); a warm solve handed a wrong Jacobian refreshes it and lands on Newton's
+equilibrium (under the same friction history); a per-cycle bounded solve of a far jump is
+finished by the calls after it.
+"""
+import dataclasses
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from continuum_statics import load_robot
+from continuum_statics.core import length_statics
+from continuum_statics.core.layout import ProbeRows
+from continuum_statics.core.length_tracking import jacobian_pieces
+from continuum_statics.core.robot import Robot
+
+CONFIG = Path(__file__).resolve().parents[1] / 'config'
+
+
+def real_tendons(model):
+    base = load_robot(CONFIG / 'three_section_robot_real_tendons.yaml')
+    return Robot(dataclasses.replace(base.description, cable_model=model))
+
+
+@pytest.mark.parametrize('model', ['point_moment', 'distributed'])
+def test_jacobian_pieces_equal_column_by_column_differences(model):
+    robot = real_tendons(model)
+    n = len(robot.cable_names)
+    solution = robot.solve_lengths(robot.straight_cable_lengths - 2e-3 * (np.arange(n) % 3 == 0))
+    z = np.concatenate([solution.state[:3], solution.end_tensions])
+    problem = length_statics._Problem(robot, solution.free_lengths, np.zeros(n), np.zeros(3),
+                                      np.zeros(3))
+    rows = ProbeRows(n)
+    tension_step = 1e-7 * problem.t_ref
+
+    def outputs(zz):  # balance rows and free length consumed, one probe per call
+        x, fixed = problem.state_of(zz)
+        values, _, states = robot.probe(x, 0, np.zeros(3), np.zeros(3), fixed)
+        consumed, _, _ = problem.consumed(states, values[rows.lengths], zz[3:])
+        return values[rows.balance], consumed
+
+    balance0, consumed0 = outputs(z)
+    reference_balance = np.empty((3, 3 + n))
+    reference_consumed = np.empty((n, 3 + n))
+    for c in range(3 + n):
+        h = robot.bending_step() if c < 3 else tension_step
+        shifted = z.copy()
+        shifted[c] += h
+        balance, consumed = outputs(shifted)
+        reference_balance[:, c] = (balance - balance0) / h
+        reference_consumed[:, c] = (consumed - consumed0) / h
+    args = robot.kernel_args(np.zeros(3), np.zeros(3))
+    balance, d_consumed = jacobian_pieces(*args[:6], *args[7:], z, problem.kernel_moment_map,
+                                          problem.compliance, solution.end_tensions,
+                                          tension_step)
+    # the pieces hold d(consumed)/dz with the stretch factor of the nominal tension: the
+    # reference differentiates the stretch too, which differs by O(h) only
+    scale = np.abs(reference_consumed).max()
+    np.testing.assert_allclose(d_consumed, reference_consumed, atol=1e-6 * scale)
+    np.testing.assert_allclose(balance, reference_balance,
+                               atol=1e-6 * np.abs(reference_balance).max())
+
+
+@pytest.mark.parametrize('model', ['point_moment', 'distributed'])
+def test_a_warm_solve_on_a_wrong_jacobian_refreshes_it_and_lands_on_the_equilibrium(model):
+    robot = real_tendons(model)
+    n = len(robot.cable_names)
+    first = robot.solve_lengths(robot.straight_cable_lengths - 1e-3)
+    target = robot.straight_cable_lengths - 1e-3 + 1e-3 * (np.arange(n) % 3 == 1)
+    balance, d_consumed = first.jacobian_parts
+    wrong = dataclasses.replace(first, jacobian_parts=(0.3 * balance, -d_consumed))
+    warm = robot.solve_lengths(target, warm_start=wrong)
+    # the same motion history (friction acts against it) solved by Newton from nothing
+    reference = robot.solve_lengths(target, warm_start=dataclasses.replace(
+        first, jacobian_parts=None, model_at=None, shape=robot.solve_bvp()))
+    assert warm.converged and reference.converged
+    np.testing.assert_allclose(warm.shape.tip_position, reference.shape.tip_position,
+                               atol=1e-8)
+    np.testing.assert_allclose(warm.tensions, reference.tensions, atol=1e-6)
+
+
+def test_a_bounded_solve_of_a_far_jump_is_finished_by_the_next_calls():
+    robot = real_tendons('point_moment')
+    n = len(robot.cable_names)
+    # a start with no Jacobian to step on (as after a least-squares estimate): Newton's only
+    start = dataclasses.replace(robot.solve_lengths(robot.straight_cable_lengths),
+                                jacobian_parts=None)
+    far = robot.straight_cable_lengths - 2e-2 * (np.arange(n) % 3 == 0)  # 20 mm pulls
+    reference = robot.solve_lengths(far, warm_start=start)  # unbounded, the same history
+    result, calls = start, 0
+    while calls < 30:
+        result = length_statics.solve_lengths(robot, far, warm_start=result, max_newton=1)
+        calls += 1
+        if result.converged:
+            break
+        assert 'unfinished' in result.message
+    assert result.converged and calls > 1
+    np.testing.assert_allclose(result.shape.tip_position, reference.shape.tip_position,
+                               atol=1e-8)
