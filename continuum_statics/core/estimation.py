@@ -38,7 +38,7 @@ from continuum_statics.core.tracking import (
 )
 
 #: Newton iterations a node's per-cycle tendon-model estimate may take after its chord steps.
-TENDON_NEWTON = 2
+TENDON_NEWTON = 1
 #: RMS length residual (m) above which an estimate says in its message that it is a best fit.
 BEST_FIT_NOTE = 1e-6
 #: RMS length residual (m) of the least-squares fit above which ideal cables are tried as slack

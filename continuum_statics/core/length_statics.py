@@ -226,20 +226,23 @@ def solve_lengths(robot, lengths, tip_force=(0.0, 0.0, 0.0), tip_moment=(0.0, 0.
     warm = _warm_z(robot, warm_start)
     total = 0
     parts = getattr(warm_start, 'jacobian_parts', None)
+    chord_parts = None  # the Jacobian pieces a chord that gave up ended on (refreshed at most
+    # a few steps before): the bounded Newton starts on them instead of making its own
     if warm is not None and parts is not None and parts[0].shape == (3, 3 + n):
         z, ok, iterations, info, parts, model = _chord(problem, warm, parts, warm_start)
         total += iterations
         if ok:
             return _solution(robot, problem, z, info, True, total, '', parts, model)
-        warm = z  # keep the progress
+        warm, chord_parts = z, parts  # keep the progress
     starts = [] if warm is None else [warm]
     bounded = max_newton is not None and warm is not None
     if not bounded:
         starts.append(np.concatenate([bvp.linear_guess(robot, tip_force, tip_moment),
                                       np.zeros(n)]))
     for z0 in starts:
-        z, ok, iterations, info, parts = (_newton(problem, z0, max_newton, BOUNDED_BACKTRACKS)
-                                          if bounded else _newton(problem, z0))
+        z, ok, iterations, info, parts = (
+            _newton(problem, z0, max_newton, BOUNDED_BACKTRACKS, chord_parts) if bounded
+            else _newton(problem, z0))
         total += iterations
         if ok:
             return _solution(robot, problem, z, info, True, total, '', parts)
@@ -316,12 +319,17 @@ class ModelAt(NamedTuple):
                 and np.array_equal(self.load[3:], problem.tip_moment))
 
 
-def _newton(problem, z0, max_iterations=None, backtracks=16):
-    """Semismooth Newton with backtracking; (z, converged, iterations, info, parts)."""
+def _newton(problem, z0, max_iterations=None, backtracks=16, parts=None):
+    """Semismooth Newton with backtracking; (z, converged, iterations, info, parts).
+
+    ``parts``: Jacobian pieces to take the first step on (else made at ``z0``).
+    """
     robot = problem.robot
     max_iterations = max_iterations or robot.solver.max_iterations
     z = np.array(z0, dtype=float)
-    res, jac, info, parts = problem.evaluate(z)
+    res, jac, info, parts = problem.evaluate(z, parts)
+    if jac is None:
+        jac = problem.jacobian(parts, info[5])
     for iteration in range(max_iterations):
         if _done(problem, res):
             return z, True, iteration, info, parts
