@@ -13,6 +13,7 @@ import numpy as np
 import pytest
 
 from continuum_statics import load_robot
+from continuum_statics.core.estimation import Tracking
 from continuum_statics.core.robot import Robot
 from continuum_statics.core.tracking import TRACK_RUNS
 from continuum_statics.tools.bench_noisy import motion, scipy_estimate
@@ -34,7 +35,7 @@ def test_every_call_of_a_noisy_sequence_stays_in_budget_finite_and_flagged(name,
     measured = exact + np.random.default_rng(3).normal(0.0, 50e-6, exact.shape)
     previous = robot.estimate_shape(measured[0])
     for lengths in measured[1:]:
-        previous = robot.estimate_shape(lengths, warm_start=previous, max_model_runs=TRACK_RUNS)
+        previous = robot.estimate_shape(lengths, warm_start=previous, tracking=Tracking())
         # the budget is checked before each model evaluation: one Jacobian may overrun it
         assert previous.model_runs <= TRACK_RUNS + robot.probe_runs
         assert np.all(np.isfinite(previous.shape.positions))
@@ -55,7 +56,7 @@ def test_a_capped_estimate_is_finished_by_the_next_calls():
     start = robot.estimate_shape(near)
     result, calls = start, 0
     while True:
-        result = robot.estimate_shape(far, warm_start=result, max_model_runs=TRACK_RUNS)
+        result = robot.estimate_shape(far, warm_start=result, tracking=Tracking())
         calls += 1
         if not result.capped or calls == 50:
             break
@@ -75,7 +76,7 @@ def test_the_estimate_on_noisy_lengths_is_the_least_squares_fit(name, model):
     truth = robot.estimate_shape(exact[-1])
     previous = robot.estimate_shape(measured[0])
     for lengths in measured[1:]:
-        previous = robot.estimate_shape(lengths, warm_start=previous, max_model_runs=TRACK_RUNS)
+        previous = robot.estimate_shape(lengths, warm_start=previous, tracking=Tracking())
     # run the budgeted sequence's last estimate to its end (it may have been capped)
     estimate = robot.estimate_shape(measured[-1], warm_start=previous)
     fit = scipy_estimate(robot, measured[-1], truth.state)

@@ -11,6 +11,8 @@ import math
 
 import numpy as np
 
+from continuum_statics.core.estimation import Tracking
+from continuum_statics.core.length_statics import MOTION_THRESHOLD
 from continuum_statics.core.tracking import TRACK_RUNS
 
 
@@ -19,18 +21,22 @@ class Thresholds:
     """The judgement of a fit.
 
     ``warn``: RMS length residual (m) above which a fit is a best fit; ``drop``: above which no
-    shape is near; ``margin``: how far (m) lengths may be outside the robot file's limits.
+    shape is near; ``margin``: how far (m) lengths may be outside the robot file's limits;
+    ``motion``: how far (m) a cable must move before its friction direction follows (the
+    margin becomes 5 σ of the noise).
     """
 
     warn: float
     drop: float
     margin: float
+    motion: float = MOTION_THRESHOLD
 
     @classmethod
     def with_noise(cls, warn, drop, margin, noise):
-        """Thresholds raised to the encoders' noise σ (m): 3 σ warn, 10 σ drop, 5 σ margin."""
+        """Thresholds raised to the encoders' noise σ (m): 3 σ warn and motion, 10 σ drop."""
         warn = max(warn, 3.0 * noise)
-        return cls(warn, max(drop, warn, 10.0 * noise), max(margin, 5.0 * noise))
+        return cls(warn, max(drop, warn, 10.0 * noise), max(margin, 5.0 * noise),
+                   max(MOTION_THRESHOLD, 3.0 * noise))
 
 
 @dataclass(frozen=True, eq=False)
@@ -115,9 +121,10 @@ class ShapeTracker:
         notes = {'load_problem': '', 'distrust': ''}
         try:
             # the first measurement (nothing to track from yet) is solved to the end, once
-            budget = self.max_model_runs if self.warm is not None else None
+            tracking = None if self.warm is None else Tracking(
+                self.max_model_runs, thresholds.warn, thresholds.motion)
             estimate = self._estimate(self._tracking, lengths, load, tensions, self.warm, notes,
-                                      budget, thresholds.warn)
+                                      tracking)
             if tensions is not None and not estimate.residual <= thresholds.warn:
                 # tensions and lengths disagree: the lengths (encoders) are trusted, the
                 # tensions (a sensor, a current estimate) are not used for this shape
@@ -126,13 +133,13 @@ class ShapeTracker:
                                      % estimate.residual)
                 tensions = None
                 estimate = self._estimate(self._tracking, lengths, load, None, self.warm, notes,
-                                          budget, thresholds.warn)
+                                          tracking)
             capped = estimate.capped or (not estimate.converged
                                          and self._tracking is not self.robot)
             if capped and not estimate.residual <= thresholds.drop:
                 # far from the last shape (a jump, a restart): one more bounded estimate now
                 estimate = self._estimate(self.robot, lengths, load, tensions, estimate, notes,
-                                          self.max_model_runs, thresholds.warn)
+                                          tracking)
                 capped = estimate.capped
             if capped:  # the best state reached: the next measurement goes on from it
                 self.warm = estimate
@@ -165,17 +172,11 @@ class ShapeTracker:
                            tensions_used=tensions is not None, **notes)
 
     @staticmethod
-    def _estimate(robot, lengths, load, tensions, warm, notes, max_model_runs=None,
-                  slack_residual=None):
-        """Estimate; a tip load the model cannot take is replaced by zero (and noted).
-
-        ``slack_residual``: the warn threshold (m), above which ideal cables are tried as slack.
-        """
+    def _estimate(robot, lengths, load, tensions, warm, notes, tracking=None):
+        """Estimate; a tip load the model cannot take is replaced by zero (and noted)."""
         try:
             return robot.estimate_shape(lengths, tip_force=load[:3], tip_moment=load[3:],
-                                        tensions=tensions, warm_start=warm,
-                                        max_model_runs=max_model_runs or None,
-                                        slack_residual=slack_residual)
+                                        tensions=tensions, warm_start=warm, tracking=tracking)
         except ValueError as error:
             if not np.any(load):
                 raise

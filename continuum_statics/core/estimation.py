@@ -27,12 +27,14 @@ from continuum_statics.core import bvp, length_statics
 from continuum_statics.core.inputs import as_vector
 from continuum_statics.core.layout import ProbeRows
 from continuum_statics.core.least_squares import constrained_gauss_newton
+from continuum_statics.core.length_statics import MOTION_THRESHOLD
 from continuum_statics.core.shape import Shape
 from continuum_statics.core.tendons import full_circle_tension
 from continuum_statics.core.tracking import (
     DAMPING,
     SECANT_FRACTION,
     TRACK_ITERATIONS,
+    TRACK_RUNS,
     WarmStart,
     track,
 )
@@ -47,6 +49,24 @@ SLACK_RESIDUAL = 1e-4
 _NO_JACOBIAN = np.zeros((0, 0))  # tells track to use finite-difference Jacobians
 _NO_VALUES, _NO_STATES = np.zeros(0), np.zeros((0, 0))  # tells track to integrate at the start
 _UNBOUNDED = 2 ** 62  # model runs: no budget (the iteration limits bound the work)
+
+
+@dataclass(frozen=True)
+class Tracking:
+    """How a node that tracks the robot estimates each measurement (bounded work per call).
+
+    :ivar max_model_runs: IVPs a least-squares estimate may integrate per call (a Jacobian
+        refresh begun inside may overrun it); an estimate that needs more is ``capped``; 0:
+        until it converges (and the tendon model's solve too)
+    :ivar slack_residual: RMS misfit (m) above which ideal cables are tried as slack (statics'
+        warn threshold: at least 3 sigma of its encoders)
+    :ivar motion_threshold: free-length change (m) that counts as a cable's motion, which sets
+        its friction direction (3 sigma of its encoders: noise is not motion)
+    """
+
+    max_model_runs: int = TRACK_RUNS
+    slack_residual: float = SLACK_RESIDUAL
+    motion_threshold: float = MOTION_THRESHOLD
 
 
 @dataclass(frozen=True, eq=False)
@@ -98,7 +118,7 @@ class ShapeEstimate:
 
 def estimate_shape(robot, cable_lengths, tip_force=(0.0, 0.0, 0.0), tip_moment=(0.0, 0.0, 0.0),
                    tensions=None, start=None, jacobians=None, previous=None,
-                   max_model_runs=None, slack_residual=SLACK_RESIDUAL):
+                   tracking=None):
     """Estimate the shape from measured cable lengths (m, ``robot.cable_names`` order).
 
     ``tip_force`` (N) and ``tip_moment`` (N m) are the external tip load in the base frame.
@@ -106,13 +126,14 @@ def estimate_shape(robot, cable_lengths, tip_force=(0.0, 0.0, 0.0), tip_moment=(
     tracking; default the small-deflection passive solution) and ``jacobians`` the previous
     estimate's, to be reused (one model run per iteration instead of 1 + len(state));
     ``previous`` the previous result itself (the tendon model's warm start and friction history);
-    ``max_model_runs`` the IVPs a warm-started least-squares estimate may integrate (None: until
-    it converges; else an estimate that needs more returns the best state reached, ``capped``);
-    ``slack_residual`` the RMS misfit (m) above which ideal cables are tried as slack (a node
-    passes its warn threshold, at least 3 sigma of its encoders).
+    ``tracking`` a :class:`Tracking` when a node calls it once per measurement (bounded work,
+    thresholds of its encoders' noise); None: solved to the end.
     """
     n_cables = len(robot.cable_names)
     measured = as_vector(cable_lengths, n_cables, 'cable_lengths')
+    # a node's per-cycle call: bounded work unless its budget is 0 ("until it converges")
+    bounded = tracking is not None and bool(tracking.max_model_runs)
+    slack_residual = tracking.slack_residual if tracking is not None else SLACK_RESIDUAL
     tip_force = as_vector(tip_force, 3, 'tip_force')
     tip_moment = as_vector(tip_moment, 3, 'tip_moment')
     observable = robot.observable_bending
@@ -128,7 +149,7 @@ def estimate_shape(robot, cable_lengths, tip_force=(0.0, 0.0, 0.0), tip_moment=(
         # the motor-held lengths decide the shape (stretch, slack, friction); measured
         # tensions are compared with the model's
         estimate = _tendon_estimate(robot, measured, tip_force, tip_moment, previous,
-                                    observable, notes, bool(max_model_runs))
+                                    observable, notes, tracking)
         if tensions is not None:
             off = _rms(estimate.tendons.tensions - tensions)
             estimate = dataclasses.replace(estimate, message='; '.join(
@@ -155,7 +176,7 @@ def estimate_shape(robot, cable_lengths, tip_force=(0.0, 0.0, 0.0), tip_moment=(
         # lengths (ideal cables that all end up shorter than any shape allows have no
         # equilibrium: then the least-squares fit below, as without slack)
         slack = _tendon_estimate(robot, measured, tip_force, tip_moment, previous, observable,
-                                 list(notes), bool(max_model_runs))
+                                 list(notes), tracking)
         if _plausible(robot, slack):
             return slack
     runs = [0]
@@ -174,28 +195,27 @@ def estimate_shape(robot, cable_lengths, tip_force=(0.0, 0.0, 0.0), tip_moment=(
     args = robot.kernel_args(tip_force, tip_moment)
     load = np.concatenate([tip_force, tip_moment])
     if jacobians is not None:  # tracking: the previous Jacobians, Broyden-updated, compiled
-        budget = max_model_runs or _UNBOUNDED
+        budget = tracking.max_model_runs if bounded else _UNBOUNDED
         carry = WarmStart(*jacobians)
         known = carry.values.shape[0] and np.array_equal(carry.load, load)
         x, res, con, states, jac, con_jac, iterations, used, ok, damping, age = track(
             *args, measured, start, carry.jac, carry.con_jac, carry.damping,
             carry.values if known else _NO_VALUES, carry.states, carry.age,
             robot.solver.estimate_tolerance, robot.length, TRACK_ITERATIONS, robot.probe_runs,
-            budget, SECANT_FRACTION if max_model_runs else 0.0)
+            budget, SECANT_FRACTION if bounded else 0.0)
         runs[0] += used
         used = runs[0]
         if ok:
             slack = _slack_estimate(robot, measured, tip_force, tip_moment, previous,
-                                    observable, notes, _rms(res), bool(max_model_runs),
-                                    slack_residual)
+                                    observable, notes, _rms(res), tracking, slack_residual)
             return slack or _finish(robot, x, tip_force, states, res, True, iterations,
                                     observable, notes, _carry(jac, con_jac, DAMPING, res,
                                                               measured, con, states, load, age),
                                     used)
-        if max_model_runs:
+        if bounded:
             # bounded work per measurement: the best state reached; the next call goes on
             notes.insert(0, 'unfinished after %d model runs (max_model_runs %d): refined with '
-                            'the next measurement' % (used, max_model_runs))
+                            'the next measurement' % (used, tracking.max_model_runs))
             estimate = _finish(robot, x, tip_force, states, res, True, iterations, observable,
                                notes, _carry(jac, con_jac, damping, res, measured, con, states,
                                              load, age), used)
@@ -209,7 +229,7 @@ def estimate_shape(robot, cable_lengths, tip_force=(0.0, 0.0, 0.0), tip_moment=(
     runs[0] += used
     if ok:
         slack = _slack_estimate(robot, measured, tip_force, tip_moment, previous, observable,
-                                notes, _rms(res), False, slack_residual)
+                                notes, _rms(res), None, slack_residual)
         return slack or _finish(robot, x, tip_force, states, res, True, iterations, observable,
                                 notes, _carry(jac, con_jac, DAMPING, res, measured, con, states,
                                               load, 0), runs[0])
@@ -224,7 +244,7 @@ def estimate_shape(robot, cable_lengths, tip_force=(0.0, 0.0, 0.0), tip_moment=(
         evaluate, start, robot.solver.max_iterations, robot.solver.estimate_tolerance,
         constraint_weight=robot.length)
     slack = _slack_estimate(robot, measured, tip_force, tip_moment, previous, observable,
-                            notes, _rms(result.residual), False, slack_residual)
+                            notes, _rms(result.residual), None, slack_residual)
     if slack is not None:
         return slack
     return _finish(robot, result.x, tip_force, result.evaluation, result.residual,
@@ -245,7 +265,7 @@ def _finish(robot, x, tip_force, states, length_residual, stationary, iterations
 
 
 def _slack_estimate(robot, measured, tip_force, tip_moment, previous, observable, notes,
-                    residual, bounded, slack_residual):
+                    residual, tracking, slack_residual):
     """Return the tendon model's estimate when it explains lengths least squares missed.
 
     Returns None when the least-squares fit was within ``slack_residual`` or the tendon
@@ -256,7 +276,7 @@ def _slack_estimate(robot, measured, tip_force, tip_moment, previous, observable
     if residual <= slack_residual or not len(measured):
         return None
     slack = _tendon_estimate(robot, measured, tip_force, tip_moment, previous, observable,
-                             list(notes), bounded)
+                             list(notes), tracking)
     return slack if _plausible(robot, slack) and slack.residual < residual else None
 
 
@@ -271,17 +291,18 @@ def _plausible(robot, estimate):
 
 
 def _tendon_estimate(robot, measured, tip_force, tip_moment, previous, observable, notes,
-                     bounded=False):
+                     tracking=None):
     """Return the estimate of the displacement-driven statics (slack, stretch, friction).
 
-    ``bounded``: a node's per-cycle call (:data:`TENDON_NEWTON` Newton iterations at most after
-    the chord steps; an unfinished result is ``capped``).
+    ``tracking``: a node's per-cycle call (:data:`TENDON_NEWTON` Newton iterations at most
+    after the chord steps, an unfinished result ``capped``; its motion threshold).
     """
     warm = getattr(previous, 'tendons', None) or previous
     # ideal cables only try it (the least squares are the fallback): no slow last resort
-    solution = length_statics.solve_lengths(robot, measured, tip_force, tip_moment, warm,
-                                            continuation=not robot.tendons.is_ideal,
-                                            max_newton=TENDON_NEWTON if bounded else None)
+    solution = length_statics.solve_lengths(
+        robot, measured, tip_force, tip_moment, warm, continuation=not robot.tendons.is_ideal,
+        max_newton=TENDON_NEWTON if tracking and tracking.max_model_runs else None,
+        motion_threshold=tracking.motion_threshold if tracking else MOTION_THRESHOLD)
     if solution.message:
         notes.insert(0, solution.message)
     if np.any(solution.slack):
@@ -289,7 +310,7 @@ def _tendon_estimate(robot, measured, tip_force, tip_moment, previous, observabl
             name for name, slack in zip(robot.cable_names, solution.slack) if slack))
     estimate = _result(solution.shape, solution.converged, solution.residual,
                        solution.iterations, observable, notes, tendons=solution)
-    if bounded and not solution.converged and warm is not None:
+    if tracking and tracking.max_model_runs and not solution.converged and warm is not None:
         return dataclasses.replace(estimate, capped=True)
     return estimate
 

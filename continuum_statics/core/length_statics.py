@@ -79,6 +79,7 @@ class LengthSolution:
     jacobian_parts: tuple = None  # the last Jacobian pieces: the next warm call starts on them
     slack_lengths: np.ndarray = None  # (n,) m by which each cable is longer than its path
     model_at: object = None  # the model at the solution (:class:`ModelAt`), for the next call
+    motion_reference: np.ndarray = None  # (n,) m, free lengths where each cable last moved
 
     @property
     def state(self):
@@ -89,8 +90,10 @@ class LengthSolution:
 class _Problem:
     """One solve's fixed data and the evaluation of the residual F(z) and its Jacobian."""
 
-    def __init__(self, robot, free_lengths, motion, tip_force, tip_moment):
+    def __init__(self, robot, free_lengths, motion, tip_force, tip_moment,
+                 motion_reference=None):
         self.robot = robot
+        self.motion_reference = motion_reference  # where each cable last moved (m)
         self.n = len(robot.cable_names)
         self.free = free_lengths
         self.motion = motion
@@ -187,21 +190,31 @@ def _constants(robot):
             moment_map, kernel_map)
 
 
-def motion_since(robot, free_lengths, warm_start):
-    """Each cable's friction sign: +1 pulled since ``warm_start``, -1 paid out, else its last."""
-    previous = getattr(warm_start, 'free_lengths', None)
+def motion_since(robot, free_lengths, warm_start, threshold=MOTION_THRESHOLD):
+    """Each cable's friction sign and motion reference (m) after ``warm_start``.
+
+    A cable whose free length moved more than ``threshold`` (m) from its reference (where it
+    was when it last moved) was pulled (+1) or paid out (-1) and its reference moves along;
+    else it keeps its last sign and reference, so encoder noise under the threshold never flips
+    friction and slow motion still counts once it adds up.
+    """
+    previous = getattr(warm_start, 'motion_reference', None)
+    if previous is None:
+        previous = getattr(warm_start, 'free_lengths', None)
     last = getattr(warm_start, 'motion', None)
     n = len(robot.cable_names)
     motion = np.zeros(n) if last is None or len(last) != n else np.array(last, dtype=float)
-    if previous is not None and len(previous) == n:
-        change = free_lengths - previous
-        motion[change < -MOTION_THRESHOLD] = 1.0
-        motion[change > MOTION_THRESHOLD] = -1.0
-    return motion
+    if previous is None or len(previous) != n:
+        return motion, free_lengths.copy()
+    change = free_lengths - previous
+    motion[change < -threshold] = 1.0
+    motion[change > threshold] = -1.0
+    return motion, np.where(np.abs(change) > threshold, free_lengths, previous)
 
 
 def solve_lengths(robot, lengths, tip_force=(0.0, 0.0, 0.0), tip_moment=(0.0, 0.0, 0.0),
-                  warm_start=None, continuation=True, max_newton=None):
+                  warm_start=None, continuation=True, max_newton=None,
+                  motion_threshold=MOTION_THRESHOLD):
     """Equilibrium when the motors hold cable ``lengths`` (m, motor side, cable_names order).
 
     ``tip_force`` (N) and ``tip_moment`` (N m) in the base frame; ``warm_start`` the previous
@@ -211,7 +224,8 @@ def solve_lengths(robot, lengths, tip_force=(0.0, 0.0, 0.0), tip_moment=(0.0, 0.
     ``continuation`` False skips the slow last resort (a try whose failure has a fallback).
     ``max_newton`` bounds the work of a warm-started call (a node's per-cycle budget): after the
     chord steps at most that many Newton iterations from the warm start and nothing else; the
-    next call goes on from the result.
+    next call goes on from the result. ``motion_threshold``: free-length change (m) that counts
+    as a cable's motion for its friction direction (:func:`motion_since`).
     """
     n = len(robot.cable_names)
     lengths = as_vector(lengths, n, 'lengths')
@@ -221,8 +235,8 @@ def solve_lengths(robot, lengths, tip_force=(0.0, 0.0, 0.0), tip_moment=(0.0, 0.
     if np.any(free <= 0.0):
         raise ValueError('lengths give non-positive free lengths for cables %s'
                          % [name for name, f in zip(robot.cable_names, free) if f <= 0.0])
-    motion = motion_since(robot, free, warm_start)
-    problem = _Problem(robot, free, motion, tip_force, tip_moment)
+    motion, reference = motion_since(robot, free, warm_start, motion_threshold)
+    problem = _Problem(robot, free, motion, tip_force, tip_moment, reference)
     warm = _warm_z(robot, warm_start)
     total = 0
     parts = getattr(warm_start, 'jacobian_parts', None)
@@ -405,6 +419,7 @@ def _solution(robot, problem, z, info, converged, iterations, message, parts=Non
                           end_tensions=tensions, slack=slack,
                           converged=bool(converged), message='; '.join(notes),
                           free_lengths=problem.free.copy(), motion=problem.motion.copy(),
+                          motion_reference=problem.motion_reference,
                           iterations=iterations, residual=_cable_residual(info),
                           jacobian_parts=parts, slack_lengths=np.where(slack, gap, 0.0),
                           model_at=model)

@@ -258,7 +258,7 @@ class _Model:
             return result
         robot = self.robot
         free = robot.tendons.free_lengths(lengths, robot.straight_cable_lengths)
-        return dataclasses.replace(result, free_lengths=free)
+        return dataclasses.replace(result, free_lengths=free, motion_reference=None)
 
     def whitener(self, load, predicted, result):
         """W with W^T W = C^-1, C = R_y + J_u R_u J_u^T: the residual's covariance."""
@@ -285,7 +285,8 @@ def _noise_deadband(robot, warm, lengths, sigma):
         return warm
     free = robot.tendons.free_lengths(lengths, robot.straight_cable_lengths)
     still = np.abs(free - previous) < 3.0 * sigma
-    return dataclasses.replace(warm, free_lengths=np.where(still, free, previous))
+    return dataclasses.replace(warm, free_lengths=np.where(still, free, previous),
+                               motion_reference=None)
 
 
 def _angle(rotation):

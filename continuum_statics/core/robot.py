@@ -382,13 +382,12 @@ class Robot:
     # -- inverse problems ------------------------------------------------------------------
     def estimate_shape(self, cable_lengths, tip_force=(0.0, 0.0, 0.0),
                        tip_moment=(0.0, 0.0, 0.0), tensions=None, warm_start=None,
-                       u0_guess=None, max_model_runs=None, slack_residual=None):
+                       u0_guess=None, tracking=None):
         """Shape from measured cable lengths (m) and a tip load (N, N m); :mod:`estimation`.
 
-        ``max_model_runs``: IVPs a warm-started estimate may integrate (a node's per-cycle
-        budget; the result is then ``capped`` and the next call goes on from it); None: until
-        it converges. ``slack_residual``: RMS misfit (m) above which ideal cables are tried as
-        slack (default :data:`estimation.SLACK_RESIDUAL`).
+        ``tracking``: an :class:`estimation.Tracking` when a node calls it once per measurement
+        (bounded work per call: an unfinished estimate is ``capped`` and the next call goes on
+        from it); None: solved to the end.
         """
         jacobians = getattr(warm_start, 'jacobians', None)
         if jacobians is not None and jacobians[0].shape != (len(self.cable_names),
@@ -396,8 +395,7 @@ class Robot:
             jacobians = None
         return estimation.estimate_shape(self, cable_lengths, tip_force, tip_moment, tensions,
                                          _warm_or_guess(self, warm_start, u0_guess), jacobians,
-                                         warm_start, max_model_runs,
-                                         slack_residual or estimation.SLACK_RESIDUAL)
+                                         warm_start, tracking)
 
     def estimate_tip_wrench(self, lengths=None, tensions=None, tip_position=None,
                             tip_rotation=None, noise=None, moment=False, warm_start=None):

@@ -98,6 +98,7 @@ def _bundled_robot():
 def _exercise(robot):
     """Make every call the nodes and tools make, with their argument types."""
     from continuum_statics.core.backbone_sampling import BackboneSampler
+    from continuum_statics.core.estimation import Tracking
     from continuum_statics.core.rotations import rotation_to_quaternion
 
     zero = np.zeros(3)
@@ -122,7 +123,7 @@ def _exercise(robot):
     robot.estimate_shape(lengths + 1e-5, tip_force=load[:3], tip_moment=load[3:],
                          warm_start=estimate)
     robot.estimate_shape(lengths + 2e-5, tip_force=load[:3], tip_moment=load[3:],
-                         warm_start=estimate, max_model_runs=32)  # statics' per-cycle budget
+                         warm_start=estimate, tracking=Tracking())  # statics' per-cycle call
     tensions = np.full(len(robot.cable_names), 0.1)
     robot.estimate_shape(lengths, tip_force=load[:3], tip_moment=load[3:], tensions=tensions,
                          warm_start=estimate)

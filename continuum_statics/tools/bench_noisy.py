@@ -20,6 +20,8 @@ import numpy as np
 from scipy.optimize import least_squares
 
 from continuum_statics import load_robot
+from continuum_statics.control.shape_tracking import Thresholds
+from continuum_statics.core.estimation import Tracking
 from continuum_statics.core.layout import ProbeRows
 from continuum_statics.core.robot import Robot
 from continuum_statics.core.tracking import TRACK_RUNS
@@ -82,11 +84,12 @@ def bench_robot(robot, label, samples):
     for sigma in SIGMAS:
         measured = exact + rng.normal(0.0, sigma, exact.shape)
         times, runs, capped, previous = [], [], 0, None
-        warn = max(1e-4, 3.0 * sigma)  # statics' warn threshold with length_noise_std = sigma
+        # as statics with length_noise_std = sigma: its budget and its thresholds
+        thresholds = Thresholds.with_noise(1e-4, 2e-3, 1e-3, sigma)
+        tracking = Tracking(TRACK_RUNS, thresholds.warn, thresholds.motion)
         for k, lengths in enumerate(measured):
             start = time.perf_counter()
-            previous = robot.estimate_shape(lengths, warm_start=previous,
-                                            max_model_runs=TRACK_RUNS, slack_residual=warn)
+            previous = robot.estimate_shape(lengths, warm_start=previous, tracking=tracking)
             if k >= 20:
                 times.append(time.perf_counter() - start)
                 runs.append(previous.model_runs)
