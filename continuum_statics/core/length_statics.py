@@ -38,6 +38,8 @@ from continuum_statics.core.shape import Shape
 from continuum_statics.core.tendon_kernel import path_stretch
 
 _NO_VALUES, _NO_STATES = np.zeros(0), np.zeros((0, 0))  # tell chord to integrate at its start
+#: Capstan coefficient below which a cable is taken as frictionless (exp(2 pi mu) - 1 < 1e-8).
+NEGLIGIBLE_FRICTION = 1e-9
 #: Free-length change (m) below which a cable is taken as not moving (its friction sign is kept).
 MOTION_THRESHOLD = 1e-7
 #: Chord steps on a warm start's Jacobian before a fresh Newton solve.
@@ -94,14 +96,15 @@ class _Problem:
                  motion_reference=None):
         self.robot = robot
         self.motion_reference = motion_reference  # where each cable last moved (m)
+        self.balance_tolerance = BALANCE_TOLERANCE  # of a converged solve, relative
         self.n = len(robot.cable_names)
         self.free = free_lengths
         self.motion = motion
         self.tip_force, self.tip_moment = tip_force, tip_moment
-        self.friction = robot.tendons.friction * motion
-        self.with_friction = bool(np.any(self.friction != 0.0))
         (self.rows, self.compliance, self.base_axis, self.radius, self.t_ref, self.kappa,
-         self.scale, self.moment_map, self.kernel_moment_map) = _constants(robot)
+         self.scale, self.moment_map, self.kernel_moment_map, friction) = _constants(robot)
+        self.friction = friction * motion
+        self.with_friction = bool(np.any(self.friction != 0.0))
 
     def state_of(self, z):
         """Solver state x and fixed tensions of z (the robot's solver-state convention)."""
@@ -186,8 +189,11 @@ def _constants(robot):
     # the compiled chord reads an array of that shape whatever the model
     kernel_map = (moment_map if moment_map is not None
                   else np.zeros((robot.state_size - 3, n)))
+    # a capstan factor within 1e-8 of 1 over a full turn is none (a fit that found no friction
+    # writes ~1e-13): the frictionless path is much cheaper than the wrap of every hole
+    friction = np.where(robot.tendons.friction > NEGLIGIBLE_FRICTION, robot.tendons.friction, 0.0)
     return (ProbeRows(n), robot.tendons.compliance, base_axis, radius, t_ref, kappa, scale,
-            moment_map, kernel_map)
+            moment_map, kernel_map, friction)
 
 
 def motion_since(robot, free_lengths, warm_start, threshold=MOTION_THRESHOLD):
@@ -224,8 +230,9 @@ def solve_lengths(robot, lengths, tip_force=(0.0, 0.0, 0.0), tip_moment=(0.0, 0.
     ``continuation`` False skips the slow last resort (a try whose failure has a fallback).
     ``max_newton`` bounds the work of a warm-started call (a node's per-cycle budget): after the
     chord steps at most that many Newton iterations from the warm start and nothing else; the
-    next call goes on from the result. ``motion_threshold``: free-length change (m) that counts
-    as a cable's motion for its friction direction (:func:`motion_since`).
+    next call goes on from the result, and the balance is solved to the lengths' tolerance
+    (``solver.estimate_tolerance`` over the holes' radius). ``motion_threshold``: free-length
+    change (m) that counts as a cable's motion for its friction direction (:func:`motion_since`).
     """
     n = len(robot.cable_names)
     lengths = as_vector(lengths, n, 'lengths')
@@ -237,6 +244,11 @@ def solve_lengths(robot, lengths, tip_force=(0.0, 0.0, 0.0), tip_moment=(0.0, 0.
                          % [name for name, f in zip(robot.cable_names, free) if f <= 0.0])
     motion, reference = motion_since(robot, free, warm_start, motion_threshold)
     problem = _Problem(robot, free, motion, tip_force, tip_moment, reference)
+    if max_newton is not None:
+        # a per-cycle call solves the balance to the lengths' tolerance: a balance error b
+        # (an angle over the rod) moves a cable at radius r by about r b
+        problem.balance_tolerance = max(BALANCE_TOLERANCE,
+                                        robot.solver.estimate_tolerance / problem.radius)
     warm = _warm_z(robot, warm_start)
     total = 0
     parts = getattr(warm_start, 'jacobian_parts', None)
@@ -308,7 +320,7 @@ def _chord(problem, z0, parts, warm_start):
                      problem.kernel_moment_map, problem.free, problem.friction,
                      problem.compliance, problem.base_axis, problem.kappa, problem.radius,
                      problem.scale, parts[0], parts[1], robot.solver.estimate_tolerance,
-                     CHORD_ITERATIONS, CHORD_REFRESHES,
+                     problem.balance_tolerance, CHORD_ITERATIONS, CHORD_REFRESHES,
                      _NO_VALUES if known is None else known.values,
                      _NO_STATES if known is None else known.states)
     info = (x, None if problem.moment_map is not None else fixed, states, motor, gap, taut)
@@ -395,7 +407,7 @@ def _continuation(robot, problem, z0):
 
 
 def _done(problem, res):
-    return (np.max(np.abs(res[:3]), initial=0.0) <= BALANCE_TOLERANCE
+    return (np.max(np.abs(res[:3]), initial=0.0) <= problem.balance_tolerance
             and np.max(np.abs(res[3:]), initial=0.0) * problem.radius
             <= problem.robot.solver.estimate_tolerance)
 

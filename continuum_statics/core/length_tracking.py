@@ -211,10 +211,10 @@ def _jacobian(balance, d_consumed, taut, kappa, radius, scale):
 
 
 @numba.njit(cache=True)
-def _done(residual, radius, tolerance):
+def _done(residual, radius, tolerance, balance_tolerance):
     n = residual.shape[0]
     for i in range(3):
-        if not abs(residual[i]) <= BALANCE_TOLERANCE:
+        if not abs(residual[i]) <= balance_tolerance:
             return False
     for i in range(3, n):
         if not abs(residual[i]) * radius <= tolerance:
@@ -227,7 +227,7 @@ def chord(s_grid, params, model, tip_force, tip_moment, step, section_state_inde
           section_bases, section_ranks, section_cables, section_cable_count, cable_offsets,
           guide_nodes, cable_last_guide, cable_end_node, section_end_node, z0, moment_map, free,
           friction, compliance, base_axis, kappa, radius, scale, balance0, d_consumed0,
-          tolerance, max_iterations, refreshes, start_values, start_states):
+          tolerance, balance_tolerance, max_iterations, refreshes, start_values, start_states):
     """Chord steps from ``z0``; returns the record :data:`CHORD_RESULT` names.
 
     The arguments up to ``section_end_node`` are those of :func:`kernel.probe` without the
@@ -237,7 +237,8 @@ def chord(s_grid, params, model, tip_force, tip_moment, step, section_state_inde
     (n,) free lengths Lf (m); ``friction`` (n,) mu times the sign of motion; ``compliance`` 1/EA
     (1/N); ``kappa`` (m/N), ``radius`` (m) and ``scale`` (3 + n) the problem's scales;
     ``balance0`` (3, 3 + n) and ``d_consumed0`` (n, 3 + n) the previous Jacobian pieces (m per
-    unscaled z), returned Broyden-updated; ``tolerance`` on the cable rows (m). A step that
+    unscaled z), returned Broyden-updated; ``tolerance`` on the cable rows (m) and
+    ``balance_tolerance`` on the balance rows (relative, :data:`BALANCE_TOLERANCE`). A step that
     gains less than half is retried on Jacobian pieces refreshed by forward differences at z
     (:func:`jacobian_pieces`, 4 + n IVPs), at most ``refreshes`` times; then ``ok`` is False.
     ``start_values`` (:data:`MODEL_VALUES`) and ``start_states`` the model at ``z0`` when known
@@ -269,7 +270,7 @@ def chord(s_grid, params, model, tip_force, tip_moment, step, section_state_inde
     iteration = 0
     limit = max_iterations
     while iteration < limit:
-        if _done(res, radius, tolerance):
+        if _done(res, radius, tolerance, balance_tolerance):
             return (z, True, iteration, res, x, fixed, states, motor, gap, taut, balance,
                     d_consumed, runs, model_values)
         iteration += 1
@@ -304,5 +305,5 @@ def chord(s_grid, params, model, tip_force, tip_moment, step, section_state_inde
         z, res, x, fixed, states, motor, gap, taut, mean, error, model_values = (
             trial, t_res, t_x, t_fixed, t_states, t_motor, t_gap, t_taut, t_mean, t_error,
             t_values)
-    return (z, _done(res, radius, tolerance), iteration, res, x, fixed, states, motor, gap,
-            taut, balance, d_consumed, runs, model_values)
+    return (z, _done(res, radius, tolerance, balance_tolerance), iteration, res, x, fixed,
+            states, motor, gap, taut, balance, d_consumed, runs, model_values)
