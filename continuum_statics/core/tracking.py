@@ -43,8 +43,8 @@ class WarmStart(NamedTuple):
 TRACK_ITERATIONS = 6
 #: IVPs a node's warm-started estimate may integrate per measurement by default (statics'
 #: ``max_model_runs``): its iterations, line searches and Jacobian refreshes (``probe_runs``
-#: IVPs each); 0.3-0.8 ms on the example robots at most.
-TRACK_RUNS = 32
+#: IVPs each, the last of which may overrun it); 8-25 us each on the example robots.
+TRACK_RUNS = 24
 #: A step the model's own (finite-difference) Jacobian predicts to change the lengths by less than
 #: this fraction of the misfit is taken as stationary: the size of the Jacobian's own error.
 STATIONARY_FRACTION = 1e-4
@@ -124,6 +124,7 @@ def track(s_grid, params, model, tip_force, tip_moment, step, fixed, section_sta
         jac = jac0.copy()
         con_jac = con_jac0.copy()
     exact = fresh  # jac, con_jac are the model's own at x (not Broyden-updated)
+    refreshed = False  # the model's own Jacobians were made once in this call
     age = 0 if fresh else age0
     penalty = (1e3 * weight) ** 2
     current = res @ res + penalty * (con @ con)
@@ -140,7 +141,7 @@ def track(s_grid, params, model, tip_force, tip_moment, step, fixed, section_sta
             small = tolerance ** 2
             if exact:
                 small = max(small, STATIONARY_FRACTION ** 2 * (res @ res))
-            elif age <= SECANT_AGE:
+            if exact or age <= SECANT_AGE:  # a budgeted call: 1 % of the misfit is near enough
                 small = max(small, secant_fraction ** 2 * (res @ res))
             done = predicted @ predicted <= small and weight ** 2 * (con @ con) <= tolerance ** 2
             # without a budget, a secant Jacobian's "done" on a misfit (lengths no shape fits)
@@ -154,7 +155,7 @@ def track(s_grid, params, model, tip_force, tip_moment, step, fixed, section_sta
             # a secant Jacobian gets two tries (its damped steps rarely help): then the model's
             # own; with those, the first try comes with its Jacobians (the usual accepted
             # step), damped ones and corrections with one IVP each
-            for attempt in range(0 if done else 12 if fresh else 2):
+            for attempt in range(0 if done else 12 if fresh or refreshed else 2):
                 if runs >= max_runs:
                     break
                 trial = x + step
@@ -191,12 +192,15 @@ def track(s_grid, params, model, tip_force, tip_moment, step, fixed, section_sta
             # out of iterations, or no step lowers the misfit: with secant Jacobians, go on with
             # the model's own from x (they alone tell a stationary nonzero misfit); else, or
             # when the budget is spent, the caller goes on from here (the next measurement)
-            if fresh or runs >= max_runs:
+            if fresh or refreshed or runs >= max_runs:
                 return x, res, con, states, jac, con_jac, iteration, runs, False, damping, age
             # (the refresh may overrun the budget: the next call must start on good Jacobians)
             res, con, states, jac, con_jac = _evaluate(model_args, x, measured, n_all)
             runs += probe_runs
-            fresh = exact = True
+            exact = refreshed = True
+            # solved to the end: the model's own Jacobians at every step from here (robust far
+            # off); a budgeted call secant-updates them (the next measurement goes on anyway)
+            fresh = secant_fraction == 0.0
             age = 0
             limit = iteration + max_iterations
             continue

@@ -68,7 +68,7 @@ def statics_parameters():
                   "robot file's solver.max_iterations): a fit that needs more goes on from "
                   'this estimate with the next measurement; one that is still far off is '
                   'finished at once', 0, 1000),
-        ParamSpec('max_model_runs', 32, 'rod integrations (IVPs) a warm-started estimate may '
+        ParamSpec('max_model_runs', 24, 'rod integrations (IVPs) a warm-started estimate may '
                   'spend per measurement, ~10-25 us each (0: until it converges): an estimate '
                   'that needs more is published as the best state reached (capped, counted on '
                   'diagnostics) and goes on with the next measurement', 0, 100000),
