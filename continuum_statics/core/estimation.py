@@ -39,8 +39,12 @@ from continuum_statics.core.tracking import (
     track,
 )
 
-#: Newton iterations a node's per-cycle tendon-model estimate may take after its chord steps.
+#: Newton iterations a node's per-cycle tendon-model estimate may take when its warm start has
+#: no Jacobian for chord steps (else the chord's refresh is the bound).
 TENDON_NEWTON = 1
+#: The same for trying ideal cables as slack (a rare event: a paid-out cable, not noise, since
+#: the misfit is above the warn threshold), started from a least-squares fit: a few more.
+SLACK_NEWTON = 3
 #: RMS length residual (m) above which an estimate says in its message that it is a best fit.
 BEST_FIT_NOTE = 1e-6
 #: RMS length residual (m) of the least-squares fit above which ideal cables are tried as slack
@@ -84,6 +88,8 @@ class ShapeEstimate:
         the model there, the damping reached), reused by the next warm start
     :ivar model_runs: IVPs integrated (the cost of the estimate)
     :ivar tendons: the :class:`length_statics.LengthSolution` when the tendon model gave the shape
+    :ivar slack_attempt: an unfinished try of ideal cables as slack (a
+        :class:`length_statics.LengthSolution`), which the next measurement's try goes on from
     :ivar capped: a warm-started estimate that spent its per-call budget (``TRACK_RUNS`` IVPs)
         before converging: the best state reached; the next call, warm-started from it, goes on
     """
@@ -99,6 +105,7 @@ class ShapeEstimate:
     model_runs: int = 0
     tendons: object = None
     capped: bool = False
+    slack_attempt: object = None
 
     @property
     def tensions(self):
@@ -206,12 +213,13 @@ def estimate_shape(robot, cable_lengths, tip_force=(0.0, 0.0, 0.0), tip_moment=(
         runs[0] += used
         used = runs[0]
         if ok:
-            slack = _slack_estimate(robot, measured, tip_force, tip_moment, previous,
-                                    observable, notes, _rms(res), tracking, slack_residual)
-            return slack or _finish(robot, x, tip_force, states, res, True, iterations,
-                                    observable, notes, _carry(jac, con_jac, DAMPING, res,
-                                                              measured, con, states, load, age),
-                                    used)
+            slack, attempt = _slack_estimate(robot, measured, tip_force, tip_moment, previous,
+                                             observable, notes, _rms(res), tracking,
+                                             slack_residual)
+            return slack or dataclasses.replace(
+                _finish(robot, x, tip_force, states, res, True, iterations, observable, notes,
+                        _carry(jac, con_jac, DAMPING, res, measured, con, states, load, age),
+                        used), slack_attempt=attempt)
         if bounded:
             # bounded work per measurement: the best state reached; the next call goes on
             notes.insert(0, 'unfinished after %d model runs (max_model_runs %d): refined with '
@@ -228,8 +236,8 @@ def estimate_shape(robot, cable_lengths, tip_force=(0.0, 0.0, 0.0), tip_moment=(
         robot.probe_runs, _UNBOUNDED, 0.0)
     runs[0] += used
     if ok:
-        slack = _slack_estimate(robot, measured, tip_force, tip_moment, previous, observable,
-                                notes, _rms(res), None, slack_residual)
+        slack, _ = _slack_estimate(robot, measured, tip_force, tip_moment, previous,
+                                   observable, notes, _rms(res), None, slack_residual)
         return slack or _finish(robot, x, tip_force, states, res, True, iterations, observable,
                                 notes, _carry(jac, con_jac, DAMPING, res, measured, con, states,
                                               load, 0), runs[0])
@@ -243,8 +251,8 @@ def estimate_shape(robot, cable_lengths, tip_force=(0.0, 0.0, 0.0), tip_moment=(
     result = constrained_gauss_newton(
         evaluate, start, robot.solver.max_iterations, robot.solver.estimate_tolerance,
         constraint_weight=robot.length)
-    slack = _slack_estimate(robot, measured, tip_force, tip_moment, previous, observable,
-                            notes, _rms(result.residual), None, slack_residual)
+    slack, _ = _slack_estimate(robot, measured, tip_force, tip_moment, previous, observable,
+                               notes, _rms(result.residual), None, slack_residual)
     if slack is not None:
         return slack
     return _finish(robot, result.x, tip_force, result.evaluation, result.residual,
@@ -268,16 +276,20 @@ def _slack_estimate(robot, measured, tip_force, tip_moment, previous, observable
                     residual, tracking, slack_residual):
     """Return the tendon model's estimate when it explains lengths least squares missed.
 
-    Returns None when the least-squares fit was within ``slack_residual`` or the tendon
-    model did no better (lengths no taut-or-slack shape has either: noise, a wrong file), or
-    only with tensions no cable takes (inextensible cables pulled in against the rod's axial
-    stiffness: above the full-circle tension or a tension limit).
+    Returns (estimate or None, unfinished attempt or None). The estimate is None when the
+    least-squares fit was within ``slack_residual`` or the tendon model did no better (lengths
+    no taut-or-slack shape has either: noise, a wrong file), or only with tensions no cable
+    takes (inextensible cables pulled in against the rod's axial stiffness: above the
+    full-circle tension or a tension limit). A node's bounded try that did not finish cannot be
+    judged yet: it is handed back, and the next measurement's try goes on from it.
     """
     if residual <= slack_residual or not len(measured):
-        return None
+        return None, None
     slack = _tendon_estimate(robot, measured, tip_force, tip_moment, previous, observable,
                              list(notes), tracking)
-    return slack if _plausible(robot, slack) and slack.residual < residual else None
+    if _plausible(robot, slack) and slack.residual < residual:
+        return slack, None
+    return None, slack.tendons if slack.capped else None
 
 
 def _plausible(robot, estimate):
@@ -297,11 +309,13 @@ def _tendon_estimate(robot, measured, tip_force, tip_moment, previous, observabl
     ``tracking``: a node's per-cycle call (:data:`TENDON_NEWTON` Newton iterations at most
     after the chord steps, an unfinished result ``capped``; its motion threshold).
     """
-    warm = getattr(previous, 'tendons', None) or previous
+    warm = (getattr(previous, 'tendons', None) or getattr(previous, 'slack_attempt', None)
+            or previous)
     # ideal cables only try it (the least squares are the fallback): no slow last resort
     solution = length_statics.solve_lengths(
         robot, measured, tip_force, tip_moment, warm, continuation=not robot.tendons.is_ideal,
-        max_newton=TENDON_NEWTON if tracking and tracking.max_model_runs else None,
+        max_newton=((TENDON_NEWTON if not robot.tendons.is_ideal else SLACK_NEWTON)
+                    if tracking and tracking.max_model_runs else None),
         motion_threshold=tracking.motion_threshold if tracking else MOTION_THRESHOLD)
     if solution.message:
         notes.insert(0, solution.message)

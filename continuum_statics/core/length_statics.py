@@ -228,8 +228,9 @@ def solve_lengths(robot, lengths, tip_force=(0.0, 0.0, 0.0), tip_moment=(0.0, 0.
     give each cable's direction of motion for friction). Never raises for a failed solve: then
     ``converged`` is False and ``message`` says why; bad arguments raise ``ValueError``.
     ``continuation`` False skips the slow last resort (a try whose failure has a fallback).
-    ``max_newton`` bounds the work of a warm-started call (a node's per-cycle budget): after the
-    chord steps at most that many Newton iterations from the warm start and nothing else; the
+    ``max_newton`` bounds the work of a warm-started call (a node's per-cycle budget): the chord
+    steps (with one Jacobian refresh) when the warm start has a Jacobian, else at most that many
+    Newton iterations from it, and nothing else; the
     next call goes on from the result, and the balance is solved to the lengths' tolerance
     (``solver.estimate_tolerance`` over the holes' radius). ``motion_threshold``: free-length
     change (m) that counts as a cable's motion for its friction direction (:func:`motion_since`).
@@ -252,22 +253,26 @@ def solve_lengths(robot, lengths, tip_force=(0.0, 0.0, 0.0), tip_moment=(0.0, 0.
     warm = _warm_z(robot, warm_start)
     total = 0
     parts = getattr(warm_start, 'jacobian_parts', None)
-    chord_parts = None  # the Jacobian pieces a chord that gave up ended on (refreshed at most
-    # a few steps before): the bounded Newton starts on them instead of making its own
+    chord_ran = False
     if warm is not None and parts is not None and parts[0].shape == (3, 3 + n):
         z, ok, iterations, info, parts, model = _chord(problem, warm, parts, warm_start)
         total += iterations
         if ok:
             return _solution(robot, problem, z, info, True, total, '', parts, model)
-        warm, chord_parts = z, parts  # keep the progress
-    starts = [] if warm is None else [warm]
+        warm, chord_ran = z, True  # keep the progress
     bounded = max_newton is not None and warm is not None
+    if bounded and chord_ran:
+        # the chord refreshed its Jacobian and still gave up: the next call goes on from here
+        return _solution(robot, problem, z, info, False, total,
+                         'unfinished (chord steps on a refreshed Jacobian): refined with the '
+                         'next measurement', parts)
+    starts = [] if warm is None else [warm]
     if not bounded:
         starts.append(np.concatenate([bvp.linear_guess(robot, tip_force, tip_moment),
                                       np.zeros(n)]))
     for z0 in starts:
         z, ok, iterations, info, parts = (
-            _newton(problem, z0, max_newton, BOUNDED_BACKTRACKS, chord_parts) if bounded
+            _newton(problem, z0, max_newton, BOUNDED_BACKTRACKS) if bounded
             else _newton(problem, z0))
         total += iterations
         if ok:
@@ -345,17 +350,12 @@ class ModelAt(NamedTuple):
                 and np.array_equal(self.load[3:], problem.tip_moment))
 
 
-def _newton(problem, z0, max_iterations=None, backtracks=16, parts=None):
-    """Semismooth Newton with backtracking; (z, converged, iterations, info, parts).
-
-    ``parts``: Jacobian pieces to take the first step on (else made at ``z0``).
-    """
+def _newton(problem, z0, max_iterations=None, backtracks=16):
+    """Semismooth Newton with backtracking; (z, converged, iterations, info, parts)."""
     robot = problem.robot
     max_iterations = max_iterations or robot.solver.max_iterations
     z = np.array(z0, dtype=float)
-    res, jac, info, parts = problem.evaluate(z, parts)
-    if jac is None:
-        jac = problem.jacobian(parts, info[5])
+    res, jac, info, parts = problem.evaluate(z)
     for iteration in range(max_iterations):
         if _done(problem, res):
             return z, True, iteration, info, parts
