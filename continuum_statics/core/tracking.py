@@ -134,22 +134,22 @@ def track(s_grid, params, model, tip_force, tip_moment, step, fixed, section_sta
     iteration = 0
     limit = max_iterations
     while True:
+        step, predicted = constrained_step(res, jac, con, con_jac, damping)
+        small = tolerance ** 2
+        if exact:
+            small = max(small, STATIONARY_FRACTION ** 2 * (res @ res))
+        if exact or age <= SECANT_AGE:  # a budgeted call: 1 % of the misfit is near enough
+            small = max(small, secant_fraction ** 2 * (res @ res))
+        done = predicted @ predicted <= small and weight ** 2 * (con @ con) <= tolerance ** 2
+        # without a budget, a secant Jacobian's "done" on a misfit (lengths no shape fits) is
+        # confirmed by the model's own: it is ~1 % off, the step it predicts too
+        trusted = (exact or secant_fraction > 0.0
+                   or STATIONARY_FRACTION ** 2 * (res @ res) <= tolerance ** 2)
+        if done and trusted:
+            return x, res, con, states, jac, con_jac, max(iteration, 1), runs, True, damping, age
         refresh = iteration >= limit
         if not refresh:
             iteration += 1
-            step, predicted = constrained_step(res, jac, con, con_jac, damping)
-            small = tolerance ** 2
-            if exact:
-                small = max(small, STATIONARY_FRACTION ** 2 * (res @ res))
-            if exact or age <= SECANT_AGE:  # a budgeted call: 1 % of the misfit is near enough
-                small = max(small, secant_fraction ** 2 * (res @ res))
-            done = predicted @ predicted <= small and weight ** 2 * (con @ con) <= tolerance ** 2
-            # without a budget, a secant Jacobian's "done" on a misfit (lengths no shape fits)
-            # is confirmed by the model's own: it is ~1 % off, the step it predicts too
-            trusted = (exact or secant_fraction > 0.0
-                       or STATIONARY_FRACTION ** 2 * (res @ res) <= tolerance ** 2)
-            if done and trusted:
-                return x, res, con, states, jac, con_jac, iteration, runs, True, damping, age
             accepted = False
             with_jacobian = False  # whether t_jac, t_con_jac are the model's own at the trial
             # a secant Jacobian gets two tries (its damped steps rarely help): then the model's
