@@ -187,7 +187,8 @@ def estimate_shape(robot, cable_lengths, tip_force=(0.0, 0.0, 0.0), tip_moment=(
         if _plausible(robot, slack):
             return slack
     runs = [0]
-    if start is None and jacobians is None:
+    cold = start is None and jacobians is None
+    if cold:
         # cold: tracked from the passive rod, whose model and Jacobians are known per robot and
         # load (most cold starts are near it; a bent one refreshes them on the way)
         misses = _passive_start.cache_info().misses
@@ -211,6 +212,13 @@ def estimate_shape(robot, cable_lengths, tip_force=(0.0, 0.0, 0.0), tip_moment=(
             robot.solver.estimate_tolerance, robot.length, TRACK_ITERATIONS, robot.probe_runs,
             budget, SECANT_FRACTION if bounded else 0.0)
         runs[0] += used
+        if ok and cold and age:
+            # hand the next (warm) estimate the model's own Jacobians here, not secant updates
+            # of the straight rod's: it would pay for them on its first step off this path
+            _, full, _ = robot.probe(x, size, tip_force, tip_moment)
+            jac, con_jac, age = (np.ascontiguousarray(full[cables]),
+                                 np.ascontiguousarray(full[balance]), 0)
+            runs[0] += robot.probe_runs
         used = runs[0]
         if ok:
             slack, attempt = _slack_estimate(robot, measured, tip_force, tip_moment, previous,

@@ -197,10 +197,9 @@ def track(s_grid, params, model, tip_force, tip_moment, step, fixed, section_sta
             # (the refresh may overrun the budget: the next call must start on good Jacobians)
             res, con, states, jac, con_jac = _evaluate(model_args, x, measured, n_all)
             runs += probe_runs
+            # from here damped tries and secant updates of them (the caller of a call solved to
+            # the end falls back on the model's own Jacobians at every step if this gives up)
             exact = refreshed = True
-            # solved to the end: the model's own Jacobians at every step from here (robust far
-            # off); a budgeted call secant-updates them (the next measurement goes on anyway)
-            fresh = secant_fraction == 0.0
             age = 0
             limit = iteration + max_iterations
             continue
