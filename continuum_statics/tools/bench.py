@@ -290,6 +290,48 @@ def bench_robot(path, repeat):
         print('  BVP tip error vs converged, tip masses 0-45 g: max %.2e m' % max(errors))
 
 
+#: Not an example file (issue 22's case): one section, three cables at 120 degrees, ten guide
+#: disks (nodes off the 24-step grid) and a 20 g tip load: kernels must be as fast on it.
+THREE_CABLE_ROD = {
+    'name': 'rod_3c_10_guides',
+    'rod': {'length': 0.30, 'diameter': 2.0e-3, 'youngs_modulus': 58.0e9, 'poisson_ratio': 0.33,
+            'density': 6450.0},
+    'base': {'frame_id': 'base_link', 'position': [0, 0, 0], 'orientation': [0, 0, 0, 1]},
+    'gravity': [0.0, 0.0, -9.81],
+    'cables': [{'name': 'c%d' % k, 'offset': [0.01 * np.cos(a), 0.01 * np.sin(a), 0.0],
+                'length_limits': [0.27, 0.33]}
+               for k, a in enumerate(np.radians([0.0, 120.0, 240.0]))],
+    'guides': [0.03 * (k + 1) for k in range(10)],
+    'solver': {'steps': 24},
+}
+
+
+def bench_three_cable_rod(repeat):
+    """Print shape and cold-estimate times of :data:`THREE_CABLE_ROD` (not an example file)."""
+    from continuum_statics.core.robot import Robot
+    from continuum_statics.core.robot_file import parse_robot_description
+
+    robot = Robot(parse_robot_description(THREE_CABLE_ROD, 'bench'))
+    force = np.array([0.0, 0.0, -0.02 * 9.81])
+    print('\n%s (in bench.py): 1 section, 24 steps + guide breaks = %d nodes, 3 cables, 20 g tip'
+          % (robot.name, len(robot.s_grid)))
+    u0 = np.array([2.0, -1.0, 0.0])
+    _row('shape solve (IVP)', timings(lambda: robot.solve_ivp(u0, force), repeat))
+    rng = np.random.default_rng(3)
+    rows = [robot.cable_lengths(robot.solve_ivp(rng.uniform(-4.0, 4.0, 3) * [1, 1, 0], force))
+            for _ in range(50)]
+    times = []
+    for lengths in rows:  # far apart: every one cold
+        start = time.perf_counter()
+        robot.estimate_shape(lengths, force)
+        times.append(time.perf_counter() - start)
+    times = np.array(times[1:]) * 1e6  # (the first integrates the passive rod's Jacobians)
+    print('  shape estimate (cold, 49 far-apart shapes) median %.1f us, p99 %.1f us, max %.1f us'
+          % (np.median(times), np.percentile(times, 99), times.max()))
+    baseline = timings(lambda: scipy_tip(robot, u0, force), max(20, repeat // 50), warmup=2)
+    _row('SciPy solve_ivp RK45 (1e-3, 1e-6)', baseline)
+
+
 STARTUP = """
 import time
 t0 = time.perf_counter()
@@ -326,6 +368,7 @@ def main(argv=None):
     print('continuum_statics core benchmark, one core, %d calls per figure' % args.repeat)
     for name in ('jones2009_nitinol_rod.yaml', 'tendon_robot.yaml'):
         bench_robot(_config(name), args.repeat)
+    bench_three_cable_rod(args.repeat)
     for name in ('two_section_robot.yaml', 'three_section_robot.yaml'):
         bench_sections(_config(name), args.repeat)
     if not args.no_startup:
