@@ -90,8 +90,8 @@ class ShapeEstimate:
     :ivar tendons: the :class:`length_statics.LengthSolution` when the tendon model gave the shape
     :ivar slack_attempt: an unfinished try of ideal cables as slack (a
         :class:`length_statics.LengthSolution`), which the next measurement's try goes on from
-    :ivar capped: a warm-started estimate that spent its per-call budget (``TRACK_RUNS`` IVPs)
-        before converging: the best state reached; the next call, warm-started from it, goes on
+    :ivar capped: an estimate that spent its per-call budget (:class:`Tracking`) before
+        converging: the best state reached; the next call, warm-started from it, goes on
     """
 
     shape: Shape
@@ -237,7 +237,7 @@ def estimate_shape(robot, cable_lengths, tip_force=(0.0, 0.0, 0.0), tip_moment=(
                                              load, age), used)
             return dataclasses.replace(estimate, converged=False, capped=True)
         start = x  # keep the progress; go on as from a cold start
-    # cold: the same compiled loop with finite-difference Jacobians at every evaluation
+    # the fallback: the same compiled loop with finite-difference Jacobians at every evaluation
     x, res, con, states, jac, con_jac, iterations, used, ok, _, _ = track(
         *args, measured, start, _NO_JACOBIAN, _NO_JACOBIAN, DAMPING, _NO_VALUES, _NO_STATES, 0,
         robot.solver.estimate_tolerance, robot.length, robot.solver.max_iterations,
@@ -314,8 +314,9 @@ def _tendon_estimate(robot, measured, tip_force, tip_moment, previous, observabl
                      tracking=None):
     """Return the estimate of the displacement-driven statics (slack, stretch, friction).
 
-    ``tracking``: a node's per-cycle call (:data:`TENDON_NEWTON` Newton iterations at most
-    after the chord steps, an unfinished result ``capped``; its motion threshold).
+    ``tracking``: a node's per-cycle call (chord steps with one Jacobian refresh, or
+    :data:`TENDON_NEWTON` / :data:`SLACK_NEWTON` Newton iterations when the warm start has no
+    Jacobian; an unfinished result is ``capped``; its motion threshold).
     """
     warm = (getattr(previous, 'tendons', None) or getattr(previous, 'slack_attempt', None)
             or previous)
