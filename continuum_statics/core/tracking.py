@@ -8,10 +8,10 @@ refreshed once by finite differences at the current state: on lengths no shape f
 encoders) the minimum has a nonzero residual, where a secant Jacobian's step points nowhere
 useful, and only the model's own Jacobian tells that the fit is stationary. The work of one call
 is bounded (``max_runs`` IVPs): a call that would need more returns its best state (``ok``
-False), and the next measurement continues from it. The cold estimate runs the same loop with
+False), and the next measurement continues from it. A cold estimate starts on the passive rod's
+Jacobians (``estimation``); the fallback of an estimate solved to the end runs the same loop with
 finite-difference Jacobians at every evaluation (one compiled call instead of a Python loop over
-the kernels), and falls back to :func:`least_squares.constrained_gauss_newton` from where it
-stopped if it gives up.
+the kernels), then :func:`least_squares.constrained_gauss_newton` from where it stopped.
 """
 from typing import NamedTuple
 
