@@ -13,7 +13,9 @@ import pytest
 import yaml
 
 from continuum_statics import load_robot
-from continuum_statics.tools import calibrate, run_calibration, solve
+from continuum_statics.calibration import summary, tip_loads
+from continuum_statics.calibration.tip_loads import calibrate_tip_loads
+from continuum_statics.tools import calibrate, solve
 
 PAPER_ROD = REPO / 'config' / 'jones2009_nitinol_rod.yaml'
 V6 = REPO / 'test' / 'data' / 'ftdcr_v6'
@@ -53,7 +55,7 @@ def test_tip_load_tips_in_mm_are_refused_and_nothing_is_written(tmp_path):
     data = write_tip_loads(tmp_path / 'mm.csv', forces, tips * 1e3)
     output = tmp_path / 'out.yaml'
     with pytest.raises(ValueError, match='are the tips in mm'):
-        calibrate.calibrate(PAPER_ROD, data, ['youngs_modulus'], output)
+        calibrate_tip_loads(PAPER_ROD, data, ['youngs_modulus'], output)
     assert not output.exists()
 
 
@@ -64,7 +66,7 @@ def test_tip_load_rows_that_cannot_determine_the_fit_are_refused(tmp_path, count
                            np.repeat(tips[1:], count, axis=0))
     with pytest.raises(ValueError, match=r'1 distinct row\(s\) \(of %d\) cannot determine 2 '
                                          'parameter' % count):
-        calibrate.calibrate(PAPER_ROD, data, ['youngs_modulus', 'base_pitch'],
+        calibrate_tip_loads(PAPER_ROD, data, ['youngs_modulus', 'base_pitch'],
                             tmp_path / 'out.yaml')
     assert not (tmp_path / 'out.yaml').exists()
 
@@ -77,13 +79,13 @@ def test_parameters_the_data_do_not_separate_are_refused(tmp_path):
     noisy = tips + rng.normal(0.0, 1e-5, (6, 3))
     data = write_tip_loads(tmp_path / 'sag.csv', np.zeros((6, 3)), noisy)
     with pytest.raises(ValueError, match='the data do not determine'):
-        calibrate.calibrate(PAPER_ROD, data, ['youngs_modulus', 'density'],
+        calibrate_tip_loads(PAPER_ROD, data, ['youngs_modulus', 'density'],
                             tmp_path / 'out.yaml')
     assert not (tmp_path / 'out.yaml').exists()
 
 
 def test_a_long_fit_prints_progress_on_stderr(tmp_path, monkeypatch, capsys):
-    monkeypatch.setattr(calibrate, 'PROGRESS_S', 0.0)  # every evaluation, for the test
+    monkeypatch.setattr(tip_loads, 'PROGRESS_S', 0.0)  # every evaluation, for the test
     forces, tips = paper_rows(8)
     data = write_tip_loads(tmp_path / 'loads.csv', forces, tips)
     assert calibrate.main(['--robot', str(PAPER_ROD), '--data', str(data), '--json']) == 0
@@ -93,9 +95,9 @@ def test_a_long_fit_prints_progress_on_stderr(tmp_path, monkeypatch, capsys):
 
 
 def test_friction_fitted_to_nothing_is_reported_as_none():
-    notes = run_calibration._notes({'friction': [2.5e-10], 'stiffness': [80.0]})
+    notes = summary.notes({'friction': {'after': 2.5e-10}, 'stiffness': {'after': [80.0]}})
     assert notes and 'friction: the data show none (fitted 2.5e-10' in notes[0]
-    assert run_calibration._notes({'friction': [0.08]}) == []
+    assert summary.notes({'friction': {'after': 0.08}}) == []
 
 
 # -- robot file -------------------------------------------------------------------------------

@@ -14,9 +14,15 @@ import pytest
 from scipy.spatial.transform import Rotation
 
 from continuum_statics import load_robot
+from continuum_statics.calibration.fit import fit
+from continuum_statics.calibration.parameters import turned
+from continuum_statics.calibration.pool import fork_pool
+from continuum_statics.calibration.recorded_run import ColumnMap, RecordedRun, read_recorded_run
+from continuum_statics.calibration.replay import replay, rms
+from continuum_statics.calibration.run_model import RunModel
+from continuum_statics.calibration.runs import calibrate_run
 from continuum_statics.core.tendons import Tendons
-from continuum_statics.tools import calibrate, run_calibration
-from continuum_statics.tools.recorded_run import ColumnMap, RecordedRun, read_recorded_run
+from continuum_statics.tools import calibrate
 
 V6 = REPO / 'config' / 'ftdcr_v6_robot.yaml'
 DATA = REPO / 'test' / 'data' / 'ftdcr_v6'
@@ -40,13 +46,12 @@ def pulls(robot, depth=0.004, steps=4, payout=0.5):
 
 
 def truth_robot(robot):
-    turned = run_calibration._turned(robot.description.cable_offsets,
-                                     np.repeat([0.0, 1.2, -0.9], 3))
+    offsets = turned(robot.description.cable_offsets, np.repeat([0.0, 1.2, -0.9], 3))
     tendons = dataclasses.replace(
         Tendons.default(9), stiffness=np.repeat([300.0, 500.0, 800.0], 3),
         friction=np.full(9, 0.08),
         zero_offset=np.array([2, -1, 0, 1, 3, -2, 0, -1, 2], dtype=float) * 1e-4)
-    return robot.__class__(dataclasses.replace(robot.description, cable_offsets=turned,
+    return robot.__class__(dataclasses.replace(robot.description, cable_offsets=offsets,
                                                tendons=tendons))
 
 
@@ -54,7 +59,7 @@ def synthetic_run(robot, noise=5e-5, seed=3):
     lengths = pulls(robot)
     run = RecordedRun(times=np.arange(len(lengths), dtype=float), labels=('',) * len(lengths),
                       lengths=lengths, tips=np.zeros((len(lengths), 3)), source='synthetic')
-    points, failed = run_calibration.replay(truth_robot(robot), run)
+    points, failed = replay(truth_robot(robot), run)
     assert not failed.any()
     rotation = Rotation.from_rotvec([0.2, -0.3, 0.25]).as_matrix()
     tips = points @ rotation.T + np.array([0.01, -0.02, 0.03])
@@ -83,7 +88,7 @@ def test_fit_workers_survive_an_rclpy_node_left_as_garbage_by_the_parent():
             cycle = {'node': node}
             cycle['cycle'] = cycle
             del node, cycle
-        with run_calibration.fork_pool(2) as pool:
+        with fork_pool(2) as pool:
             assert all(pool.map(_collect_in_worker, range(4)))
     finally:
         if enabled:
@@ -93,13 +98,13 @@ def test_fit_workers_survive_an_rclpy_node_left_as_garbage_by_the_parent():
 def test_fit_recovers_the_parameters_of_a_synthetic_run():
     robot = load_robot(V6)
     run, rotation = synthetic_run(robot)
-    model = run_calibration.RunModel(robot, ['registration', 'section_rotation', 'cable_zero',
-                                             'stiffness', 'friction'], run)
+    model = RunModel(robot, ['registration', 'section_rotation', 'cable_zero', 'stiffness',
+                             'friction'], run)
     lines = []
-    x, result = run_calibration.fit(model, log=lines.append, workers=2)
-    values = model.values(x)
-    errors, _ = run_calibration.errors_of(model, x, run)
-    assert run_calibration.rms(errors) < 1.5e-4  # noise 0.05 mm per axis: 0.087 mm RMS
+    result = fit(model, log=lines.append, workers=2)
+    values = model.values(result.x)
+    errors, _ = model.errors(result.x, run)
+    assert rms(errors) < 1.5e-4  # noise 0.05 mm per axis: 0.087 mm RMS
     # patterns turned by 69 and -52 degrees from the file's: found by the scan, then refined
     assert np.allclose(values['section_rotation'], [1.2, -0.9], atol=0.01)
     assert np.allclose(values['friction'], 0.08, atol=0.02)
@@ -134,15 +139,15 @@ def test_calibrate_command_on_a_recorded_csv_writes_a_robot_file_that_reproduces
     assert summary['rms_aligned_after'] <= summary['rms_after']
     # the written file, replayed in its own (tracker) frame, gives the fitted errors
     written = load_robot(output)
-    points, failed = run_calibration.replay(written, run)
+    points, failed = replay(written, run)
     assert not failed.any()
-    assert run_calibration.rms(points - run.tips) == pytest.approx(summary['rms_after'],
+    assert rms(points - run.tips) == pytest.approx(summary['rms_after'],
                                                                     rel=1e-3)
 
 
 def test_unknown_fit_names_are_refused(tmp_path):
     with pytest.raises(ValueError, match='unknown parameter.*fittable: registration'):
-        run_calibration.calibrate_run(V6, DATA / 'tendon_pull_subset.csv', ['elasticity'],
+        calibrate_run(V6, DATA / 'tendon_pull_subset.csv', ['elasticity'],
                                       None)
 
 
@@ -157,10 +162,10 @@ def test_the_calibrated_v6_robot_keeps_its_held_out_error():
     for name, guard in (('train.csv', TRAIN_GUARD), ('val.csv', VAL_GUARD)):
         run = read_recorded_run(DATA / name, robot.cable_names, robot.straight_cable_lengths,
                                 columns)
-        points, failed = run_calibration.replay(robot, run)
+        points, failed = replay(robot, run)
         assert not failed.any()
         errors = points - run.tips
-        assert run_calibration.rms(errors) < guard, name
+        assert rms(errors) < guard, name
 
 
 def read_column_map(robot):

@@ -276,14 +276,16 @@ class Robot:
         return Shape(self.s_grid, states, u0, tip_force, self.c, self.d, state=state,
                      fixed_tensions=np.zeros(len(self.cable_names)))
 
-    def solve_bvp(self, tip_force=(0.0, 0.0, 0.0), tip_moment=(0.0, 0.0, 0.0), u0_guess=None):
+    def solve_bvp(self, tip_force=(0.0, 0.0, 0.0), tip_moment=(0.0, 0.0, 0.0), u0_guess=None,
+                  warm_start=None):
         """Shape of the rod with slack cables under a tip force F (N) and moment (N m), global.
 
-        See :func:`continuum_statics.core.bvp.solve_loaded`; raises ``ConvergenceError``.
+        ``warm_start``: a previous result whose u(0) starts the solve. See
+        :func:`continuum_statics.core.bvp.solve_loaded`; raises ``ConvergenceError``.
         """
         tip_force = as_vector(tip_force, 3, 'tip_force')
         tip_moment = as_vector(tip_moment, 3, 'tip_moment')
-        start = None if u0_guess is None else self.passive_state(as_vector(u0_guess, 3, 'u0'))
+        start = _warm_or_guess(self, warm_start, u0_guess)
         state = bvp.solve_loaded(self, self.passive_state(), None, tip_force, tip_moment, start)
         return self.make_shape(state, tip_force, self.integrate_state(state, tip_force))
 

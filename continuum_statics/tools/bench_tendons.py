@@ -17,11 +17,11 @@ import numpy as np
 from scipy.optimize import root
 
 from continuum_statics import load_robot
+from continuum_statics.calibration.recorded_run import ColumnMap
 from continuum_statics.core import length_statics
 from continuum_statics.core.robot import Robot
 from continuum_statics.core.tendons import Tendons
 from continuum_statics.tools.bench import _config, _row
-from continuum_statics.tools.recorded_run import ColumnMap
 
 V6_DATA = _config('ftdcr_v6_robot.yaml').parents[1] / 'test' / 'data' / 'ftdcr_v6'
 V6_COLUMNS = ColumnMap(cables=('servo_1_mm', 'servo_20_mm', 'servo_23_mm', 'servo_9_mm',
@@ -94,7 +94,7 @@ def bench_solve_lengths(robot, label, count=200):
 
 def bench_calibration():
     """Print the v6 calibration's wall time and tip errors, without and with friction."""
-    from continuum_statics.tools.run_calibration import calibrate_run
+    from continuum_statics.calibration.runs import calibrate_run
 
     robot_file = _config('ftdcr_v6_robot.yaml')
     for fit in (('registration', 'section_rotation', 'cable_angle', 'cable_zero', 'stiffness'),
@@ -110,7 +110,7 @@ def bench_calibration():
             summary['rms_aligned_after'] * 1e3))
         print('  held-out RMS: %.2f mm (%.2f mm aligned)' % (
             summary['validate_rms'] * 1e3, summary['validate_rms_aligned'] * 1e3))
-        print('  fitted: %s' % json.dumps({k: np.round(v, 4).tolist()
+        print('  fitted: %s' % json.dumps({k: np.round(v['after'], 4).tolist()
                                              for k, v in summary['fitted'].items()}))
 
 

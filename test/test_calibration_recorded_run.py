@@ -7,7 +7,7 @@ import pytest
 from rosbags.rosbag2 import StoragePlugin, Writer
 from rosbags.typesys import Stores, get_typestore
 
-from continuum_statics.tools.recorded_run import (
+from continuum_statics.calibration.recorded_run import (
     ColumnMap,
     add_column_arguments,
     column_map_from_args,

@@ -1,0 +1,131 @@
+"""The least-squares fit of a run model: a pattern-rotation scan, then trust-region steps.
+
+``scipy.optimize.least_squares`` (trust region, bounds) minimises the model's residuals; its
+finite-difference Jacobian columns are replays run on every core (:mod:`.pool`).
+"""
+import math
+import time
+from typing import NamedTuple
+
+import numpy as np
+from scipy.optimize import least_squares
+
+from continuum_statics.calibration.pool import default_workers, fork_pool
+from continuum_statics.calibration.replay import rms
+from continuum_statics.calibration.run_model import RunModel
+
+#: Angles per section and rows of the pattern-rotation scan that starts a fit.
+SCAN_STEPS = 24
+SCAN_ROWS = 250
+#: Relative finite-difference step of a Jacobian column (at least this times 1e-2 absolute).
+DIFFERENCE_STEP = 1e-4
+
+_WORKER_MODEL = None  # the model a forked worker evaluates
+
+
+class FitResult(NamedTuple):
+    """What a fit reached: search vector, last residuals and Jacobian, and how it ended."""
+
+    x: np.ndarray
+    residuals: np.ndarray
+    jacobian: np.ndarray   # (residuals, variables), the last finite-difference Jacobian
+    evaluations: int
+    success: bool
+    message: str
+
+
+def scan_rotations(model, x0, log=print, steps=SCAN_STEPS, rows=SCAN_ROWS):
+    """Start each section's pattern rotation at the best of ``steps`` angles around the circle.
+
+    A lab knows its holes' radius and spacing but not how each pattern sits: a local fit from a
+    wrong quarter turn ends in a wrong basin. Sections are scanned base to tip on every
+    ``len(run) // rows``-th row (the registration, solved in closed form, follows each guess).
+    """
+    block = next((b for b in model.blocks if b.name == 'section_rotation'), None)
+    if block is None:
+        return x0
+    stride = max(1, len(model.run.tips) // rows)
+    coarse = RunModel(model.robot, model.fit,
+                      model.run.subset(np.arange(0, len(model.run.tips), stride)),
+                      model.vector.shear_fixed)
+    x = np.array(x0, dtype=float)
+    for index in range(block.index.start, block.index.stop):
+        costs = []
+        for angle in x[index] + np.linspace(-math.pi, math.pi, steps, endpoint=False):
+            trial = x.copy()
+            trial[index] = math.remainder(angle, 2.0 * math.pi)
+            costs.append((float(np.sum(coarse.residuals(trial) ** 2)), trial[index]))
+        x[index] = min(costs)[1]
+    log('  pattern rotations scanned (%d angles each, %d rows): start %s rad'
+        % (steps, len(coarse.run.tips), np.round(x[block.index], 3).tolist()))
+    return x
+
+
+def fit(model, log=print, workers=None, max_evaluations=40):
+    """Fit the model's search vector; returns a :class:`FitResult`."""
+    global _WORKER_MODEL
+    workers = workers or default_workers()
+    low, high = model.bounds()
+    x0 = np.clip(model.start(), low, high)
+    x0 = scan_rotations(model, x0, log)
+    model.residuals(x0, update=True)
+    _WORKER_MODEL = model
+    began = time.monotonic()
+    count = [0]
+    with fork_pool(workers) as pool:
+        cache = {}
+
+        def fun(x):
+            res = model.residuals(x, update=True)
+            cache['x'], cache['res'] = np.array(x), res
+            count[0] += 1
+            n = len(model.run.tips)
+            log('  evaluation %d: RMS %.3f mm (%.0f s)' % (
+                count[0], rms(res[:3 * n].reshape(-1, 3)) * 1e3, time.monotonic() - began))
+            return res
+
+        def jac(x):
+            base = cache['res'] if np.array_equal(cache.get('x'), x) else model.residuals(x)
+            steps = DIFFERENCE_STEP * np.maximum(np.abs(x), 1e-2)
+            steps = np.where(x + steps > high, -steps, steps)
+            trials = [x + steps[i] * np.eye(len(x))[i] for i in range(len(x))]
+            # the workers see the registration of the fork; refresh them by passing it along
+            columns = list(pool.map(_worker_residuals_with, [
+                (trial, model.rotation, model.position) for trial in trials]))
+            return np.stack([(c - base) / h for c, h in zip(columns, steps)], axis=1)
+
+        if model.size == 0:  # only closed-form names (registration): nothing to search
+            res = fun(x0)
+            return FitResult(x0, res, np.zeros((res.size, 0)), 1, True, 'closed form only')
+        # ftol 1e-3: a step that gains less than 0.1 % of the cost ends the fit (its last
+        # evaluations gained micrometres at a minute each)
+        result = least_squares(fun, x0, jac=jac, bounds=(low, high), x_scale='jac',
+                               xtol=1e-8, ftol=1e-3, gtol=1e-8, max_nfev=max_evaluations)
+    res = model.residuals(result.x, update=True)
+    return FitResult(result.x, res, np.asarray(result.jac), int(result.nfev),
+                     bool(result.success), str(result.message))
+
+
+def _worker_residuals_with(args):
+    x, rotation, position = args
+    _WORKER_MODEL.rotation, _WORKER_MODEL.position = rotation, position
+    return _WORKER_MODEL.residuals(x)
+
+
+def standard_errors(jacobian, residuals, derivatives=None):
+    """1-sigma of each variable from the Jacobian and the residual RMS (Gauss-Newton covariance).
+
+    :param derivatives: d value / d variable per variable, to get the 1-sigma in value units
+    :returns: (m,) 1-sigma, NaN where the Jacobian is singular
+    """
+    jacobian = np.asarray(jacobian, dtype=float)
+    if jacobian.shape[1] == 0:
+        return np.zeros(0)
+    dof = max(jacobian.shape[0] - jacobian.shape[1], 1)
+    variance = float(np.sum(np.asarray(residuals) ** 2)) / dof
+    try:
+        covariance = np.linalg.inv(jacobian.T @ jacobian) * variance
+    except np.linalg.LinAlgError:
+        return np.full(jacobian.shape[1], np.nan)
+    sigma = np.sqrt(np.clip(np.diag(covariance), 0.0, None))
+    return sigma if derivatives is None else sigma * np.abs(derivatives)

@@ -1,0 +1,128 @@
+"""A recorded run's residuals: candidate robots replayed, registered onto the tracker, compared.
+
+The registration of the tracker frame to the base (rotation + translation) is not a search
+variable: for every candidate robot it is the best rigid fit of the model points to the measured
+ones (Kabsch), so it cannot start in a wrong basin. Gravity, given in the tracker frame, enters
+the model through the registration of the previous evaluation.
+"""
+import dataclasses
+
+import numpy as np
+
+from continuum_statics.calibration.parameters import SearchVector, quaternion
+from continuum_statics.calibration.replay import FAILED_ROW_ERROR, kabsch, replay
+from continuum_statics.core.robot import Robot
+
+#: m/s^2: a fitted gravity is written with this magnitude (its excess goes into the density).
+STANDARD_GRAVITY = 9.80665
+#: Weight (per m or rad) of the rows that hold a degenerate combination at zero.
+GAUGE_WEIGHT = 1.0
+
+
+class RunModel:
+    """Candidate robots of a search vector and their replayed model points on a run.
+
+    :param robot: the robot file's robot (its base pose is the registration's start)
+    :param fit: fit names (:data:`parameters.RUN_PARAMETERS`)
+    :param run: a :class:`recorded_run.RecordedRun`
+    """
+
+    def __init__(self, robot, fit, run, shear_fixed=False):
+        self.robot = robot
+        self.run = run
+        self.vector = SearchVector(robot, fit, shear_fixed)
+        self.fit = self.vector.fit
+        self.registered = self.vector.registered
+        self.blocks = self.vector.blocks
+        self.size = self.vector.size
+        self.rotation = robot.base_rotation.copy()  # tracker <- base, updated by the fit
+        self.position = np.array(robot.base_position, dtype=float)
+
+    def start(self):
+        """Search vector of the robot file's values."""
+        return self.vector.start()
+
+    def bounds(self):
+        """(low, high) of the search vector."""
+        return self.vector.bounds()
+
+    def values(self, x):
+        """Fit name -> its values in file units."""
+        return self.vector.values(x)
+
+    def robot_for(self, x, frame='base'):
+        """Return the robot of search vector ``x``.
+
+        Its base is at the origin (``frame='base'``, gravity turned into the base frame) or at
+        the registration in the tracker frame (``frame='tracker'``).
+        """
+        candidate = self.vector.robot_for(x)
+        description = candidate.description
+        gravity = np.array(description.gravity, dtype=float)
+        changes = {}
+        if frame == 'base':
+            changes.update(base_position=np.zeros(3),
+                           base_orientation=np.array([0.0, 0.0, 0.0, 1.0]),
+                           gravity=self.rotation.T @ gravity)
+        else:
+            changes.update(base_position=self.position.copy(),
+                           base_orientation=quaternion(self.rotation))
+            magnitude = float(np.linalg.norm(gravity))
+            if 'gravity' in self.fit and magnitude > 0.0:  # |g| = 9.81, the weight in the density
+                changes['rod'] = dataclasses.replace(
+                    description.rod, density=description.rod.density * magnitude
+                    / STANDARD_GRAVITY)
+                changes['gravity'] = gravity * STANDARD_GRAVITY / magnitude
+        return Robot(dataclasses.replace(description, **changes))
+
+    def points(self, x, run=None):
+        """Model marker points (n, 3), base frame, and the rows whose solve did not converge."""
+        return replay(self.robot_for(x), self.run if run is None else run)
+
+    def register(self, points, tips):
+        """Registration (rotation, position) of the model points onto the tips, per the fit."""
+        ok = np.all(np.isfinite(points), axis=1)
+        if self.registered and np.count_nonzero(ok) >= 3:
+            return kabsch(points[ok], tips[ok])
+        rotation = self.rotation
+        if 'base_position' in self.fit and np.any(ok):
+            return rotation, np.mean(tips[ok] - points[ok] @ rotation.T, axis=0)
+        return rotation, self.position
+
+    def residuals(self, x, update=False, run=None):
+        """Return registered model minus measured tips (flattened, m) and the gauge rows."""
+        run = self.run if run is None else run
+        points, _ = self.points(x, run)
+        rotation, position = self.register(points, run.tips)
+        if update:
+            self.rotation, self.position = rotation, position
+        errors = points @ rotation.T + position - run.tips
+        errors = np.nan_to_num(errors, nan=FAILED_ROW_ERROR, posinf=FAILED_ROW_ERROR,
+                               neginf=-FAILED_ROW_ERROR)
+        return np.concatenate([errors.ravel(), self.gauge(x)])
+
+    def errors(self, x, run):
+        """Return registered model minus measured tips (n, 3) of ``run`` and its failed rows.
+
+        The registration is held at the fit's.
+        """
+        points, failed = self.points(x, run)
+        return points @ self.rotation.T + self.position - run.tips, failed
+
+    def gauge(self, x):
+        """Return rows holding at zero the combinations the data cannot see.
+
+        A section's mean cable angle (its rotation's, or the registration's roll for the first
+        section) and, with ``pretension``, a section's mean zero offset (a pretension shifts
+        every free length).
+        """
+        values, rows = self.values(x), []
+        for k, section in enumerate(self.robot.sections):
+            cables = list(section.cable_indices)
+            if 'cable_angle' in values and ('section_rotation' in values
+                                            or (k == 0 and self.registered)):
+                rows.append(GAUGE_WEIGHT * np.mean(values['cable_angle'][cables]))
+            if 'cable_zero' in values and 'pretension' in values:
+                rows.append(GAUGE_WEIGHT * np.mean(values['cable_zero'][cables])
+                            / self.robot.length)
+        return np.array(rows)

@@ -1,0 +1,88 @@
+"""Calibration from a recorded run: replay the cable lengths through the model, fit it.
+
+Each evaluation replays the run row by row through :meth:`Robot.solve_lengths` (slack cables,
+stretch, pretension, friction by direction of motion), each row warm-started by the previous one
+as on the robot, and compares the model's tracked point (``tip_marker`` on the tip frame) with
+the measured tip (:mod:`.run_model`, :mod:`.fit`). Fit names: :mod:`.parameters`.
+"""
+import time
+
+import numpy as np
+
+from continuum_statics.calibration import summary as summaries
+from continuum_statics.calibration.error_budget import error_budget
+from continuum_statics.calibration.fit import fit as fit_model
+from continuum_statics.calibration.parameters import check_names, quaternion
+from continuum_statics.calibration.recorded_run import check_tip_units, read_recorded_run
+from continuum_statics.calibration.replay import replay
+from continuum_statics.calibration.robot_writer import write_robot_file
+from continuum_statics.calibration.run_model import RunModel
+
+
+def read_run(path, robot, column_map, tip_topic='tip_pose_measured'):
+    """Read a recorded run (CSV or bag) in the robot's cable order, SI units, tips checked."""
+    run = read_recorded_run(path, robot.cable_names, robot.straight_cable_lengths, column_map,
+                            tip_topic)
+    check_tip_units(run.tips, robot.length, path)
+    return run
+
+
+def calibrate_run(robot_file, data_file, fit_names, column_map, output=None, validate=None,
+                  tip_topic='tip_pose_measured', log=print, max_evaluations=40, report=False,
+                  workers=None):
+    """Fit a robot file to a recorded run; write ``output``; return the summary (SI units).
+
+    :param validate: a held-out run: its errors are reported, never fitted
+    :param report: add the error budget (:mod:`.error_budget`) as ``error_budget``
+    :raises ValueError: unreadable files, unknown parameters, missing columns
+    """
+    from continuum_statics import load_robot
+
+    check_names(fit_names, 'run')
+    robot = load_robot(robot_file)
+    run = read_run(data_file, robot, column_map, tip_topic)
+    held_out = read_run(validate, robot, column_map, tip_topic) if validate else None
+    model = RunModel(robot, fit_names, run, summaries.shear_fixed(robot_file))
+    if 3 * len(run.tips) < model.size:
+        raise ValueError('%d rows cannot determine %d parameters' % (len(run.tips), model.size))
+    began = time.monotonic()
+    before = replay(robot, run)[0] - run.tips
+    log('calibrate: %d rows of %s, %d parameters (%s); the robot file as given: RMS %.2f mm'
+        % (len(run.tips), data_file, model.size, ', '.join(model.fit),
+           summaries.before_after(before, before)['rms_before'] * 1e3))
+    result = fit_model(model, log, workers=workers, max_evaluations=max_evaluations)
+    x = result.x
+    errors, failed = model.errors(x, run)
+    fitted = summaries.fitted_values(model.vector, x, result.jacobian, result.residuals,
+                                     model.bounds())
+    summary = {
+        'kind': 'run', 'robot': str(robot_file), 'data': str(data_file),
+        'rows': int(len(run.tips)),
+        'model': 'solve_lengths (recorded run replayed row by row)',
+        'fit': list(model.fit), 'fitted': fitted,
+        **summaries.before_after(before, errors),
+        'unconverged_rows': int(np.count_nonzero(failed)),
+        'registration': {'position': model.position.tolist(),
+                         'orientation': quaternion(model.rotation).tolist()},
+        'optimizer': {'success': result.success, 'evaluations': result.evaluations,
+                      'message': result.message},
+        'seconds': round(time.monotonic() - began, 1),
+        'notes': summaries.notes(fitted),
+        'output': None if output is None else str(output),
+    }
+    model_errors = {'train': errors}
+    if held_out is not None:
+        held_errors, held_failed = model.errors(x, held_out)
+        model_errors['held_out'] = held_errors
+        stats = summaries.before_after(held_errors, held_errors)
+        summary.update(validate=str(validate), validate_rows=int(len(held_out.tips)),
+                       validate_rms=stats['rms_after'],
+                       validate_rms_aligned=stats['rms_aligned_after'],
+                       validate_max=stats['max_after'],
+                       validate_unconverged_rows=int(np.count_nonzero(held_failed)))
+    if report:
+        summary['error_budget'] = error_budget(run, held_out, model_errors)
+    if output is not None:
+        write_robot_file(output, robot_file, model.robot_for(x, frame='tracker'), model.fit,
+                         summaries.header(summary))
+    return summary
