@@ -19,6 +19,7 @@ from continuum_statics.calibration.parameters import turned
 from continuum_statics.calibration.pool import fork_pool
 from continuum_statics.calibration.recorded_run import ColumnMap, RecordedRun, read_recorded_run
 from continuum_statics.calibration.replay import replay, rms
+from continuum_statics.calibration.robot_writer import write_robot_file
 from continuum_statics.calibration.run_model import RunModel
 from continuum_statics.calibration.runs import calibrate_run
 from continuum_statics.core.tendons import Tendons
@@ -171,3 +172,42 @@ def test_the_calibrated_v6_robot_keeps_its_held_out_error():
 def read_column_map(robot):
     return ColumnMap(cables=tuple('%s_mm' % name for name in robot.cable_names),
                      kind='displacement', scale=1e-3, tip_scale=1e-3)
+
+
+def test_fit_recovers_section_lengths_and_writes_them(tmp_path):
+    """Sections 1 mm longer, 1 mm shorter and 0.5 mm longer than the file says: found.
+
+    The truth moves the guides with their section; the run's motor lengths are the truth's
+    (homed straight). Cables stretch and carry a pretension, as real ones do.
+    """
+    nominal = load_robot(V6)
+    tendons = dataclasses.replace(Tendons.default(9), stiffness=np.full(9, 500.0),
+                                  pretension=np.full(9, 1.0))
+    robot = nominal.__class__(dataclasses.replace(nominal.description, tendons=tendons))
+    truth_lengths = np.array([0.101, 0.099, 0.0225])
+    truth = RunModel(robot, ['section_length'], None).vector.robot_for(
+        np.log(truth_lengths / np.array([0.1, 0.1, 0.022])))
+    lengths = pulls(truth)
+    run = RecordedRun(times=np.arange(len(lengths), dtype=float), labels=('',) * len(lengths),
+                      lengths=lengths, tips=np.zeros((len(lengths), 3)), source='synthetic')
+    points, failed = replay(truth, run)
+    assert not failed.any()
+    run = dataclasses.replace(run, tips=points)
+    model = RunModel(robot, ['registration', 'section_length'], run)
+    start = rms(model.residuals(model.start())[:3 * len(run)].reshape(-1, 3))
+    result = fit(model, log=lambda line: None, workers=2)
+    found = model.values(result.x)['section_length']
+    errors, _ = model.errors(result.x, run)
+    # slack cables make the cost a staircase in the lengths: the fit ends on a step near the
+    # truth (0.46 mm RMS from 14 mm), not at zero
+    assert rms(errors) < 0.1 * start
+    assert np.allclose(found, truth_lengths, atol=1.5e-4)
+    assert np.allclose(model.robot_for(result.x).description.guides, truth.description.guides,
+                       atol=3e-4)
+    output = tmp_path / 'stretched.yaml'
+    fitted = model.robot_for(result.x, frame='tracker')
+    write_robot_file(output, V6, fitted, model.fit, ['test'])
+    written = load_robot(output)
+    assert np.allclose(written.description.guides, fitted.description.guides, atol=1e-9)
+    assert written.length == pytest.approx(fitted.length, abs=1e-9)
+    assert np.all(np.isinf(written.tendons.stiffness))  # the file's: tendons were not fitted
