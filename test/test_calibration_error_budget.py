@@ -21,7 +21,7 @@ DATA = REPO / 'test' / 'data' / 'ftdcr_v6'
 
 
 def smooth_tips(lengths):
-    """A smooth (quadratic) map of 4 motor lengths (m) to a tip (m)."""
+    """Return a smooth (quadratic) map of 4 motor lengths (m) to a tip (m)."""
     z = (lengths - 0.2) / 0.01
     return np.column_stack([0.02 * z[:, 0] - 0.01 * z[:, 1] * z[:, 2],
                             0.015 * z[:, 1] + 0.005 * z[:, 3] ** 2,
@@ -70,7 +70,8 @@ def test_the_baselines_choose_their_settings_inside_the_training_run():
 
 
 def test_patterns_group_repetitions_and_phases_and_folds_keep_them_whole():
-    labels = ['rep1_seg1_dir90', 'rep1_seg1_dir90_hold', 'rep2_seg1_dir90', 'rep1_tendon3_id9_pull',
+    labels = ['rep1_seg1_dir90', 'rep1_seg1_dir90_hold', 'rep2_seg1_dir90',
+              'rep1_tendon3_id9_pull',
               'rep1_tendon3_id9_release', 'rep1_seg2_circle']
     groups = pattern_groups(labels)
     assert groups.tolist() == [0, 0, 0, 1, 1, 2]
