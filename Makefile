@@ -1,6 +1,6 @@
 # The two commands of README.md: `make demo` (main job) and `make test` (whole suite).
 # Both create .venv on first use and reuse it afterwards.
-.PHONY: venv venv-jazzy demo test test-jazzy bench bench-nodes bench-nodes-noisy bench-drivers bench-tendons bench-load lint clean fuzz soak
+.PHONY: venv venv-jazzy demo test test-jazzy bench bench-nodes bench-nodes-noisy bench-drivers bench-tendons bench-calibration bench-load lint clean fuzz soak
 
 venv:
 	@scripts/setup_venv.sh
@@ -58,9 +58,14 @@ lint: venv
 clean:
 	rm -rf .venv .venv-jazzy build install log *.egg-info
 
-# Real tendons: solve_lengths warm/cold beside SciPy; with the v6 calibration (several minutes).
+# Real tendons: solve_lengths warm/cold beside SciPy.
 bench-load: venv
 	.venv/bin/python -m continuum_statics.tools.bench_load --plot docs/images/tip_load_noise.png
 
 bench-tendons: venv
-	.venv/bin/python -m continuum_statics.tools.bench_tendons --calibration
+	.venv/bin/python -m continuum_statics.tools.bench_tendons
+
+# The v6 calibration: replay cost, the default fit, train and held-out RMS, the error budget
+# (about a minute); CANDIDATES="cable_stiffness section_length" adds their cross-validation.
+bench-calibration: venv
+	.venv/bin/python -m continuum_statics.tools.bench_calibration $(if $(CANDIDATES),--select $(CANDIDATES))

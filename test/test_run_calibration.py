@@ -22,6 +22,7 @@ from continuum_statics.calibration.replay import replay, rms
 from continuum_statics.calibration.robot_writer import write_robot_file
 from continuum_statics.calibration.run_model import RunModel
 from continuum_statics.calibration.runs import calibrate_run
+from continuum_statics.calibration.selection import select
 from continuum_statics.core.tendons import Tendons
 from continuum_statics.tools import calibrate
 
@@ -211,3 +212,32 @@ def test_fit_recovers_section_lengths_and_writes_them(tmp_path):
     assert np.allclose(written.description.guides, fitted.description.guides, atol=1e-9)
     assert written.length == pytest.approx(fitted.length, abs=1e-9)
     assert np.all(np.isinf(written.tendons.stiffness))  # the file's: tendons were not fitted
+
+
+def test_selection_keeps_the_physics_the_run_shows_and_drops_what_it_does_not():
+    """Truth with capstan friction: cross-validation keeps friction, not a tip-marker shift.
+
+    Nine patterns (one per cable's pull), three folds of whole patterns; the fit of each fold
+    never saw the pulls it is scored on.
+    """
+    robot = load_robot(V6)
+    truth = robot.__class__(dataclasses.replace(robot.description, tendons=dataclasses.replace(
+        Tendons.default(9), stiffness=np.full(9, 500.0), friction=np.full(9, 0.1))))
+    lengths = pulls(robot, payout=0.2)
+    labels = tuple('rep1_tendon%d_pull' % (i // 8) for i in range(len(lengths)))
+    run = RecordedRun(times=np.arange(len(lengths), dtype=float), labels=labels,
+                      lengths=lengths, tips=np.zeros((len(lengths), 3)), source='synthetic')
+    points, failed = replay(truth, run)
+    assert not failed.any()
+    noisy = points + np.random.default_rng(8).normal(0.0, 5e-5, points.shape)
+    run = dataclasses.replace(run, tips=noisy)
+    start = dataclasses.replace(robot.description, tendons=dataclasses.replace(
+        Tendons.default(9), stiffness=np.full(9, 300.0)))
+    lines = []
+    result = select(robot.__class__(start), run, ['registration', 'stiffness'],
+                    ['friction', 'tip_marker'], log=lines.append, workers=2)
+    assert result['kept'] == ['friction']
+    assert result['fit'] == ['registration', 'stiffness', 'friction']
+    assert result['candidates']['friction'] < 0.5 * result['base']
+    assert result['selected'] == result['candidates']['friction']
+    assert len(lines) == 3 and all('cross-validated (3 folds' in line for line in lines)

@@ -17,6 +17,7 @@ from continuum_statics.calibration.recorded_run import check_tip_units, read_rec
 from continuum_statics.calibration.replay import replay
 from continuum_statics.calibration.robot_writer import write_robot_file
 from continuum_statics.calibration.run_model import RunModel
+from continuum_statics.calibration.selection import select
 
 
 def read_run(path, robot, column_map, tip_topic='tip_pose_measured'):
@@ -29,20 +30,30 @@ def read_run(path, robot, column_map, tip_topic='tip_pose_measured'):
 
 def calibrate_run(robot_file, data_file, fit_names, column_map, output=None, validate=None,
                   tip_topic='tip_pose_measured', log=print, max_evaluations=40, report=False,
-                  workers=None):
+                  workers=None, candidates=()):
     """Fit a robot file to a recorded run; write ``output``; return the summary (SI units).
 
     :param validate: a held-out run: its errors are reported, never fitted
     :param report: add the error budget (:mod:`.error_budget`) as ``error_budget``
+    :param candidates: fit names to try on top of ``fit_names``: each is kept when it lowers the
+        error cross-validated inside the run (:mod:`.selection`, summary ``selection``)
     :raises ValueError: unreadable files, unknown parameters, missing columns
     """
     from continuum_statics import load_robot
 
-    check_names(fit_names, 'run')
+    check_names(list(fit_names) + list(candidates), 'run')
     robot = load_robot(robot_file)
     run = read_run(data_file, robot, column_map, tip_topic)
     held_out = read_run(validate, robot, column_map, tip_topic) if validate else None
-    model = RunModel(robot, fit_names, run, summaries.shear_fixed(robot_file))
+    shear_fixed = summaries.shear_fixed(robot_file)
+    selection = None
+    if candidates:
+        log('calibrate: choosing among %s by cross-validation inside %s'
+            % (', '.join(candidates), data_file))
+        selection = select(robot, run, fit_names, candidates, log, workers, max_evaluations,
+                           shear_fixed)
+        fit_names = selection['fit']
+    model = RunModel(robot, fit_names, run, shear_fixed)
     if 3 * len(run.tips) < model.size:
         raise ValueError('%d rows cannot determine %d parameters' % (len(run.tips), model.size))
     began = time.monotonic()
@@ -80,6 +91,8 @@ def calibrate_run(robot_file, data_file, fit_names, column_map, output=None, val
                        validate_rms_aligned=stats['rms_aligned_after'],
                        validate_max=stats['max_after'],
                        validate_unconverged_rows=int(np.count_nonzero(held_failed)))
+    if selection is not None:
+        summary['selection'] = selection
     if report:
         summary['error_budget'] = error_budget(run, held_out, model_errors)
     if output is not None:

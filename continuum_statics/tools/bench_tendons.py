@@ -4,30 +4,21 @@
 friction), cold (from nothing) and warm (a tracking sequence: each call warm-started by the
 previous result), beside a plain SciPy baseline of the same equations in the same run
 (``scipy.optimize.root``, Levenberg-Marquardt with SciPy's own finite differences, on the same
-residual). With ``--calibration``: the recorded-run calibration of the FTDCR v6 robot on its
-training file (wall time, both cores) and the train and held-out tip RMS before and after, with
-and without friction. Figures, not assertions.
+residual). The v6 calibration has its own benchmark (:mod:`.bench_calibration`). Figures, not
+assertions.
 """
 import argparse
 import dataclasses
-import json
 import time
 
 import numpy as np
 from scipy.optimize import root
 
 from continuum_statics import load_robot
-from continuum_statics.calibration.recorded_run import ColumnMap
 from continuum_statics.core import length_statics
 from continuum_statics.core.robot import Robot
 from continuum_statics.core.tendons import Tendons
 from continuum_statics.tools.bench import _config, _row
-
-V6_DATA = _config('ftdcr_v6_robot.yaml').parents[1] / 'test' / 'data' / 'ftdcr_v6'
-V6_COLUMNS = ColumnMap(cables=('servo_1_mm', 'servo_20_mm', 'servo_23_mm', 'servo_9_mm',
-                               'servo_6_mm', 'servo_11_mm', 'servo_24_mm', 'servo_2_mm',
-                               'servo_3_mm'),
-                       kind='displacement', scale=1e-3, tip_scale=1e-3)
 
 
 def with_tendons(robot, stiffness=2000.0, pretension=2.0, friction=0.05):
@@ -92,41 +83,15 @@ def bench_solve_lengths(robot, label, count=200):
           % (failures, len(warm_times) + len(cold_times), scipy_fail, len(scipy_times)))
 
 
-def bench_calibration():
-    """Print the v6 calibration's wall time and tip errors, without and with friction."""
-    from continuum_statics.calibration.runs import calibrate_run
-
-    robot_file = _config('ftdcr_v6_robot.yaml')
-    for fit in (('registration', 'section_rotation', 'cable_angle', 'cable_zero', 'stiffness'),
-                ('registration', 'section_rotation', 'cable_angle', 'cable_zero', 'stiffness',
-                 'friction')):
-        start = time.perf_counter()
-        summary = calibrate_run(robot_file, V6_DATA / 'train.csv', list(fit), V6_COLUMNS,
-                                validate=V6_DATA / 'val.csv', log=lambda line: None)
-        print('\nv6 calibration (%s): %.0f s wall, %d evaluations' % (
-            ', '.join(fit), time.perf_counter() - start, summary['optimizer']['evaluations']))
-        print('  train RMS: file as given %.1f mm -> %.2f mm (%.2f mm aligned)' % (
-            summary['rms_before'] * 1e3, summary['rms_after'] * 1e3,
-            summary['rms_aligned_after'] * 1e3))
-        print('  held-out RMS: %.2f mm (%.2f mm aligned)' % (
-            summary['validate_rms'] * 1e3, summary['validate_rms_aligned'] * 1e3))
-        print('  fitted: %s' % json.dumps({k: np.round(v['after'], 4).tolist()
-                                             for k, v in summary['fitted'].items()}))
-
-
 def main(argv=None):
     """Run the benchmark; returns 0."""
     parser = argparse.ArgumentParser(prog='python -m continuum_statics.tools.bench_tendons')
-    parser.add_argument('--calibration', action='store_true',
-                        help='also calibrate the v6 robot on its recorded runs (minutes)')
-    args = parser.parse_args(argv)
+    parser.parse_args(argv)
     print('continuum_statics real-tendon benchmark')
     three = load_robot(_config('three_section_robot.yaml'))
     bench_solve_lengths(three, 'three_section_9c, ideal cables')
     bench_solve_lengths(with_tendons(three), 'three_section_9c, EA 2 kN, 2 N pretension, '
                                              'mu 0.05')
-    if args.calibration:
-        bench_calibration()
     return 0
 
 

@@ -67,6 +67,10 @@ def main(argv=None):
                         help='recorded runs in a bag: the measured tip topic (PoseStamped)')
     parser.add_argument('--max-evaluations', type=int, default=40,
                         help='recorded runs: most model evaluations of the fit (default 40)')
+    parser.add_argument('--select', nargs='+', metavar='PARAM', default=(),
+                        help='recorded runs: candidate fit names added to --fit only where they '
+                             'lower the error cross-validated inside the run (by motion '
+                             'pattern; the --validate file is never used to choose)')
     parser.add_argument('--report', action='store_true',
                         help='recorded runs: add the error budget (repeatability floor, smooth '
                              'baselines of the motor positions, the model) to the report')
@@ -79,7 +83,8 @@ def main(argv=None):
             log = (lambda text: print(text, file=sys.stderr)) if args.json else print
             summary = calibrate_run(
                 args.robot, args.data, args.fit or list(DEFAULT_FIT), column_map, args.output,
-                args.validate, args.tip_topic, log, args.max_evaluations, args.report)
+                args.validate, args.tip_topic, log, args.max_evaluations, args.report,
+                candidates=args.select)
             print(json.dumps(summary) if args.json else _run_report(summary))
             return 0
         summary = calibrate_tip_loads(args.robot, args.data, args.fit or ['youngs_modulus'],
@@ -126,6 +131,12 @@ def _run_report(summary):
             summary['validate'], summary['validate_rms'] * 1e3,
             summary['validate_rms_aligned'] * 1e3, summary['validate_max'] * 1e3))
     lines.extend('note: ' + note for note in summary.get('notes', ()))
+    if 'selection' in summary:
+        selection = summary['selection']
+        lines.append('selection (cross-validated inside the run): base %.2f mm; %s; kept: %s' % (
+            selection['base'] * 1e3, ', '.join('+%s %.2f mm' % (name, score * 1e3) for
+                                               name, score in selection['candidates'].items()),
+            ', '.join(selection['kept']) or 'none'))
     if 'error_budget' in summary:
         lines.append(format_budget(summary['error_budget']))
     if summary['output']:

@@ -1,0 +1,63 @@
+"""Which fit names to keep, chosen by cross-validation inside the training run.
+
+The training run is split by motion pattern (:func:`error_budget.pattern_groups`, whole patterns
+per fold): each fold is fitted on the other folds' rows and scored on its own, with the
+registration of that fit. A candidate name is kept when adding it to the base fit lowers the
+cross-validated tip RMS by at least :data:`MIN_GAIN`; the held-out run never takes part.
+"""
+import numpy as np
+
+from continuum_statics.calibration.error_budget import folds, pattern_groups
+from continuum_statics.calibration.fit import fit
+from continuum_statics.calibration.replay import rms
+from continuum_statics.calibration.run_model import RunModel
+
+#: Folds of the cross-validation (whole motion patterns each).
+SELECTION_FOLDS = 3
+#: Relative drop of the cross-validated RMS a candidate must bring to be kept.
+MIN_GAIN = 0.01
+
+
+def cross_validated_rms(robot, run, fit_names, count=SELECTION_FOLDS, log=print, workers=None,
+                        max_evaluations=40, shear_fixed=False):
+    """Tip RMS (m) of every row predicted by a fit that did not see its motion pattern."""
+    fold = folds(pattern_groups(run.labels), count)
+    errors = np.zeros_like(run.tips)
+    for f in range(count):
+        test = fold == f
+        if not np.any(test) or np.all(test):
+            continue
+        model = RunModel(robot, fit_names, run.subset(~test), shear_fixed)
+        result = fit(model, log=lambda line: None, workers=workers,
+                     max_evaluations=max_evaluations)
+        errors[test] = model.errors(result.x, run.subset(test))[0]
+    errors = np.nan_to_num(errors, nan=1.0)
+    log('  cross-validated (%d folds by motion pattern) %s: %.2f mm'
+        % (count, ' '.join(fit_names), rms(errors) * 1e3))
+    return rms(errors)
+
+
+def select(robot, run, base, candidates, log=print, workers=None, max_evaluations=40,
+           shear_fixed=False):
+    """Keep the candidate names that lower the cross-validated RMS of ``base``.
+
+    :returns: {'base': rms, 'candidates': {name: rms}, 'kept': [names], 'selected': rms of
+        base + kept, 'fit': the chosen fit names}
+    """
+    kwargs = dict(log=log, workers=workers, max_evaluations=max_evaluations,
+                  shear_fixed=shear_fixed)
+    base = list(base)
+    base_rms = cross_validated_rms(robot, run, base, **kwargs)
+    scores = {name: cross_validated_rms(robot, run, base + [name], **kwargs)
+              for name in candidates if name not in base}
+    kept = sorted((name for name, score in scores.items()
+                   if score < (1.0 - MIN_GAIN) * base_rms), key=scores.get)
+    selected = scores[kept[0]] if kept else base_rms
+    if len(kept) > 1:  # together, or the best alone when together they do worse
+        together = cross_validated_rms(robot, run, base + kept, **kwargs)
+        if together < selected:
+            selected = together
+        else:
+            kept = kept[:1]
+    return {'base': base_rms, 'candidates': scores, 'kept': kept, 'selected': selected,
+            'fit': base + kept}

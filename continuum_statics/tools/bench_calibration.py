@@ -1,0 +1,90 @@
+"""``python -m continuum_statics.tools.bench_calibration``: the v6 calibration and error budget.
+
+On the FTDCR v6 robot's recorded runs (``test/data/ftdcr_v6``): the cost of one replay of the
+training run (the unit of every fit: a finite-difference Jacobian costs one per parameter), the
+default fit from the nominal robot file (wall time on every core, train and held-out tip RMS),
+and the error budget on both files (repeatability floor, model-free baselines, the model). With
+``--select NAME ...``: the candidate physics cross-validated inside the training run (whole
+motion patterns per fold; the held-out file is only reported, never used to choose). With
+``--fit NAME ...``: a fit of other names instead of the default one. Figures, not assertions.
+"""
+import argparse
+import time
+
+import numpy as np
+
+from continuum_statics import load_robot
+from continuum_statics.calibration.error_budget import format_budget
+from continuum_statics.calibration.parameters import DEFAULT_FIT
+from continuum_statics.calibration.recorded_run import ColumnMap
+from continuum_statics.calibration.replay import replay
+from continuum_statics.calibration.runs import calibrate_run, read_run
+from continuum_statics.tools.bench import _config
+
+V6_ROBOT = _config('ftdcr_v6_robot.yaml')
+V6_DATA = V6_ROBOT.parents[1] / 'test' / 'data' / 'ftdcr_v6'
+V6_COLUMNS = ColumnMap(cables=('servo_1_mm', 'servo_20_mm', 'servo_23_mm', 'servo_9_mm',
+                               'servo_6_mm', 'servo_11_mm', 'servo_24_mm', 'servo_2_mm',
+                               'servo_3_mm'),
+                       kind='displacement', scale=1e-3, tip_scale=1e-3)
+
+
+def bench_replay(robot_file, repeats=3):
+    """Print the wall time of one replay of the v6 training run (the fit's unit of work)."""
+    robot = load_robot(robot_file)
+    run = read_run(V6_DATA / 'train.csv', robot, V6_COLUMNS)
+    replay(robot, run.subset(np.arange(20)))  # compiled kernels loaded
+    times = []
+    for _ in range(repeats):
+        start = time.perf_counter()
+        replay(robot, run)
+        times.append(time.perf_counter() - start)
+    best = min(times)
+    print('replay of train.csv (%d rows, %s): %.2f s (%.0f us per row), best of %d'
+          % (len(run), robot_file.name, best, best / len(run) * 1e6, repeats))
+    return best
+
+
+def bench_fit(fit, candidates=()):
+    """Fit the nominal v6 file to train.csv; print the figures and the error budget."""
+    start = time.perf_counter()
+    summary = calibrate_run(V6_ROBOT, V6_DATA / 'train.csv', list(fit), V6_COLUMNS,
+                            validate=V6_DATA / 'val.csv', log=lambda line: None, report=True,
+                            candidates=candidates)
+    wall = time.perf_counter() - start
+    if 'selection' in summary:
+        selection = summary['selection']
+        print('\nselection, cross-validated inside train.csv (3 folds of whole motion '
+              'patterns): base %.2f mm' % (selection['base'] * 1e3))
+        for name, score in selection['candidates'].items():
+            print('  + %-16s %.2f mm%s' % (name, score * 1e3,
+                                           '  kept' if name in selection['kept'] else ''))
+        print('  chosen: %s (%.2f mm)' % (' '.join(selection['fit']), selection['selected'] * 1e3))
+    print('\nv6 fit (%s): %.0f s wall, %d evaluations, %d parameters' % (
+        ', '.join(summary['fit']), wall, summary['optimizer']['evaluations'],
+        sum(np.size(v['after']) for v in summary['fitted'].values())))
+    print('  train RMS: file as given %.1f mm -> %.2f mm (%.2f mm aligned)' % (
+        summary['rms_before'] * 1e3, summary['rms_after'] * 1e3,
+        summary['rms_aligned_after'] * 1e3))
+    print('  held-out RMS: %.2f mm (%.2f mm aligned)' % (
+        summary['validate_rms'] * 1e3, summary['validate_rms_aligned'] * 1e3))
+    print(format_budget(summary['error_budget']))
+    return summary
+
+
+def main(argv=None):
+    """Run the benchmark; returns 0."""
+    parser = argparse.ArgumentParser(prog='python -m continuum_statics.tools.bench_calibration')
+    parser.add_argument('--fit', nargs='+', default=list(DEFAULT_FIT), metavar='PARAM')
+    parser.add_argument('--select', nargs='+', default=(), metavar='PARAM',
+                        help='candidate names cross-validated inside train.csv (minutes each)')
+    args = parser.parse_args(argv)
+    print('continuum_statics calibration benchmark (FTDCR v6, %s)' % V6_DATA)
+    bench_replay(V6_ROBOT)
+    bench_fit(args.fit, args.select)
+    return 0
+
+
+if __name__ == '__main__':
+    raise SystemExit(main())
+
