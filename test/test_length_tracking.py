@@ -83,6 +83,29 @@ def test_a_warm_solve_on_a_wrong_jacobian_refreshes_it_and_lands_on_the_equilibr
     np.testing.assert_allclose(warm.tensions, reference.tensions, atol=1e-6)
 
 
+@pytest.mark.parametrize('model', ['point_moment', 'distributed'])
+def test_a_warm_start_from_another_robot_solves_this_robot(model):
+    # calibration warm-starts a candidate robot by another's solution of the same lengths: the
+    # carried model (values at the solution) belongs to the other robot and must not be reused
+    frictionless = real_tendons(model)  # friction would follow the two robots' free lengths
+    tendons = dataclasses.replace(frictionless.tendons,
+                                  friction=0.0 * frictionless.tendons.friction)
+    robot = Robot(dataclasses.replace(frictionless.description, tendons=tendons))
+    lengths = robot.straight_cable_lengths - 1e-3 * (np.arange(len(robot.cable_names)) % 3 == 0)
+    other = robot.solve_lengths(lengths)
+    for factor in (1.3, 1.001):  # a far robot, and a finite-difference step away
+        stiffer = Robot(dataclasses.replace(robot.description, tendons=dataclasses.replace(
+            tendons, stiffness=factor * tendons.stiffness)))
+        warm = stiffer.solve_lengths(lengths, warm_start=other)
+        cold = stiffer.solve_lengths(lengths)
+        assert warm.converged and cold.converged
+        moved = cold.shape.tip_position - other.shape.tip_position
+        assert np.linalg.norm(moved) > 1e-5 * (factor - 1.0)
+        # the same equilibrium to the solver's tolerance (1e-9 m of cable)
+        np.testing.assert_allclose(warm.shape.tip_position - other.shape.tip_position, moved,
+                                   atol=max(1e-8, 1e-2 * np.linalg.norm(moved)))
+
+
 def test_a_bounded_solve_of_a_far_jump_is_finished_by_the_next_calls():
     robot = real_tendons('point_moment')
     n = len(robot.cable_names)

@@ -17,8 +17,6 @@ from continuum_statics.calibration.run_model import RunModel
 #: Angles per section and rows of the pattern-rotation scan that starts a fit.
 SCAN_STEPS = 24
 SCAN_ROWS = 250
-#: Relative finite-difference step of a Jacobian column (at least this times 1e-2 absolute).
-DIFFERENCE_STEP = 1e-4
 
 _WORKER_MODEL = None  # the model a forked worker evaluates
 
@@ -34,7 +32,24 @@ class FitResult(NamedTuple):
     message: str
 
 
-def scan_rotations(model, x0, log=print, steps=SCAN_STEPS, rows=SCAN_ROWS):
+def evaluate_all(model, xs, workers, starts=None):
+    """Residuals of ``model`` at every search vector of ``xs``, on ``workers`` forked processes.
+
+    The pool is forked now, so the workers share the model, its registration and the per-row
+    warm starts ``starts`` (:func:`replay.replay_solutions`) without pickling them.
+    """
+    global _WORKER_MODEL
+    _WORKER_MODEL = model
+    model.starts = starts
+    with fork_pool(workers) as pool:
+        return list(pool.map(_worker_residuals, xs))
+
+
+def _worker_residuals(x):
+    return _WORKER_MODEL.residuals(x, starts=_WORKER_MODEL.starts)
+
+
+def scan_rotations(model, x0, log=print, steps=SCAN_STEPS, rows=SCAN_ROWS, workers=1):
     """Start each section's pattern rotation at the best of ``steps`` angles around the circle.
 
     A lab knows its holes' radius and spacing but not how each pattern sits: a local fit from a
@@ -50,12 +65,12 @@ def scan_rotations(model, x0, log=print, steps=SCAN_STEPS, rows=SCAN_ROWS):
                       model.vector.shear_fixed)
     x = np.array(x0, dtype=float)
     for index in range(block.index.start, block.index.stop):
-        costs = []
+        trials = []
         for angle in x[index] + np.linspace(-math.pi, math.pi, steps, endpoint=False):
-            trial = x.copy()
-            trial[index] = math.remainder(angle, 2.0 * math.pi)
-            costs.append((float(np.sum(coarse.residuals(trial) ** 2)), trial[index]))
-        x[index] = min(costs)[1]
+            trials.append(x.copy())
+            trials[-1][index] = math.remainder(angle, 2.0 * math.pi)
+        costs = [float(np.sum(r ** 2)) for r in evaluate_all(coarse, trials, workers)]
+        x[index] = trials[int(np.argmin(costs))][index]
     log('  pattern rotations scanned (%d angles each, %d rows): start %s rad'
         % (steps, len(coarse.run.tips), np.round(x[block.index], 3).tolist()))
     return x
@@ -63,53 +78,46 @@ def scan_rotations(model, x0, log=print, steps=SCAN_STEPS, rows=SCAN_ROWS):
 
 def fit(model, log=print, workers=None, max_evaluations=40):
     """Fit the model's search vector; returns a :class:`FitResult`."""
-    global _WORKER_MODEL
     workers = workers or default_workers()
     low, high = model.bounds()
     x0 = np.clip(model.start(), low, high)
-    x0 = scan_rotations(model, x0, log)
+    x0 = scan_rotations(model, x0, log, workers=workers)
     model.residuals(x0, update=True)
-    _WORKER_MODEL = model
     began = time.monotonic()
     count = [0]
-    with fork_pool(workers) as pool:
-        cache = {}
+    cache = {}
 
-        def fun(x):
-            res = model.residuals(x, update=True)
-            cache['x'], cache['res'] = np.array(x), res
-            count[0] += 1
-            n = len(model.run.tips)
-            log('  evaluation %d: RMS %.3f mm (%.0f s)' % (
-                count[0], rms(res[:3 * n].reshape(-1, 3)) * 1e3, time.monotonic() - began))
-            return res
+    def fun(x):
+        res = model.residuals(x, update=True)
+        cache.update(x=np.array(x), res=res, starts=model.solutions)
+        count[0] += 1
+        n = len(model.run.tips)
+        log('  evaluation %d: RMS %.3f mm (%.0f s)' % (
+            count[0], rms(res[:3 * n].reshape(-1, 3)) * 1e3, time.monotonic() - began))
+        return res
 
-        def jac(x):
-            base = cache['res'] if np.array_equal(cache.get('x'), x) else model.residuals(x)
-            steps = DIFFERENCE_STEP * np.maximum(np.abs(x), 1e-2)
-            steps = np.where(x + steps > high, -steps, steps)
-            trials = [x + steps[i] * np.eye(len(x))[i] for i in range(len(x))]
-            # the workers see the registration of the fork; refresh them by passing it along
-            columns = list(pool.map(_worker_residuals_with, [
-                (trial, model.rotation, model.position) for trial in trials]))
-            return np.stack([(c - base) / h for c, h in zip(columns, steps)], axis=1)
+    def jac(x):
+        if not np.array_equal(cache.get('x'), x):
+            cache.update(x=np.array(x), res=model.residuals(x), starts=model.solutions)
+        base = cache['res']
+        steps = model.vector.steps()
+        steps = np.where(x + steps > high, -steps, steps)
+        trials = [x + steps[i] * np.eye(len(x))[i] for i in range(len(x))]
+        # each column's rows start from the base's solutions of the same rows: a chord step
+        # or two each, friction directions held
+        columns = evaluate_all(model, trials, workers, cache['starts'])
+        return np.stack([(c - base) / h for c, h in zip(columns, steps)], axis=1)
 
-        if model.size == 0:  # only closed-form names (registration): nothing to search
-            res = fun(x0)
-            return FitResult(x0, res, np.zeros((res.size, 0)), 1, True, 'closed form only')
-        # ftol 1e-3: a step that gains less than 0.1 % of the cost ends the fit (its last
-        # evaluations gained micrometres at a minute each)
-        result = least_squares(fun, x0, jac=jac, bounds=(low, high), x_scale='jac',
-                               xtol=1e-8, ftol=1e-3, gtol=1e-8, max_nfev=max_evaluations)
+    if model.size == 0:  # only closed-form names (registration): nothing to search
+        res = fun(x0)
+        return FitResult(x0, res, np.zeros((res.size, 0)), 1, True, 'closed form only')
+    # ftol 1e-3: a step that gains less than 0.1 % of the cost ends the fit (its last
+    # evaluations gained micrometres at a minute each)
+    result = least_squares(fun, x0, jac=jac, bounds=(low, high), x_scale='jac',
+                           xtol=1e-8, ftol=1e-3, gtol=1e-8, max_nfev=max_evaluations)
     res = model.residuals(result.x, update=True)
     return FitResult(result.x, res, np.asarray(result.jac), int(result.nfev),
                      bool(result.success), str(result.message))
-
-
-def _worker_residuals_with(args):
-    x, rotation, position = args
-    _WORKER_MODEL.rotation, _WORKER_MODEL.position = rotation, position
-    return _WORKER_MODEL.residuals(x)
 
 
 def standard_errors(jacobian, residuals, derivatives=None):

@@ -53,6 +53,14 @@ STIFFNESS_START = 1000.0
 LOG_FACTOR_BOUND = 3.0
 #: Bounds of a section length's log factor (+-20 %: a wrong section length is a few mm).
 SECTION_LENGTH_BOUND = 0.2
+#: Finite-difference step of each name's variables (optimiser units): large enough that the
+#: tip moves far more than the solver's tolerance (1e-9 m of cable), small enough to stay
+#: linear. A friction step of 0.01 changes a tension by 6 % over a full turn of wrap.
+DIFFERENCE_STEPS = {'section_rotation': 1e-4, 'cable_angle': 1e-4, 'cable_zero': 1e-6,
+                    'stiffness': 1e-4, 'cable_stiffness': 1e-4, 'pretension': 1e-3,
+                    'friction': 1e-2, 'section_length': 1e-4, 'youngs_modulus': 1e-4,
+                    'density': 1e-4, 'gravity': 1e-3, 'tip_marker': 1e-6, 'base_roll': 1e-3,
+                    'base_pitch': 1e-3, 'base_yaw': 1e-3, 'cable_offset_scale': 1e-4}
 #: Blocks whose variables are logarithms of their values.
 LOG_VARIABLES = ('stiffness', 'cable_stiffness', 'youngs_modulus', 'density', 'section_length')
 #: Units of each name's values (after :meth:`SearchVector.values`).
@@ -154,6 +162,13 @@ class SearchVector:
     def start(self):
         """Search vector of the robot file's values."""
         return np.concatenate([b.start for b in self.blocks]) if self.blocks else np.zeros(0)
+
+    def steps(self):
+        """Finite-difference step of every search variable (:data:`DIFFERENCE_STEPS`)."""
+        if not self.blocks:
+            return np.zeros(0)
+        return np.concatenate([np.full(b.start.size, DIFFERENCE_STEPS[b.name])
+                               for b in self.blocks])
 
     def bounds(self):
         """(low, high) of the search vector."""

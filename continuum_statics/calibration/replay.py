@@ -2,7 +2,11 @@
 
 Point arrays are (n, 3) in m; errors are model minus measured.
 """
+import math
+
 import numpy as np
+
+from continuum_statics.core.length_statics import MOTION_THRESHOLD, solve_lengths
 
 #: Error (m, per axis) of a row whose model point is not finite: large, so a fit moves away.
 FAILED_ROW_ERROR = 1.0
@@ -15,20 +19,35 @@ def replay(robot, run):
     the robot (friction follows each cable's motion). The second array (n,) is True where the
     solve did not converge (its best state is kept) or raised.
     """
+    points, failed, _ = replay_solutions(robot, run)
+    return points, failed
+
+
+def replay_solutions(robot, run, starts=None):
+    """:func:`replay`, also returning each row's solution (None where it raised).
+
+    ``starts``: per-row warm starts (another robot's solutions of the same run) instead of the
+    previous row: a robot a finite-difference step away then converges in a chord step or two
+    per row, with each cable's direction of motion (friction) held as the start had it (a
+    shifted zero offset must not read as motion).
+    """
     points = np.full((len(run.lengths), 3), np.nan)
     failed = np.zeros(len(run.lengths), dtype=bool)
+    solutions = [None] * len(run.lengths)
     previous = None
     for i, lengths in enumerate(run.lengths):
+        held = starts is not None and starts[i] is not None
         try:
-            solution = robot.solve_lengths(lengths, warm_start=previous)
+            solution = solve_lengths(robot, lengths, warm_start=starts[i] if held else previous,
+                                     motion_threshold=math.inf if held else MOTION_THRESHOLD)
         except ValueError:
             failed[i] = True
             continue
         failed[i] = not solution.converged
         shape = solution.shape
         points[i] = shape.tip_position + shape.tip_rotation @ robot.tip_marker
-        previous = solution
-    return points, failed
+        solutions[i] = previous = solution
+    return points, failed, solutions
 
 
 def kabsch(points, targets):

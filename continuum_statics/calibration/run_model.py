@@ -10,7 +10,7 @@ import dataclasses
 import numpy as np
 
 from continuum_statics.calibration.parameters import SearchVector, quaternion
-from continuum_statics.calibration.replay import FAILED_ROW_ERROR, kabsch, replay
+from continuum_statics.calibration.replay import FAILED_ROW_ERROR, kabsch, replay_solutions
 from continuum_statics.core.robot import Robot
 
 #: m/s^2: a fitted gravity is written with this magnitude (its excess goes into the density).
@@ -35,6 +35,8 @@ class RunModel:
         self.registered = self.vector.registered
         self.blocks = self.vector.blocks
         self.size = self.vector.size
+        self.solutions = None  # of the last replay
+        self.starts = None  # per-row warm starts of a Jacobian's columns (set by the fit)
         self.rotation = robot.base_rotation.copy()  # tracker <- base, updated by the fit
         self.position = np.array(robot.base_position, dtype=float)
 
@@ -75,9 +77,15 @@ class RunModel:
                 changes['gravity'] = gravity * STANDARD_GRAVITY / magnitude
         return Robot(dataclasses.replace(description, **changes))
 
-    def points(self, x, run=None):
-        """Model marker points (n, 3), base frame, and the rows whose solve did not converge."""
-        return replay(self.robot_for(x), self.run if run is None else run)
+    def points(self, x, run=None, starts=None):
+        """Model marker points (n, 3), base frame, and the rows whose solve did not converge.
+
+        ``starts``: per-row warm starts (:func:`replay.replay_solutions`); the solutions are
+        kept in :attr:`solutions` for the next call's.
+        """
+        points, failed, self.solutions = replay_solutions(
+            self.robot_for(x), self.run if run is None else run, starts)
+        return points, failed
 
     def register(self, points, tips):
         """Registration (rotation, position) of the model points onto the tips, per the fit."""
@@ -89,10 +97,10 @@ class RunModel:
             return rotation, np.mean(tips[ok] - points[ok] @ rotation.T, axis=0)
         return rotation, self.position
 
-    def residuals(self, x, update=False, run=None):
+    def residuals(self, x, update=False, run=None, starts=None):
         """Return registered model minus measured tips (flattened, m) and the gauge rows."""
         run = self.run if run is None else run
-        points, _ = self.points(x, run)
+        points, _ = self.points(x, run, starts)
         rotation, position = self.register(points, run.tips)
         if update:
             self.rotation, self.position = rotation, position

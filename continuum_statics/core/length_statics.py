@@ -330,7 +330,7 @@ def _chord(problem, z0, parts, warm_start):
                      _NO_STATES if known is None else known.states)
     info = (x, None if problem.moment_map is not None else fixed, states, motor, gap, taut)
     model = ModelAt(z.copy(), values, np.array(states), problem.friction.copy(),
-                    np.concatenate([problem.tip_force, problem.tip_moment]))
+                    np.concatenate([problem.tip_force, problem.tip_moment]), robot)
     return z, ok, iterations, info, (balance, d_consumed), model
 
 
@@ -342,10 +342,12 @@ class ModelAt(NamedTuple):
     states: np.ndarray  #: (N, 21) node states (writable: a numba argument)
     friction: np.ndarray  #: (n,) mu times the sign of motion it was integrated with
     load: np.ndarray  #: (6,) tip force and moment
+    robot: object = None  #: the robot it was integrated for (another robot's is not reused)
 
     def holds_for(self, problem):
-        """Whether a problem has this model's load and friction directions."""
-        return (np.array_equal(self.friction, problem.friction)
+        """Whether a problem has this model's robot, load and friction directions."""
+        return (problem.robot is self.robot
+                and np.array_equal(self.friction, problem.friction)
                 and np.array_equal(self.load[:3], problem.tip_force)
                 and np.array_equal(self.load[3:], problem.tip_moment))
 
