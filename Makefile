@@ -65,7 +65,8 @@ bench-load: venv
 bench-tendons: venv
 	.venv/bin/python -m continuum_statics.tools.bench_tendons
 
-# The v6 calibration: replay cost, the default fit, train and held-out RMS, the error budget
-# (about a minute); CANDIDATES="cable_stiffness section_length" adds their cross-validation.
+# The v6 calibration: replay cost, the default fit (and on a 1600-row run), train and held-out
+# RMS, the error budget (about two minutes); CANDIDATES="cable_stiffness section_length" adds
+# their cross-validation inside the training run (minutes each).
 bench-calibration: venv
-	.venv/bin/python -m continuum_statics.tools.bench_calibration $(if $(CANDIDATES),--select $(CANDIDATES))
+	.venv/bin/python -m continuum_statics.tools.bench_calibration --long $(if $(CANDIDATES),--select $(CANDIDATES))
