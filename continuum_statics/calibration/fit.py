@@ -76,12 +76,17 @@ def scan_rotations(model, x0, log=print, steps=SCAN_STEPS, rows=SCAN_ROWS, worke
     return x
 
 
-def fit(model, log=print, workers=None, max_evaluations=40):
-    """Fit the model's search vector; returns a :class:`FitResult`."""
+def fit(model, log=print, workers=None, max_evaluations=40, x0=None):
+    """Fit the model's search vector; returns a :class:`FitResult`.
+
+    ``x0``: the start (e.g. an earlier fit's values, :meth:`RunModel.start_from`); by default
+    the robot file's values with the pattern rotations scanned.
+    """
     workers = workers or default_workers()
     low, high = model.bounds()
-    x0 = np.clip(model.start(), low, high)
-    x0 = scan_rotations(model, x0, log, workers=workers)
+    if x0 is None:
+        x0 = scan_rotations(model, np.clip(model.start(), low, high), log, workers=workers)
+    x0 = np.clip(x0, low, high)
     model.residuals(x0, update=True)
     began = time.monotonic()
     count = [0]

@@ -51,6 +51,19 @@ class RunModel:
         """(low, high) of the search vector."""
         return self.vector.bounds()
 
+    def start_from(self, other, x):
+        """Return a start at ``other``'s fit ``x`` for the names both have, the file's elsewhere.
+
+        The registration is taken over too.
+        """
+        start = self.start()
+        for block in self.blocks:
+            match = next((b for b in other.blocks if b.name == block.name), None)
+            if match is not None:
+                start[block.index] = x[match.index]
+        self.rotation, self.position = other.rotation.copy(), other.position.copy()
+        return start
+
     def values(self, x):
         """Fit name -> its values in file units."""
         return self.vector.values(x)

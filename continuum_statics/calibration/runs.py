@@ -46,12 +46,16 @@ def calibrate_run(robot_file, data_file, fit_names, column_map, output=None, val
     run = read_run(data_file, robot, column_map, tip_topic)
     held_out = read_run(validate, robot, column_map, tip_topic) if validate else None
     shear_fixed = summaries.shear_fixed(robot_file)
-    selection = None
+    selection = start = None
     if candidates:
         log('calibrate: choosing among %s by cross-validation inside %s'
             % (', '.join(candidates), data_file))
         selection = select(robot, run, fit_names, candidates, log, workers, max_evaluations,
                            shear_fixed)
+        if selection['kept']:  # the chosen fit starts where the base fit ends: never worse
+            base = RunModel(robot, fit_names, run, shear_fixed)
+            start = (base, fit_model(base, log, workers=workers,
+                                     max_evaluations=max_evaluations).x)
         fit_names = selection['fit']
     model = RunModel(robot, fit_names, run, shear_fixed)
     if 3 * len(run.tips) < model.size:
@@ -61,7 +65,8 @@ def calibrate_run(robot_file, data_file, fit_names, column_map, output=None, val
     log('calibrate: %d rows of %s, %d parameters (%s); the robot file as given: RMS %.2f mm'
         % (len(run.tips), data_file, model.size, ', '.join(model.fit),
            summaries.before_after(before, before)['rms_before'] * 1e3))
-    result = fit_model(model, log, workers=workers, max_evaluations=max_evaluations)
+    result = fit_model(model, log, workers=workers, max_evaluations=max_evaluations,
+                       x0=None if start is None else model.start_from(*start))
     x = result.x
     errors, failed = model.errors(x, run)
     fitted = summaries.fitted_values(model.vector, x, result.jacobian, result.residuals,
