@@ -194,7 +194,7 @@ class SearchVector:
         return out
 
     def derivatives(self, x):
-        """D value / d variable of every search variable (the chain rule for 1-sigma)."""
+        """Return d value / d variable of every search variable (the chain rule for 1-sigma)."""
         out, values = np.ones(self.size), self.values(x)
         for block in self.blocks:
             if block.name in LOG_VARIABLES:  # value = start e^x
