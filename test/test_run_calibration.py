@@ -291,3 +291,11 @@ def test_a_fit_of_more_names_starts_where_its_default_names_end(tmp_path):
     assert any(line.startswith('calibrate: first registration section_rotation stiffness')
                for line in lines)
     assert staged['rms_after'] <= plain['rms_after'] * (1.0 + 1e-6)
+
+
+def test_selection_refuses_a_run_of_one_motion_pattern():
+    robot = load_robot(V6)
+    run, _ = synthetic_run(robot)
+    run = dataclasses.replace(run, labels=('rep1_seg1_dir0',) * len(run))
+    with pytest.raises(ValueError, match='at least 2 motion patterns'):
+        select(robot, run, ['registration'], ['friction'], log=lambda line: None, workers=1)

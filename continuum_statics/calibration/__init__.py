@@ -13,4 +13,6 @@ through ``solve_lengths``: :func:`runs.calibrate_run`) and static tip-load rows
 - :mod:`.summary`: the summary schema (m), 1-sigma, notes, the file header
 - :mod:`.robot_writer`: the calibrated robot file
 - :mod:`.error_budget`: repeatability floor, smooth baselines and the model, side by side
+- :mod:`.selection`: candidate fit names kept by cross-validation inside the run
+- :mod:`.runs`, :mod:`.tip_loads`: the two calibrations, from files to the summary
 """

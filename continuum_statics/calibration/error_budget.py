@@ -19,7 +19,7 @@ import re
 import numpy as np
 from scipy.spatial import cKDTree
 
-from continuum_statics.calibration.replay import rms, rms_aligned
+from continuum_statics.calibration.replay import error_statistics, rms, rms_aligned
 
 #: m: two rows whose every motor position agrees within this are "the same command".
 SAME_COMMAND = 2.5e-4
@@ -155,9 +155,10 @@ def error_budget(train, held_out=None, model_errors=None, tolerance=SAME_COMMAND
         model = {}
         for name, errors in model_errors.items():
             floor = budget['repeatability'].get(name, {}).get('per_row')
-            model[name] = {'rms': rms(errors), 'rms_aligned': rms_aligned(errors),
+            stats = error_statistics(errors)  # a row that did not solve counts as failed
+            model[name] = {'rms': stats['rms'], 'rms_aligned': stats['rms_aligned'],
                            'beyond_floor': None if floor is None else float(
-                               np.sqrt(max(rms_aligned(errors) ** 2 - floor ** 2, 0.0)))}
+                               np.sqrt(max(stats['rms_aligned'] ** 2 - floor ** 2, 0.0)))}
         budget['model'] = model
     return budget
 

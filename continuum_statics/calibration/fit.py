@@ -41,8 +41,12 @@ def evaluate_all(model, xs, workers, starts=None):
     global _WORKER_MODEL
     _WORKER_MODEL = model
     model.starts = starts
-    with fork_pool(workers) as pool:
-        return list(pool.map(_worker_residuals, xs))
+    try:
+        with fork_pool(workers) as pool:
+            return list(pool.map(_worker_residuals, xs))
+    finally:  # the starts hold a replay's solutions (and their robots): not kept past the call
+        _WORKER_MODEL = None
+        model.starts = None
 
 
 def _worker_residuals(x):

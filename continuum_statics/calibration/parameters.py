@@ -54,8 +54,9 @@ LOG_FACTOR_BOUND = 3.0
 #: Bounds of a section length's log factor (+-20 %: a wrong section length is a few mm).
 SECTION_LENGTH_BOUND = 0.2
 #: Finite-difference step of each name's variables (optimiser units): large enough that the
-#: tip moves far more than the solver's tolerance (1e-9 m of cable), small enough to stay
-#: linear. A friction step of 0.01 changes a tension by 6 % over a full turn of wrap.
+#: tip moves far more than a replay's tolerance (run_model.REPLAY_TOLERANCE, 1e-12 m of
+#: cable; a node's is 1e-9 m), small enough to stay linear. A friction step of 0.01 changes a
+#: tension by 6 % over a full turn of wrap.
 DIFFERENCE_STEPS = {'section_rotation': 1e-4, 'cable_angle': 1e-4, 'cable_zero': 1e-6,
                     'stiffness': 1e-4, 'cable_stiffness': 1e-4, 'pretension': 1e-3,
                     'friction': 1e-2, 'section_length': 1e-4, 'youngs_modulus': 1e-4,

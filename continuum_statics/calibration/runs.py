@@ -14,7 +14,7 @@ from continuum_statics.calibration.error_budget import error_budget
 from continuum_statics.calibration.fit import fit as fit_model
 from continuum_statics.calibration.parameters import DEFAULT_FIT, check_names, quaternion
 from continuum_statics.calibration.recorded_run import check_tip_units, read_recorded_run
-from continuum_statics.calibration.replay import replay
+from continuum_statics.calibration.replay import error_statistics, replay
 from continuum_statics.calibration.robot_writer import write_robot_file
 from continuum_statics.calibration.run_model import RunModel
 from continuum_statics.calibration.selection import select
@@ -72,7 +72,7 @@ def calibrate_run(robot_file, data_file, fit_names, column_map, output=None, val
     before = replay(robot, run)[0] - run.tips
     log('calibrate: %d rows of %s, %d parameters (%s); the robot file as given: RMS %.2f mm'
         % (len(run.tips), data_file, model.size, ', '.join(model.fit),
-           summaries.before_after(before, before)['rms_before'] * 1e3))
+           error_statistics(before)['rms'] * 1e3))
     result = fit_model(model, log, workers=workers, max_evaluations=max_evaluations,
                        x0=None if start is None else model.start_from(*start))
     x = result.x
@@ -98,11 +98,10 @@ def calibrate_run(robot_file, data_file, fit_names, column_map, output=None, val
     if held_out is not None:
         held_errors, held_failed = model.errors(x, held_out)
         model_errors['held_out'] = held_errors
-        stats = summaries.before_after(held_errors, held_errors)
+        stats = error_statistics(held_errors)
         summary.update(validate=str(validate), validate_rows=int(len(held_out.tips)),
-                       validate_rms=stats['rms_after'],
-                       validate_rms_aligned=stats['rms_aligned_after'],
-                       validate_max=stats['max_after'],
+                       validate_rms=stats['rms'], validate_rms_aligned=stats['rms_aligned'],
+                       validate_max=stats['max'],
                        validate_unconverged_rows=int(np.count_nonzero(held_failed)))
     if selection is not None:
         summary['selection'] = selection

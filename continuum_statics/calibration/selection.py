@@ -9,7 +9,7 @@ import numpy as np
 
 from continuum_statics.calibration.error_budget import folds, pattern_groups
 from continuum_statics.calibration.fit import fit
-from continuum_statics.calibration.replay import rms
+from continuum_statics.calibration.replay import error_statistics
 from continuum_statics.calibration.run_model import RunModel
 
 #: Folds of the cross-validation (whole motion patterns each).
@@ -21,20 +21,24 @@ MIN_GAIN = 0.01
 def cross_validated_rms(robot, run, fit_names, count=SELECTION_FOLDS, log=print, workers=None,
                         max_evaluations=40, shear_fixed=False):
     """Tip RMS (m) of every row predicted by a fit that did not see its motion pattern."""
-    fold = folds(pattern_groups(run.labels), count)
+    groups = pattern_groups(run.labels)
+    if len(np.unique(groups)) < 2:
+        raise ValueError('cross-validation needs at least 2 motion patterns in the run (labels '
+                         'or, unlabelled, 10 blocks of rows); %d found' % len(np.unique(groups)))
+    fold = folds(groups, count)
     errors = np.zeros_like(run.tips)
     for f in range(count):
         test = fold == f
-        if not np.any(test) or np.all(test):
+        if not np.any(test):
             continue
         model = RunModel(robot, fit_names, run.subset(~test), shear_fixed)
         result = fit(model, log=lambda line: None, workers=workers,
                      max_evaluations=max_evaluations)
         errors[test] = model.errors(result.x, run.subset(test))[0]
-    errors = np.nan_to_num(errors, nan=1.0)
+    score = error_statistics(errors)['rms']  # a row that did not solve counts as failed
     log('  cross-validated (%d folds by motion pattern) %s: %.2f mm'
-        % (count, ' '.join(fit_names), rms(errors) * 1e3))
-    return rms(errors)
+        % (count, ' '.join(fit_names), score * 1e3))
+    return score
 
 
 def select(robot, run, base, candidates, log=print, workers=None, max_evaluations=40,
