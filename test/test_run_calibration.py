@@ -69,6 +69,16 @@ def synthetic_run(robot, noise=5e-5, seed=3):
     return dataclasses.replace(run, tips=tips), rotation
 
 
+def write_run_csv(path, robot, run):
+    """Write a run as a lab's CSV (motor displacements and tips in mm); returns (path, header)."""
+    header = ['timestamp'] + ['%s_mm' % n for n in robot.cable_names] + ['tip_x', 'tip_y',
+                                                                          'tip_z']
+    rows = np.column_stack([run.times, (robot.straight_cable_lengths - run.lengths) * 1e3,
+                            run.tips * 1e3])
+    np.savetxt(path, rows, delimiter=',', header=','.join(header), comments='')
+    return path, header
+
+
 def _collect_in_worker(_):
     return gc.collect() >= 0
 
@@ -121,12 +131,7 @@ def test_calibrate_command_on_a_recorded_csv_writes_a_robot_file_that_reproduces
         tmp_path, capsys):
     robot = load_robot(V6)
     run, _ = synthetic_run(robot)
-    csv = tmp_path / 'run.csv'
-    header = ['timestamp'] + ['%s_mm' % n for n in robot.cable_names] + ['tip_x', 'tip_y',
-                                                                          'tip_z']
-    rows = np.column_stack([run.times, (robot.straight_cable_lengths - run.lengths) * 1e3,
-                            run.tips * 1e3])
-    np.savetxt(csv, rows, delimiter=',', header=','.join(header), comments='')
+    csv, header = write_run_csv(tmp_path / 'run.csv', robot, run)
     output = tmp_path / 'calibrated.yaml'
     code = calibrate.main([
         '--robot', str(V6), '--data', str(csv), '--validate', str(csv), '--json',
@@ -275,12 +280,7 @@ def test_a_fit_of_more_names_starts_where_its_default_names_end(tmp_path):
     """Adding names never makes the training error worse: the default part is fitted first."""
     robot = load_robot(V6)
     run, _ = synthetic_run(robot)
-    csv = tmp_path / 'run.csv'
-    header = ['timestamp'] + ['%s_mm' % n for n in robot.cable_names] + ['tip_x', 'tip_y',
-                                                                          'tip_z']
-    rows = np.column_stack([run.times, (robot.straight_cable_lengths - run.lengths) * 1e3,
-                            run.tips * 1e3])
-    np.savetxt(csv, rows, delimiter=',', header=','.join(header), comments='')
+    csv, header = write_run_csv(tmp_path / 'run.csv', robot, run)
     columns = ColumnMap(cables=tuple(header[1:10]), kind='displacement', scale=1e-3,
                         tip_scale=1e-3)
     default = ['registration', 'section_rotation', 'stiffness']
