@@ -25,6 +25,12 @@ hole with t_j (tau_j+ - tau_j-). The rod-plus-tendons wrench is then exactly con
 equilibrium holds to round-off); without it, that wrench jumps by the kink load, which is
 non-zero only where shear or twist strain jumps at a disk (tip loads, gravity).
 
+General routing (R&W 2011 eqs. 12-17 in full): ``cable_routes`` gives, per tendon, a function
+s -> (l, l', l'') of its hole position in the body frame and its first two derivatives. Then
+p_j^b' = v + u x l_j + l_j', and a_j = A_j (u x p_j^b' + u x l_j' + l_j''); everything else is
+as above (the end-disk pull along the tendon's own tangent p_j^b'). Written from the paper's
+equations, not from the package's rod-plus-tendons cut formulation.
+
 ``model='point_moment'`` (the paper's): no distributed tendon load and no tendon force; each
 tendon applies only the point moment t_j R(s_k) (e3 x l_j) at its end disk; between disks
 n' = -f, m' = -r' x n.
@@ -73,11 +79,17 @@ class _Rod:
         return E3 + n_body / np.diag(self.d), m_body / np.diag(self.c)
 
 
-def _rhs(rod, offsets, tensions, model):
-    """Return the right-hand side y' = F(s, y), y = [r, R (row-major), v, u]."""
-    hats = [hat(l_j) for l_j in offsets]
+def _straight(offset):
+    """Return the route s -> (l, l', l'') of a tendon at a constant offset."""
+    zero = np.zeros(3)
+    return lambda _s: (offset, zero, zero)
 
-    def rhs(_s, y):
+
+def _rhs(rod, offsets, tensions, model, routes=None):
+    """Return the right-hand side y' = F(s, y), y = [r, R (row-major), v, u]."""
+    routes = routes or [_straight(l_j) for l_j in offsets]
+
+    def rhs(s, y):
         rot = y[3:12].reshape(3, 3)
         v = y[12:15]
         u = y[15:18]
@@ -90,15 +102,17 @@ def _rhs(rod, offsets, tensions, model):
         lhs[:3, :3] = rod.d
         lhs[3:, 3:] = rod.c
         if model == 'distributed':
-            for l_j, l_hat, t_j in zip(offsets, hats, tensions):
+            for route, t_j in zip(routes, tensions):
                 if t_j == 0.0:
                     continue
-                pb = v + np.cross(u, l_j)
+                l_j, dl_j, ddl_j = route(s)
+                l_hat = hat(l_j)
+                pb = v + np.cross(u, l_j) + dl_j
                 norm = np.linalg.norm(pb)
                 pb_hat = hat(pb)
                 a_mat = -t_j * (pb_hat @ pb_hat) / norm ** 3
                 b_mat = l_hat @ a_mat
-                a_vec = a_mat @ np.cross(u, pb)
+                a_vec = a_mat @ (np.cross(u, pb) + np.cross(u, dl_j) + ddl_j)
                 lhs[:3, :3] += a_mat
                 lhs[:3, 3:] -= a_mat @ l_hat
                 lhs[3:, :3] += b_mat
@@ -115,13 +129,17 @@ def _rhs(rod, offsets, tensions, model):
     return rhs
 
 
-def _end_loads(rot, v, u, offsets, tensions, model):
-    """Return the total force and moment (global, about the backbone) of tendons ending here."""
+def _end_loads(rot, v, u, offsets, tensions, model, tangents=None):
+    """Return the total force and moment (global, about the backbone) of tendons ending here.
+
+    ``tangents``: each tendon's l' there (general routing; default zero).
+    """
     force = np.zeros(3)
     moment = np.zeros(3)
-    for l_j, t_j in zip(offsets, tensions):
+    tangents = np.zeros_like(offsets) if tangents is None else tangents
+    for l_j, dl_j, t_j in zip(offsets, tangents, tensions):
         if model == 'distributed':
-            pb = v + np.cross(u, l_j)
+            pb = v + np.cross(u, l_j) + dl_j
             f_j = -t_j * rot @ pb / np.linalg.norm(pb)
             force += f_j
             moment += np.cross(rot @ l_j, f_j)
@@ -170,6 +188,7 @@ def _kinked(rod, rot, v, u, v_new, u_new, n_new, m_new, offsets, tensions, conti
 def _shoot(rod, problem, x, s_eval=None, rtol=1e-12, atol=1e-14):
     """Integrate from the base with scaled base wrench x; return the tip residual (and nodes)."""
     ends, offsets, cable_sections, tensions, model = problem['cables']
+    routes = problem.get('routes')
     force_scale = rod.ei / rod.length ** 2
     moment_scale = rod.ei / rod.length
     v, u = rod.strains(x[:3] * force_scale, x[3:] * moment_scale)
@@ -179,7 +198,8 @@ def _shoot(rod, problem, x, s_eval=None, rtol=1e-12, atol=1e-14):
     nodes = []
     for stop in breaks:
         active = [j for j in range(len(tensions)) if ends[cable_sections[j]] >= stop - 1e-12]
-        rhs = _rhs(rod, offsets[active], tensions[active], model)
+        rhs = _rhs(rod, offsets[active], tensions[active], model,
+                   None if routes is None else [routes[j] for j in active])
         t_eval = None
         if s_eval is not None:
             t_eval = s_eval[(s_eval >= start) & (s_eval <= stop)]
@@ -194,7 +214,14 @@ def _shoot(rod, problem, x, s_eval=None, rtol=1e-12, atol=1e-14):
         v, u = y[12:15], y[15:18]
         ending = [j for j in range(len(tensions))
                   if abs(ends[cable_sections[j]] - stop) <= 1e-12]
-        force, moment = _end_loads(rot, v, u, offsets[ending], tensions[ending], model)
+        if routes is None:
+            force, moment = _end_loads(rot, v, u, offsets[ending], tensions[ending], model)
+        else:
+            if stop < rod.length:
+                raise NotImplementedError('reference: routed tendons end at the tip only')
+            ends_l = np.array([routes[j](stop)[0] for j in ending]).reshape(-1, 3)
+            ends_dl = np.array([routes[j](stop)[1] for j in ending]).reshape(-1, 3)
+            force, moment = _end_loads(rot, v, u, ends_l, tensions[ending], model, ends_dl)
         n = rot @ rod.d @ (v - E3)
         m = rot @ rod.c @ u
         if stop < rod.length:
@@ -273,11 +300,14 @@ def _polish(rod, problem, x, iterations=30):
 
 def solve_reference(length, diameter, youngs_modulus, poisson_ratio, density, base_position,
                     base_rotation, gravity, section_ends, cable_offsets, cable_sections,
-                    tensions, tip_force, tip_moment, model, s_eval, disk_kinks=False):
+                    tensions, tip_force, tip_moment, model, s_eval, disk_kinks=False,
+                    cable_routes=None):
     """Solve the tendon-driven rod's statics; return positions and rotations at s_eval.
 
     Lengths in m, moduli in Pa, density in kg/m^3, gravity in m/s^2, tensions in N, tip force in
     N and tip moment in N m (global frame). ``model`` is 'distributed' or 'point_moment'.
+    ``cable_routes``: per tendon s -> (l, l', l'') (general routing, distributed model, one
+    section ending at the tip); ``cable_offsets`` then only seeds the first guess (l(0)).
     Returns a dict with ``positions`` (len(s_eval), 3), ``rotations`` (len(s_eval), 3, 3), the
     rod's internal force ``n`` (N) and moment ``m`` (N m) there (global frame; left limits at a
     disk) and ``residual`` (scaled tip residual).
@@ -298,6 +328,7 @@ def solve_reference(length, diameter, youngs_modulus, poisson_ratio, density, ba
             'tip_force': load * np.asarray(tip_force, float),
             'tip_moment': load * np.asarray(tip_moment, float),
             'disk_kinks': bool(disk_kinks),
+            'routes': cable_routes,
             'cables': ([float(e) for e in section_ends], offsets,
                        [int(k) for k in cable_sections], load * tensions, model),
         }

@@ -33,7 +33,7 @@ def linear_guess(robot, tip_force, tip_moment, body_force=None, loads=None, fixe
         moments, tensions = robot.loads(loads, fixed)
         local = local + moments.sum(axis=0)
         if robot.cable_model == 'distributed':  # tensions act on the cross-section: t (e3 x l)
-            local = local + np.cross([0.0, 0.0, 1.0], robot.cable_offsets).T @ tensions
+            local = local + np.cross([0.0, 0.0, 1.0], robot.hole_offsets[:, 0]).T @ tensions
     return local / robot.c
 
 

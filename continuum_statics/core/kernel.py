@@ -32,14 +32,25 @@ import math
 import numba
 import numpy as np
 
-from continuum_statics.core.layout import STATE_SIZE  # the node layout, stated once
+from continuum_statics.core.layout import (  # the node and parameter layouts, stated once
+    BASE_POSITION_AT,
+    BASE_ROTATION_AT,
+    BENDING_AT,
+    BODY_FORCE_AT,
+    C_AT,
+    C_INV_AT,
+    D_INV_AT,
+    MOMENT_AT,
+    POSITION_AT,
+    ROTATION_AT,
+    STATE_SIZE,
+    STRETCH_AT,
+)
+from continuum_statics.core.routing import hole_in
 
 POINT_MOMENT, DISTRIBUTED = 0, 1
 STRAIN_ITERATIONS = 8  # Newton steps at most; 3 reach round-off at 30 N on 10 mm holes
 
-# Layout of the ``params`` vector (see :func:`pack_params`).
-_C, _C_INV, _D, _D_INV, _F_BODY, _R0, _ROT0 = 0, 3, 6, 9, 12, 15, 18
-PARAMS_SIZE = 27
 _SIXTH, _TWELFTH = 1.0 / 6.0, 1.0 / 12.0  # multiplications: a division is ~15 cycles
 
 
@@ -133,13 +144,15 @@ def _to_local(rot, m0, m1, m2):
 
 
 @numba.njit(cache=True)
-def _strain_newton(ml, nl, u, w, p, tensions, offsets, active):
+def _strain_newton(ml, nl, u, w, p, tensions, routes, point, active):
     """Strains (u, v - e3) of the distributed model (eqs. 6, 7 with the cables' pressure).
 
-    C u = ml - sum t l x tau, D (v - e3) = nl - sum t tau over the cables passing here.
-
+    C u = ml - sum t l x tau, D (v - e3) = nl - sum t tau over the cables passing here, with
+    tau = q / |q|, q = v + u x l + l' (R&W 2011 eq. 12 in the body frame; l, l' of cable j in
+    ``routes[point, 6 j:6 j + 6]``, :class:`~continuum_statics.core.routing.Routing`).
     ``ml``, ``nl`` = R^T M, R^T N; ``u``, ``w`` the previous strains, the start of Newton's
-    iteration (exact Jacobian, quadratic convergence); ``active[j]``: cable j passes here.
+    iteration (exact Jacobian, quadratic convergence: l' does not depend on u);
+    ``active[j]``: cable j passes here.
     """
     ml0, ml1, ml2 = ml
     nl0, nl1, nl2 = nl
@@ -148,18 +161,20 @@ def _strain_newton(ml, nl, u, w, p, tensions, offsets, active):
     for _ in range(STRAIN_ITERATIONS):
         sm0 = sm1 = sm2 = 0.0  # sum t l x tau
         sn0 = sn1 = sn2 = 0.0  # sum t tau
-        k00 = p[_C]
-        k11 = p[_C + 1]
-        k22 = p[_C + 2]
+        k00 = p[C_AT]
+        k11 = p[C_AT + 1]
+        k22 = p[C_AT + 2]
         k01 = k02 = k12 = 0.0
         for j in range(active.shape[0]):
             t = tensions[j]
             if not active[j] or t == 0.0:
                 continue
-            l0, l1, l2 = offsets[j, 0], offsets[j, 1], offsets[j, 2]
-            q0 = w0 + u1 * l2 - u2 * l1  # v + u x l
-            q1 = w1 + u2 * l0 - u0 * l2
-            q2 = w2 + 1.0 + u0 * l1 - u1 * l0
+            # indexed, not a view of the row: a view costs two atomic reference counts
+            k = 6 * j
+            l0, l1, l2 = routes[point, k], routes[point, k + 1], routes[point, k + 2]
+            q0 = w0 + u1 * l2 - u2 * l1 + routes[point, k + 3]  # v + u x l + l'
+            q1 = w1 + u2 * l0 - u0 * l2 + routes[point, k + 4]
+            q2 = w2 + 1.0 + u0 * l1 - u1 * l0 + routes[point, k + 5]
             inv = 1.0 / math.sqrt(q0 * q0 + q1 * q1 + q2 * q2)
             tau0, tau1, tau2 = q0 * inv, q1 * inv, q2 * inv
             sm0 += t * (l1 * tau2 - l2 * tau1)
@@ -182,9 +197,9 @@ def _strain_newton(ml, nl, u, w, p, tensions, offsets, active):
             k01 -= s * (l0 * l1 + a0 * a1)
             k02 -= s * (l0 * l2 + a0 * a2)
             k12 -= s * (l1 * l2 + a1 * a2)
-        r0 = ml0 - p[_C] * u0 - sm0
-        r1 = ml1 - p[_C + 1] * u1 - sm1
-        r2 = ml2 - p[_C + 2] * u2 - sm2
+        r0 = ml0 - p[C_AT] * u0 - sm0
+        r1 = ml1 - p[C_AT + 1] * u1 - sm1
+        r2 = ml2 - p[C_AT + 2] * u2 - sm2
         # solve the symmetric 3x3 system K du = r by its adjugate
         a00 = k11 * k22 - k12 * k12
         a01 = k02 * k12 - k01 * k22
@@ -199,9 +214,9 @@ def _strain_newton(ml, nl, u, w, p, tensions, offsets, active):
         u0 += du0
         u1 += du1
         u2 += du2
-        w0 = (nl0 - sn0) * p[_D_INV]
-        w1 = (nl1 - sn1) * p[_D_INV + 1]
-        w2 = (nl2 - sn2) * p[_D_INV + 2]
+        w0 = (nl0 - sn0) * p[D_INV_AT]
+        w1 = (nl1 - sn1) * p[D_INV_AT + 1]
+        w2 = (nl2 - sn2) * p[D_INV_AT + 2]
         # Newton converges quadratically: after a correction of 1e-9 the error is ~1e-18
         size = abs(u0) + abs(u1) + abs(u2)
         if abs(du0) + abs(du1) + abs(du2) <= 1e-9 * (1.0 + size):
@@ -240,18 +255,22 @@ def _dexpinv(theta, xi):
 
 
 @numba.njit(cache=True, inline='always')
-def _cable_sums(u, w, tensions, offsets, active, out):
-    """Sum t l x tau (out[0:3]) and t tau (out[3:6]) over active cables; tau ~ v + u x l."""
+def _cable_sums(u, w, tensions, routes, active, out):
+    """Sum t l x tau (out[0:3]) and t tau (out[3:6]) over active cables at the base (s = 0).
+
+    tau ~ v + u x l + l' with the routes' values at the start of the first interval.
+    """
     for i in range(6):
         out[i] = 0.0
     for j in range(active.shape[0]):
         t = tensions[j]
         if not active[j] or t == 0.0:
             continue
-        l0, l1, l2 = offsets[j, 0], offsets[j, 1], offsets[j, 2]
-        q0 = w[0] + u[1] * l2 - u[2] * l1
-        q1 = w[1] + u[2] * l0 - u[0] * l2
-        q2 = w[2] + 1.0 + u[0] * l1 - u[1] * l0
+        k = 6 * j
+        l0, l1, l2 = routes[0, k], routes[0, k + 1], routes[0, k + 2]
+        q0 = w[0] + u[1] * l2 - u[2] * l1 + routes[0, k + 3]
+        q1 = w[1] + u[2] * l0 - u[0] * l2 + routes[0, k + 4]
+        q2 = w[2] + 1.0 + u[0] * l1 - u[1] * l0 + routes[0, k + 5]
         inv = t / math.sqrt(q0 * q0 + q1 * q1 + q2 * q2)
         out[0] += inv * (l1 * q2 - l2 * q1)
         out[1] += inv * (l2 * q0 - l0 * q2)
@@ -262,25 +281,25 @@ def _cable_sums(u, w, tensions, offsets, active, out):
 
 
 @numba.njit(cache=True)
-def _base_stretch(rot, force, p, model, tensions, offsets, active, u, w):
+def _base_stretch(rot, force, p, model, tensions, routes, active, u, w):
     """v(0) - e3 for a given u(0): D (v - e3) = R^T N - sum t tau(u, v), by fixed-point steps."""
     nl0 = rot[0] * force[0] + rot[3] * force[1] + rot[6] * force[2]
     nl1 = rot[1] * force[0] + rot[4] * force[1] + rot[7] * force[2]
     nl2 = rot[2] * force[0] + rot[5] * force[1] + rot[8] * force[2]
-    w[0], w[1], w[2] = nl0 * p[_D_INV], nl1 * p[_D_INV + 1], nl2 * p[_D_INV + 2]
+    w[0], w[1], w[2] = nl0 * p[D_INV_AT], nl1 * p[D_INV_AT + 1], nl2 * p[D_INV_AT + 2]
     if model != DISTRIBUTED:
         return
     sums = np.empty(6)
     for _ in range(6):  # converges by a factor t / EA per step
-        _cable_sums(u, w, tensions, offsets, active, sums)
-        w[0] = (nl0 - sums[3]) * p[_D_INV]
-        w[1] = (nl1 - sums[4]) * p[_D_INV + 1]
-        w[2] = (nl2 - sums[5]) * p[_D_INV + 2]
+        _cable_sums(u, w, tensions, routes, active, sums)
+        w[0] = (nl0 - sums[3]) * p[D_INV_AT]
+        w[1] = (nl1 - sums[4]) * p[D_INV_AT + 1]
+        w[2] = (nl2 - sums[5]) * p[D_INV_AT + 2]
 
 
 @numba.njit(cache=True)
 def integrate_batch(s_grid, params, model, tip_forces, base_bendings, disk_moments, tensions,
-                    offsets, cable_end_node, section_end_node):
+                    stage_routes, route_kinks, cable_end_node, section_end_node):
     """Integrate a batch of initial-value problems from base to tip.
 
     :param s_grid: (N,) node arc lengths, s_grid[0] = 0, s_grid[-1] = rod length (m)
@@ -290,7 +309,10 @@ def integrate_batch(s_grid, params, model, tip_forces, base_bendings, disk_momen
     :param base_bendings: (B, 3) u(0) per problem, local frame (1/m)
     :param disk_moments: (B, S, 3) point moment at each section's end disk, local frame (N m)
     :param tensions: (B, n_cables) cable tensions for the distributed model (N)
-    :param offsets: (n_cables, 3) hole positions in the local frame (m)
+    :param stage_routes: (3 (N - 1), 6 n_cables) l (m) and l' of every cable at the start,
+        middle and end of each interval, local frame (``Routing.stage_routes``); one row
+        (1, 6 n_cables) when every cable is straight
+    :param route_kinks: (N,) a cable turns at the node (l' jumps): its strain is recomputed
     :param cable_end_node: (n_cables,) node of each cable's end disk
     :param section_end_node: (S,) node of each section's end disk
     :returns: (B, N, 21) states, layout in the module docstring
@@ -305,65 +327,73 @@ def integrate_batch(s_grid, params, model, tip_forces, base_bendings, disk_momen
     """
     n_batch = base_bendings.shape[0]
     n_nodes = s_grid.shape[0]
-    n_cables = offsets.shape[0]
+    n_cables = cable_end_node.shape[0]
     n_sections = section_end_node.shape[0]
+    routed = 1 if stage_routes.shape[0] > 1 else 0  # one row: every cable straight
     length = s_grid[n_nodes - 1]
     states = np.empty((n_batch, n_nodes, STATE_SIZE))
     active = np.zeros(n_cables, dtype=np.bool_)
     vectors = np.empty((3, 3))  # force, u, w of the base (for _base_stretch)
     sums = np.empty(6)
-    c_inv = (params[_C_INV], params[_C_INV + 1], params[_C_INV + 2])
-    d_inv = (params[_D_INV], params[_D_INV + 1], params[_D_INV + 2])
-    f_body = (params[_F_BODY], params[_F_BODY + 1], params[_F_BODY + 2])
-    rot0 = (params[_ROT0], params[_ROT0 + 1], params[_ROT0 + 2], params[_ROT0 + 3],
-            params[_ROT0 + 4], params[_ROT0 + 5], params[_ROT0 + 6], params[_ROT0 + 7],
-            params[_ROT0 + 8])
+    c_inv = (params[C_INV_AT], params[C_INV_AT + 1], params[C_INV_AT + 2])
+    d_inv = (params[D_INV_AT], params[D_INV_AT + 1], params[D_INV_AT + 2])
+    f_body = (params[BODY_FORCE_AT], params[BODY_FORCE_AT + 1], params[BODY_FORCE_AT + 2])
+    q = BASE_ROTATION_AT
+    rot0 = (params[q], params[q + 1], params[q + 2], params[q + 3], params[q + 4], params[q + 5],
+            params[q + 6], params[q + 7], params[q + 8])
     for b in range(n_batch):
         tens = tensions[b]
         f0, f1, f2 = tip_forces[b, 0], tip_forces[b, 1], tip_forces[b, 2]
         for i in range(3):
-            states[b, 0, i] = params[_R0 + i]
+            states[b, 0, POSITION_AT + i] = params[BASE_POSITION_AT + i]
             vectors[0, i] = tip_forces[b, i] + f_body[i] * length  # eq. 10: n(0)
             vectors[1, i] = base_bendings[b, i]
         for i in range(9):
-            states[b, 0, 3 + i] = rot0[i]
+            states[b, 0, ROTATION_AT + i] = rot0[i]
         for j in range(n_cables):
             active[j] = cable_end_node[j] >= 1
         # v(0) for the given u(0) (eq. 10 with the cables' pull); M(0) then follows from u(0)
-        _base_stretch(params[_ROT0:_ROT0 + 9], vectors[0], params, model, tens, offsets, active,
-                      vectors[1], vectors[2])
+        _base_stretch(params[BASE_ROTATION_AT:BASE_ROTATION_AT + 9], vectors[0], params, model,
+                      tens, stage_routes, active, vectors[1], vectors[2])
         u = (vectors[1, 0], vectors[1, 1], vectors[1, 2])
         w = (vectors[2, 0], vectors[2, 1], vectors[2, 2])
         # M(0) = R(0) (C u(0) + sum t l x tau)
-        ml0, ml1, ml2 = params[_C] * u[0], params[_C + 1] * u[1], params[_C + 2] * u[2]
+        ml0, ml1, ml2 = params[C_AT] * u[0], params[C_AT + 1] * u[1], params[C_AT + 2] * u[2]
         if model == DISTRIBUTED:
-            _cable_sums(vectors[1], vectors[2], tens, offsets, active, sums)
+            _cable_sums(vectors[1], vectors[2], tens, stage_routes, active, sums)
             ml0, ml1, ml2 = ml0 + sums[0], ml1 + sums[1], ml2 + sums[2]
         rot = rot0
         m0 = rot[0] * ml0 + rot[1] * ml1 + rot[2] * ml2
         m1 = rot[3] * ml0 + rot[4] * ml1 + rot[5] * ml2
         m2 = rot[6] * ml0 + rot[7] * ml1 + rot[8] * ml2
-        p0, p1, p2 = states[b, 0, 0], states[b, 0, 1], states[b, 0, 2]
+        p0, p1, p2 = (states[b, 0, POSITION_AT], states[b, 0, POSITION_AT + 1],
+                      states[b, 0, POSITION_AT + 2])
         for i in range(3):
-            states[b, 0, 12 + i] = w[i]
-            states[b, 0, 15 + i] = u[i]
-        states[b, 0, 18], states[b, 0, 19], states[b, 0, 20] = m0, m1, m2
+            states[b, 0, STRETCH_AT + i] = w[i]
+            states[b, 0, BENDING_AT + i] = u[i]
+        states[b, 0, MOMENT_AT], states[b, 0, MOMENT_AT + 1], states[b, 0, MOMENT_AT + 2] = \
+            m0, m1, m2
         fresh = True  # u, w hold the strain at the current node for the coming interval
         for node in range(1, n_nodes):
             s0 = s_grid[node - 1]
             h = s_grid[node] - s0
             newton = False  # a tensioned cable of the distributed model passes this interval
+            interval = node - 1
+            point = 3 * interval if routed else 0  # row of the interval's start in the table
             for j in range(n_cables):
                 active[j] = cable_end_node[j] >= node
                 if model == DISTRIBUTED and active[j] and tens[j] != 0.0:
                     newton = True
+            if newton and route_kinks[interval]:
+                fresh = False  # a cable turns at this node: the strain jumps here too
             # stage 1 at the node: its own strain when still valid
             n0, n1, n2 = f0 + f_body[0] * (length - s0), f1 + f_body[1] * (length - s0), \
                 f2 + f_body[2] * (length - s0)
             if not fresh:
                 ml, nl = _to_local(rot, m0, m1, m2), _to_local(rot, n0, n1, n2)
                 if newton:
-                    u, w = _strain_newton(ml, nl, u, w, params, tens, offsets, active)
+                    u, w = _strain_newton(ml, nl, u, w, params, tens, stage_routes, point,
+                                          active)
                 else:
                     u = (ml[0] * c_inv[0], ml[1] * c_inv[1], ml[2] * c_inv[2])
                     w = (nl[0] * d_inv[0], nl[1] * d_inv[1], nl[2] * d_inv[2])
@@ -388,7 +418,8 @@ def integrate_batch(s_grid, params, model, tip_forces, base_bendings, disk_momen
                     f2 + f_body[2] * (length - s)
                 ml, nl = _to_local(rot_stage, ms0, ms1, ms2), _to_local(rot_stage, n0, n1, n2)
                 if newton:
-                    u, w = _strain_newton(ml, nl, u, w, params, tens, offsets, active)
+                    u, w = _strain_newton(ml, nl, u, w, params, tens, stage_routes,
+                                          point + routed * (1 if stage < 3 else 2), active)
                 else:
                     u = (ml[0] * c_inv[0], ml[1] * c_inv[1], ml[2] * c_inv[2])
                     w = (nl[0] * d_inv[0], nl[1] * d_inv[1], nl[2] * d_inv[2])
@@ -421,7 +452,8 @@ def integrate_batch(s_grid, params, model, tip_forces, base_bendings, disk_momen
                 f2 + f_body[2] * (length - s)
             ml, nl = _to_local(rot, m0, m1, m2), _to_local(rot, n0, n1, n2)
             if newton:
-                u, w = _strain_newton(ml, nl, u, w, params, tens, offsets, active)
+                u, w = _strain_newton(ml, nl, u, w, params, tens, stage_routes,
+                                      point + 2 * routed, active)
             else:
                 u = (ml[0] * c_inv[0], ml[1] * c_inv[1], ml[2] * c_inv[2])
                 w = (nl[0] * d_inv[0], nl[1] * d_inv[1], nl[2] * d_inv[2])
@@ -436,47 +468,44 @@ def integrate_batch(s_grid, params, model, tip_forces, base_bendings, disk_momen
                         m0 -= rot[0] * t0 + rot[1] * t1 + rot[2] * t2
                         m1 -= rot[3] * t0 + rot[4] * t1 + rot[5] * t2
                         m2 -= rot[6] * t0 + rot[7] * t1 + rot[8] * t2
-            states[b, node, 0], states[b, node, 1], states[b, node, 2] = p0, p1, p2
+            states[b, node, POSITION_AT] = p0
+            states[b, node, POSITION_AT + 1] = p1
+            states[b, node, POSITION_AT + 2] = p2
             for i in range(9):
-                states[b, node, 3 + i] = rot[i]
+                states[b, node, ROTATION_AT + i] = rot[i]
             for i in range(3):
-                states[b, node, 12 + i] = w[i]
-                states[b, node, 15 + i] = u[i]
-            states[b, node, 18], states[b, node, 19], states[b, node, 20] = m0, m1, m2
+                states[b, node, STRETCH_AT + i] = w[i]
+                states[b, node, BENDING_AT + i] = u[i]
+            states[b, node, MOMENT_AT] = m0
+            states[b, node, MOMENT_AT + 1] = m1
+            states[b, node, MOMENT_AT + 2] = m2
     return states
 
 
 @numba.njit(cache=True)
-def cable_lengths_batch(states, guide_nodes, offsets, cable_last_guide):
+def cable_lengths_batch(states, guide_nodes, hole_offsets, cable_last_guide):
     """Cable lengths (B, n_cables) of a batch of shapes (paper eq. 11, errata applied).
 
     A cable runs through its hole at every guide node from the base disk (guide 0, node 0) up to
     and including its end disk ``guide_nodes[cable_last_guide[j]]``: its length is the sum of the
-    straight distances between consecutive holes. ``offsets`` (n_cables, 3) are the hole
-    positions in the rod's local frame (m).
+    straight distances between consecutive holes. ``hole_offsets`` (n_cables, G, 3) are the
+    holes in the rod's local frame at each guide (m, ``Routing.hole_offsets``).
     """
     n_batch = states.shape[0]
-    n_cables = offsets.shape[0]
+    n_cables = hole_offsets.shape[0]
     lengths = np.zeros((n_batch, n_cables))
-    previous = np.empty(3)
     for b in range(n_batch):
         for j in range(n_cables):
-            for g in range(cable_last_guide[j] + 1):
-                y = states[b, guide_nodes[g]]
-                total = 0.0
-                for i in range(3):
-                    hole = y[i] + (y[3 + 3 * i] * offsets[j, 0] + y[4 + 3 * i] * offsets[j, 1]
-                                   + y[5 + 3 * i] * offsets[j, 2])
-                    if g > 0:
-                        total += (hole - previous[i]) ** 2
-                    previous[i] = hole
-                if g > 0:
-                    lengths[b, j] += math.sqrt(total)
+            x0, x1, x2 = hole_in(states[b, guide_nodes[0]], hole_offsets[j, 0])
+            for g in range(1, cable_last_guide[j] + 1):
+                h0, h1, h2 = hole_in(states[b, guide_nodes[g]], hole_offsets[j, g])
+                lengths[b, j] += math.sqrt((h0 - x0) ** 2 + (h1 - x1) ** 2 + (h2 - x2) ** 2)
+                x0, x1, x2 = h0, h1, h2
     return lengths
 
 
 @numba.njit(cache=True)
-def _section_tensions(moment, cables, offsets, out):
+def section_tensions(moment, cables, offsets, out):
     """Least-norm tensions t >= 0 of one section's cables whose moments sum to ``moment``.
 
     The moment a cable applies is t (e3 x l) (local, in the cross-section plane); antagonistic
@@ -561,7 +590,7 @@ def loads_from_state(x, fixed_tensions, model, bases, ranks, bending_stiffness, 
         cables = section_cables[k, :section_cable_count[k]]
         if model == DISTRIBUTED:
             if ranks[k] > 0:
-                _section_tensions(moment, cables, offsets, tensions)
+                section_tensions(moment, cables, offsets, tensions)
             for i in range(3):
                 disk_moments[k, i] = 0.0
         else:
@@ -578,7 +607,8 @@ def loads_from_state(x, fixed_tensions, model, bases, ranks, bending_stiffness, 
 @numba.njit(cache=True)
 def probe(s_grid, params, model, tip_force, tip_moment, x, n_free, step, fixed_tensions,
           section_state_index, section_bases, section_ranks, section_cables, section_cable_count,
-          cable_offsets, guide_nodes, cable_last_guide, cable_end_node, section_end_node):
+          cable_offsets, guide_nodes, cable_last_guide, cable_end_node, section_end_node,
+          hole_offsets, stage_routes, route_kinks):
     """Model outputs at a solver state and their forward-difference Jacobian.
 
     Integrates ``x`` and ``x + step e_k`` for the first ``n_free`` components in one batch
@@ -586,7 +616,8 @@ def probe(s_grid, params, model, tip_force, tip_moment, x, n_free, step, fixed_t
     values = [tip position (3, m); tip z axis (3); cable lengths (n_cables, m);
     (M_end - tau) L / (E I) (3), the tip moment balance, zero at equilibrium],
     jacobian (rows of values, n_free columns), and the nominal (N, 21) states.
-    The last ten arguments are the robot's :class:`~continuum_statics.core.layout.SectionArrays`;
+    The last thirteen arguments are the robot's
+    :class:`~continuum_statics.core.layout.SectionArrays`;
     ``section_state_index`` = [index of the first moment coordinate of each section, or -1]
     (sections ending at the tip node have exact columns in the point model).
     """
@@ -595,7 +626,7 @@ def probe(s_grid, params, model, tip_force, tip_moment, x, n_free, step, fixed_t
     n_sections = section_bases.shape[0]
     n_nodes = s_grid.shape[0]
     length = s_grid[n_nodes - 1]
-    ei = params[_C]
+    ei = params[C_AT]
     exact = np.zeros(n_x, dtype=np.bool_)
     if model == POINT_MOMENT:
         for k in range(n_sections):
@@ -625,17 +656,17 @@ def probe(s_grid, params, model, tip_force, tip_moment, x, n_free, step, fixed_t
             forces[b, i] = tip_force[i]
             bendings[b, i] = trial[i]
     states = integrate_batch(s_grid, params, model, forces, bendings, moments, tensions,
-                             cable_offsets, cable_end_node, section_end_node)
-    lengths = cable_lengths_batch(states, guide_nodes, cable_offsets, cable_last_guide)
+                             stage_routes, route_kinks, cable_end_node, section_end_node)
+    lengths = cable_lengths_batch(states, guide_nodes, hole_offsets, cable_last_guide)
     rows = 9 + n_cables
     table = np.empty((n_batch, rows))
     scale = length / ei
     for b in range(n_batch):
         tip = states[b, n_nodes - 1]
         for i in range(3):
-            table[b, i] = tip[i]
-            table[b, 3 + i] = tip[5 + 3 * i]  # column 2 of R
-            table[b, 6 + n_cables + i] = (tip[18 + i] - tip_moment[i]) * scale
+            table[b, i] = tip[POSITION_AT + i]
+            table[b, 3 + i] = tip[ROTATION_AT + 2 + 3 * i]  # column 2 of R
+            table[b, 6 + n_cables + i] = (tip[MOMENT_AT + i] - tip_moment[i]) * scale
         for j in range(n_cables):
             table[b, 6 + j] = lengths[b, j]
     values = table[0].copy()
@@ -655,16 +686,17 @@ def probe(s_grid, params, model, tip_force, tip_moment, x, n_free, step, fixed_t
             if col >= n_free:
                 continue
             for i in range(3):
-                g = (tip[3 + 3 * i] * section_bases[k, 0, c]
-                     + tip[4 + 3 * i] * section_bases[k, 1, c]
-                     + tip[5 + 3 * i] * section_bases[k, 2, c])
+                g = (tip[ROTATION_AT + 3 * i] * section_bases[k, 0, c]
+                     + tip[ROTATION_AT + 1 + 3 * i] * section_bases[k, 1, c]
+                     + tip[ROTATION_AT + 2 + 3 * i] * section_bases[k, 2, c])
                 jacobian[6 + n_cables + i, col] = -g * ei * scale
     return values, jacobian, states[0].copy()
 
 
 @numba.njit(cache=True)
-def tip_jacobian(s_grid, params, model, tip_force, base_bending, disk_moments, tensions, offsets,
-                 cable_end_node, section_end_node, force_step, bending_step):
+def tip_jacobian(s_grid, params, model, tip_force, base_bending, disk_moments, tensions,
+                 stage_routes, route_kinks, cable_end_node, section_end_node, force_step,
+                 bending_step):
     """6x6 tip Jacobian by forward differences (paper sec. V.B) from one batch of 7 IVPs.
 
     Rows: tip position (m) then tip rotation angle (rad), from vee(dR R^T), the paper's
@@ -683,8 +715,8 @@ def tip_jacobian(s_grid, params, model, tip_force, base_bending, disk_moments, t
     for k in range(3):
         forces[1 + k, k] += force_step
         bendings[4 + k, k] += bending_step
-    states = integrate_batch(s_grid, params, model, forces, bendings, moments, tens, offsets,
-                             cable_end_node, section_end_node)
+    states = integrate_batch(s_grid, params, model, forces, bendings, moments, tens,
+                             stage_routes, route_kinks, cable_end_node, section_end_node)
     tip = states.shape[1] - 1
     jac = np.empty((6, 6))
     w = np.empty((3, 3))
@@ -692,13 +724,14 @@ def tip_jacobian(s_grid, params, model, tip_force, base_bending, disk_moments, t
         b = col + 1
         h = force_step if col < 3 else bending_step
         for i in range(3):
-            jac[i, col] = (states[b, tip, i] - states[0, tip, i]) / h
+            jac[i, col] = (states[b, tip, POSITION_AT + i] - states[0, tip, POSITION_AT + i]) / h
         for i in range(3):
             for j in range(3):
                 acc = 0.0
                 for k in range(3):
-                    acc += ((states[b, tip, 3 + 3 * i + k] - states[0, tip, 3 + 3 * i + k])
-                            * states[0, tip, 3 + 3 * j + k])
+                    acc += ((states[b, tip, ROTATION_AT + 3 * i + k]
+                             - states[0, tip, ROTATION_AT + 3 * i + k])
+                            * states[0, tip, ROTATION_AT + 3 * j + k])
                 w[i, j] = acc / h
         jac[3, col] = 0.5 * (w[2, 1] - w[1, 2])
         jac[4, col] = 0.5 * (w[0, 2] - w[2, 0])

@@ -13,13 +13,20 @@ from typing import NamedTuple
 
 import numpy as np
 
-# node state
-POSITION = slice(0, 3)
-ROTATION = slice(3, 12)
-STRETCH = slice(12, 15)
-BENDING = slice(15, 18)
-MOMENT = slice(18, 21)
+# node state: first index of each block (the compiled code reads these) and the slices
+POSITION_AT, ROTATION_AT, STRETCH_AT, BENDING_AT, MOMENT_AT = 0, 3, 12, 15, 18
 STATE_SIZE = 21
+POSITION = slice(POSITION_AT, ROTATION_AT)
+ROTATION = slice(ROTATION_AT, STRETCH_AT)
+STRETCH = slice(STRETCH_AT, BENDING_AT)
+BENDING = slice(BENDING_AT, MOMENT_AT)
+MOMENT = slice(MOMENT_AT, STATE_SIZE)
+
+# the rod constants vector of ``kernel.pack_params`` (PARAMS_SIZE values): first index of C
+# (3, N m^2), 1 / C, D (3, N), 1 / D, the body force (3, N/m), r(0) (3, m), R(0) row-major (9)
+C_AT, C_INV_AT, D_AT, D_INV_AT, BODY_FORCE_AT, BASE_POSITION_AT, BASE_ROTATION_AT = (
+    0, 3, 6, 9, 12, 15, 18)
+PARAMS_SIZE = 27
 
 
 @dataclass(frozen=True)
@@ -59,8 +66,11 @@ class SectionArrays(NamedTuple):
     section_ranks: np.ndarray  # (S,) columns of each basis used (0, 1 or 2)
     section_cables: np.ndarray  # (S, width) cable indices of each section, -1 padded
     section_cable_count: np.ndarray  # (S,) cables of each section
-    cable_offsets: np.ndarray  # (n_cables, 3) hole positions in the rod's local frame, m
+    cable_offsets: np.ndarray  # (n_cables, 3) hole at each cable's end disk (its pull's arm), m
     guide_nodes: np.ndarray  # (G,) integration node of each guide disk (0: the base disk)
     cable_last_guide: np.ndarray  # (n_cables,) guide index of each cable's end disk
     cable_end_node: np.ndarray  # (n_cables,) node of each cable's end disk
     section_end_node: np.ndarray  # (S,) node of each section's end disk
+    hole_offsets: np.ndarray  # (n_cables, G, 3) hole at each guide, local frame, m (routing.py)
+    stage_routes: np.ndarray  # (3 (N - 1), 6 n_cables) l and l' at each interval's RK points
+    route_kinks: np.ndarray  # (N - 1,) bool: a cable turns where interval i starts

@@ -168,7 +168,7 @@ class _Problem:
             return paths / (1.0 + t * self.compliance), t.copy(), t.copy()
         consumed, motor, mean = np.empty(self.n), np.empty(self.n), np.empty(self.n)
         robot = self.robot
-        path_stretch(states, robot.guide_nodes, robot.cable_last_guide, robot.cable_offsets,
+        path_stretch(states, robot.guide_nodes, robot.cable_last_guide, robot.hole_offsets,
                      self.base_axis, np.ascontiguousarray(t), self.friction, self.compliance,
                      consumed, motor, mean)
         return consumed, motor, mean

@@ -62,7 +62,8 @@ def _solve_linear(matrix, rhs):
 @numba.njit(cache=True)
 def _evaluate(s_grid, params, model, tip_force, tip_moment, step, section_state_index,
               section_bases, section_ranks, section_cables, section_cable_count, cable_offsets,
-              guide_nodes, cable_last_guide, cable_end_node, section_end_node, z, moment_map,
+              guide_nodes, cable_last_guide, cable_end_node, section_end_node, hole_offsets,
+              stage_routes, route_kinks, z, moment_map,
               free, friction, compliance, base_axis, kappa, radius):
     """Residual F(z) (3 + n, scaled as ``_Problem.evaluate``), state, tensions, states, gap, taut.
 
@@ -77,7 +78,8 @@ def _evaluate(s_grid, params, model, tip_force, tip_moment, step, section_state_
     values, _, states = probe(s_grid, params, model, tip_force, tip_moment, x, 0, step, fixed,
                               section_state_index, section_bases, section_ranks, section_cables,
                               section_cable_count, cable_offsets, guide_nodes, cable_last_guide,
-                              cable_end_node, section_end_node)
+                              cable_end_node, section_end_node, hole_offsets, stage_routes,
+                              route_kinks)
     tensions = np.ascontiguousarray(z[3:])
     consumed = np.empty(n)
     motor = np.empty(n)
@@ -86,7 +88,7 @@ def _evaluate(s_grid, params, model, tip_force, tip_moment, step, section_state_
     for j in range(n):
         with_friction = with_friction or friction[j] != 0.0
     if with_friction:
-        path_stretch(states, guide_nodes, cable_last_guide, cable_offsets, base_axis, tensions,
+        path_stretch(states, guide_nodes, cable_last_guide, hole_offsets, base_axis, tensions,
                      friction, compliance, consumed, motor, mean)
     else:
         for j in range(n):
@@ -143,7 +145,8 @@ def _state_of(z, model, moment_map, x, fixed):
 def jacobian_pieces(s_grid, params, model, tip_force, tip_moment, step, section_state_index,
                     section_bases, section_ranks, section_cables, section_cable_count,
                     cable_offsets, guide_nodes, cable_last_guide, cable_end_node,
-                    section_end_node, z, moment_map, compliance, mean, tension_step):
+                    section_end_node, hole_offsets, stage_routes, route_kinks, z, moment_map,
+                    compliance, mean, tension_step):
     """Return the Jacobian pieces (balance (3, 3 + n), d_consumed (n, 3 + n)) at z.
 
     Forward differences, every column in one batch of 4 + n IVPs (``_Problem.evaluate``'s
@@ -173,8 +176,8 @@ def jacobian_pieces(s_grid, params, model, tip_force, tip_moment, step, section_
             forces[b, i] = tip_force[i]
             bendings[b, i] = x[i]
     states = integrate_batch(s_grid, params, model, forces, bendings, moments, tensions,
-                             cable_offsets, cable_end_node, section_end_node)
-    lengths = cable_lengths_batch(states, guide_nodes, cable_offsets, cable_last_guide)
+                             stage_routes, route_kinks, cable_end_node, section_end_node)
+    lengths = cable_lengths_batch(states, guide_nodes, hole_offsets, cable_last_guide)
     tip = s_grid.shape[0] - 1
     scale = s_grid[tip] / params[0]  # balance rows: (M_end - tau) L / (E I), as kernel.probe
     balance = np.empty((3, size))
@@ -225,12 +228,13 @@ def _done(residual, radius, tolerance, balance_tolerance):
 @numba.njit(cache=True)
 def chord(s_grid, params, model, tip_force, tip_moment, step, section_state_index,
           section_bases, section_ranks, section_cables, section_cable_count, cable_offsets,
-          guide_nodes, cable_last_guide, cable_end_node, section_end_node, z0, moment_map, free,
+          guide_nodes, cable_last_guide, cable_end_node, section_end_node, hole_offsets,
+          stage_routes, route_kinks, z0, moment_map, free,
           friction, compliance, base_axis, kappa, radius, scale, balance0, d_consumed0,
           tolerance, balance_tolerance, max_iterations, refreshes, start_values, start_states):
     """Chord steps from ``z0``; returns the record :data:`CHORD_RESULT` names.
 
-    The arguments up to ``section_end_node`` are those of :func:`kernel.probe` without the
+    The arguments up to ``route_kinks`` are those of :func:`kernel.probe` without the
     state, ``n_free`` and the fixed tensions (flat: a tuple argument costs numba's dispatcher
     time to type). ``z0`` = [u(0) (1/m); end tensions (N)]; ``moment_map`` the robot's
     ``tension_moment_map`` (point-moment model; any array of its shape otherwise); ``free``
@@ -247,7 +251,8 @@ def chord(s_grid, params, model, tip_force, tip_moment, step, section_state_inde
     """
     args = (s_grid, params, model, tip_force, tip_moment, step, section_state_index,
             section_bases, section_ranks, section_cables, section_cable_count, cable_offsets,
-            guide_nodes, cable_last_guide, cable_end_node, section_end_node)
+            guide_nodes, cable_last_guide, cable_end_node, section_end_node, hole_offsets,
+            stage_routes, route_kinks)
     n = cable_offsets.shape[0]
     balance = balance0.copy()
     d_consumed = d_consumed0.copy()

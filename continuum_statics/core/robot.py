@@ -35,6 +35,7 @@ from continuum_statics.core.layout import (
 )
 from continuum_statics.core.robot_file import read_robot_description
 from continuum_statics.core.rotations import quaternion_to_rotation
+from continuum_statics.core.routing import Routing
 from continuum_statics.core.shape import Shape
 from continuum_statics.core.tendons import Tendons
 
@@ -110,7 +111,6 @@ class Robot:
         self.base_rotation = quaternion_to_rotation(description.base_orientation)
         self.gravity = description.gravity
         self.cable_names = description.cable_names
-        self.cable_offsets = np.ascontiguousarray(description.cable_offsets, dtype=float)
         self.cable_length_limits = description.cable_length_limits
         self.guides = description.guides
         self.sections = description.sections
@@ -139,7 +139,7 @@ class Robot:
                                  'offset and the guides' % (name, low, high, length))
 
     def _layout(self):
-        """Index tables the kernel reads: disks, cable ends, moment bases, state layout."""
+        """Index tables the kernel reads: disks, cable ends, routes, moment bases, layout."""
         n_sections, n_cables = max(len(self.sections), 1), len(self.cable_names)
         self.section_end_node = np.full(n_sections, -1, dtype=np.int64)
         self.cable_end_node = np.zeros(n_cables, dtype=np.int64)
@@ -162,6 +162,14 @@ class Robot:
             self.cable_end_node[cables] = node
             self.cable_last_guide[cables] = guide
             self.cable_section[cables] = k
+        self.routing = Routing.build(self.description.routes(), self.s_grid, self.guide_nodes,
+                                     self.cable_last_guide)
+        self.cable_offsets = self.routing.end_offsets  # the arm of each cable's end-disk pull
+        self.hole_offsets = self.routing.hole_offsets
+        self.stage_routes = self.routing.stage_routes
+        self.route_kinks = self.routing.route_kinks
+        for k, section in enumerate(self.sections):
+            cables = list(section.cable_indices)
             basis = _moment_basis(self.cable_offsets[cables])
             rank = basis.shape[1]
             self.section_bases[k, :, :rank] = basis
@@ -231,7 +239,8 @@ class Robot:
         return integrate_batch(self.s_grid, self.params if params is None else params,
                                self.model_code, np.array(tip_force, dtype=float)[None],
                                np.asarray(state[:3], dtype=float)[None], moments[None],
-                               tensions[None], self.cable_offsets, self.cable_end_node,
+                               tensions[None], self.stage_routes, self.route_kinks,
+                               self.cable_end_node,
                                self.section_end_node)[0]
 
     def probe(self, state, n_free, tip_force, tip_moment, fixed_tensions=None, params=None):
@@ -269,7 +278,7 @@ class Robot:
         # the passive state's loads are zero: no loads_from_state call (a per-call fast path)
         states = integrate_batch(self.s_grid, self.params, self.model_code, tip_force[None],
                                  u0[None], self._no_moments, self._no_tensions,
-                                 self.cable_offsets, self.cable_end_node,
+                                 self.stage_routes, self.route_kinks, self.cable_end_node,
                                  self.section_end_node)[0]
         state = np.zeros(self.state_size)
         state[:3] = u0
@@ -350,7 +359,7 @@ class Robot:
     def cable_lengths(self, shape):
         """Cable lengths (n_cables,) in m of a shape, order ``cable_names`` (eq. 11, errata)."""
         states = np.ascontiguousarray(shape.states)[None]
-        return cable_lengths_batch(states, self.guide_nodes, self.cable_offsets,
+        return cable_lengths_batch(states, self.guide_nodes, self.hole_offsets,
                                    self.cable_last_guide)[0]
 
     # -- Jacobians -------------------------------------------------------------------------
@@ -372,7 +381,8 @@ class Robot:
         return tip_jacobian(self.s_grid, self.params, self.model_code,
                             as_vector(tip_force, 3, 'tip_force'), as_vector(u0, 3, 'u0'),
                             np.zeros((n_sections, 3)), np.zeros(len(self.cable_names)),
-                            self.cable_offsets, self.cable_end_node, self.section_end_node,
+                            self.stage_routes, self.route_kinks, self.cable_end_node,
+                            self.section_end_node,
                             self.force_step(), self.bending_step())
 
     def cable_jacobian(self, u0, tip_force=(0.0, 0.0, 0.0)):

@@ -9,6 +9,7 @@ import math
 import numpy as np
 import yaml
 
+from continuum_statics.core.routing import GuideOffsets, Helix, Straight
 from continuum_statics.core.tendons import TENDON_KEYS, Tendons
 
 #: Plausible backbone materials: Young's modulus (Pa) and density (kg/m^3).
@@ -114,6 +115,9 @@ class RobotDescription:
 
     ``cable_names``, ``cable_offsets`` and ``cable_length_limits`` list every cable, section by
     section; ``guides`` is every guide disk base to tip; ``warnings`` names implausible fields.
+    ``cable_offsets`` is each cable's hole at its end disk; ``cable_routes`` holds, per cable,
+    its :mod:`~continuum_statics.core.routing` route when the file gives ``offsets`` or
+    ``helix`` (None: straight at ``cable_offsets``, what calibration may change).
     """
 
     name: str
@@ -132,11 +136,20 @@ class RobotDescription:
     warnings: tuple = ()
     tendons: Tendons = None
     tip_marker: np.ndarray = None
+    cable_routes: tuple = ()
+
+    def routes(self):
+        """One route per cable (:mod:`~continuum_statics.core.routing`), straight by default."""
+        routes = self.cable_routes or (None,) * len(self.cable_names)
+        return tuple(Straight(np.array(offset)) if route is None else route
+                     for route, offset in zip(routes, self.cable_offsets))
 
 
 _ROD_KEYS = {'length', 'diameter', 'youngs_modulus', 'poisson_ratio', 'shear_modulus', 'density'}
 _BASE_KEYS = {'frame_id', 'position', 'orientation'}
-_CABLE_KEYS = {'name', 'offset', 'length_limits', 'zero_offset', *TENDON_KEYS}
+_ROUTE_KEYS = ('offset', 'offsets', 'helix')
+_CABLE_KEYS = {'name', *_ROUTE_KEYS, 'length_limits', 'zero_offset', *TENDON_KEYS}
+_HELIX_KEYS = {'radius', 'start_angle', 'turns_per_metre'}
 _SECTION_KEYS = {'name', 'guides', 'cables', 'tendons'}
 _TOP_KEYS = {'name', 'description', 'rod', 'base', 'gravity', 'cables', 'guides', 'solver',
              'sections', 'cable_model', 'tendons', 'tip_marker'}
@@ -256,8 +269,66 @@ def _parse_guides(data, length, prefix='', start=0.0):
     return guides
 
 
-def _parse_cables(data, guides, prefix='', names=None, tendons=None, defaults=None):
+def _hole(value, field):
+    """One hole offset [x, y] or [x, y, 0] (m) in the plane of its disk, off the axis."""
+    if isinstance(value, (list, tuple)) and len(value) == 2:
+        value = list(value) + [0.0]
+    offset = _vector(value, 3, field)
+    if abs(offset[2]) > 1e-9:
+        raise ValueError('%s z must be 0: the hole lies in the plane of its disk '
+                         '(the disks are placed by guides), got %g m' % (field, offset[2]))
+    if np.hypot(offset[0], offset[1]) <= 0.0:
+        raise ValueError('%s must be off the backbone axis (x or y non-zero), got %s'
+                         % (field, offset.tolist()))
+    return offset
+
+
+def _parse_route(cable, field, path_guides):
+    """Return a cable's route and its hole at the end disk: ``offset``, ``offsets`` or ``helix``.
+
+    ``path_guides``: arc lengths of the guides the cable passes, its end disk last (m).
+    :returns: (route or None for a constant offset, end offset (3,))
+    """
+    given = [key for key in _ROUTE_KEYS if key in cable]
+    if not given:
+        raise ValueError('missing key %s.offset (or %s.offsets, one [x, y] per disk, or %s.helix '
+                         '{radius, start_angle, turns_per_metre})' % (field, field, field))
+    if len(given) > 1:
+        raise ValueError('%s: give one of offset, offsets or helix, got %s' % (field, given))
+    if 'offset' in cable:
+        return None, _hole(cable['offset'], field + '.offset')
+    end = float(path_guides[-1]) if len(path_guides) else 0.0
+    if 'helix' in cable:
+        helix = _mapping(cable['helix'], field + '.helix', _HELIX_KEYS)
+        route = Helix(
+            radius=_positive(_section(helix, 'radius', field + '.helix.radius'),
+                             field + '.helix.radius'),
+            start_angle=_number(helix.get('start_angle', 0.0), field + '.helix.start_angle'),
+            turns_per_metre=_number(_section(helix, 'turns_per_metre',
+                                             field + '.helix.turns_per_metre'),
+                                    field + '.helix.turns_per_metre'))
+        return route, route.at([end])[0][0]
+    holes = cable['offsets']
+    disks = np.concatenate([[0.0], path_guides])
+    if not isinstance(holes, (list, tuple)) or len(holes) != len(disks):
+        raise ValueError('%s.offsets must list one [x, y] (m) per disk of the cable: the base '
+                         'disk (s = 0) then its %d guides up to its end disk, %d in all; got %r'
+                         % (field, len(path_guides), len(disks), holes))
+    holes = np.array([_hole(h, '%s.offsets[%d]' % (field, i)) for i, h in enumerate(holes)])
+    return GuideOffsets(_frozen(disks), _frozen(holes)), holes[-1]
+
+
+def _parse_cables(data, guides, prefix='', names=None, tendons=None, defaults=None, routes=None,
+                  path_guides=None):
+    """Return the offsets (at the end disks) and length limits of one section's cables.
+
+    Appends each cable's route to ``routes`` (``path_guides``: every guide up to this section's
+    end disk, m).
+    """
     cables = data.get('cables') or []
+    path_guides = guides if path_guides is None else path_guides
+    path_guides = path_guides[path_guides > 0.0]  # a guide at s = 0 is the base disk
+    routes = [] if routes is None else routes
     if not isinstance(cables, (list, tuple)):
         raise ValueError('%scables must be a list of {name, offset}, got %r' % (prefix, cables))
     names = [] if names is None else names
@@ -270,13 +341,8 @@ def _parse_cables(data, guides, prefix='', names=None, tendons=None, defaults=No
             raise ValueError('%s.name must be a non-empty string, got %r' % (field, name))
         if name in names:
             raise ValueError('%s.name: duplicate cable name %r' % (field, name))
-        offset = _vector(_section(cable, 'offset', field + '.offset'), 3, field + '.offset')
-        if abs(offset[2]) > 1e-9:
-            raise ValueError('%s.offset z must be 0: the hole lies in the plane of its disk '
-                             '(the disks are placed by guides), got %g m' % (field, offset[2]))
-        if np.hypot(offset[0], offset[1]) <= 0.0:
-            raise ValueError('%s.offset must be off the backbone axis (x or y non-zero), got %s'
-                             % (field, offset.tolist()))
+        route, offset = _parse_route(cable, field, path_guides)
+        routes.append(route)
         if 'length_limits' in cable:
             lim = _vector(cable['length_limits'], 2, field + '.length_limits')
         else:
@@ -294,16 +360,17 @@ def _parse_cables(data, guides, prefix='', names=None, tendons=None, defaults=No
     return np.reshape(offsets, (-1, 3)), np.reshape(limits, (-1, 2))
 
 
-def _parse_sections(data, length, tendons, defaults):
+def _parse_sections(data, length, tendons, defaults, routes):
     """Sections from ``sections:`` or from today's top-level ``cables:`` + ``guides:``.
 
-    Appends each cable's tendon parameters to ``tendons`` (``defaults``: the top-level block).
+    Appends each cable's tendon parameters to ``tendons`` (``defaults``: the top-level block)
+    and its route to ``routes``.
     """
     if 'sections' not in data:
         guides = _parse_guides(data, length)
         names = []
         offsets, limits = _parse_cables(data, guides, names=names, tendons=tendons,
-                                        defaults=defaults)
+                                        defaults=defaults, routes=routes)
         section = Section('section_0', _frozen(guides), tuple(range(len(names))))
         return (section,) if len(guides) or names else (), names, offsets, limits
     if 'cables' in data or 'guides' in data:
@@ -327,8 +394,9 @@ def _parse_sections(data, length, tendons, defaults):
         first = len(names)
         section_defaults = dict(defaults)
         section_defaults.update(_tendon_block(item.get('tendons'), prefix + 'tendons'))
+        path_guides = np.concatenate([s.guides for s in sections] + [guides])
         section_offsets, section_limits = _parse_cables(item, guides, prefix, names, tendons,
-                                                        section_defaults)
+                                                        section_defaults, routes, path_guides)
         sections.append(Section(name, _frozen(guides), tuple(range(first, len(names)))))
         offsets.append(section_offsets)
         limits.append(section_limits)
@@ -481,13 +549,19 @@ def parse_robot_description(data, source='robot file'):
     frame_id, position, orientation = _parse_base(data)
     gravity = _vector(_section(data, 'gravity', 'gravity'), 3, 'gravity')
     defaults = _tendon_block(data.get('tendons'), 'tendons')
-    tendon_rows = []
-    sections, names, offsets, limits = _parse_sections(data, rod.length, tendon_rows, defaults)
+    tendon_rows, routes = [], []
+    sections, names, offsets, limits = _parse_sections(data, rod.length, tendon_rows, defaults,
+                                                       routes)
     _check_tendons(tendon_rows, names, rod.length)
     model = data.get('cable_model', 'point_moment')
     if model not in CABLE_MODELS:
         raise ValueError('cable_model must be one of %s, got %r'
                          % (', '.join(CABLE_MODELS), model))
+    if model != 'distributed' and any(route is not None for route in routes):
+        routed = names[next(j for j, route in enumerate(routes) if route is not None)]
+        raise ValueError('cable %r: offsets and helix routes need cable_model: distributed (the '
+                         "point_moment model loads the rod only at a cable's end disk, which "
+                         'a cable that turns round the rod does not do)' % routed)
     guides = np.concatenate([section.guides for section in sections]) if sections else []
     return RobotDescription(
         name=str(data.get('name', 'continuum_robot')), rod=rod, base_frame_id=frame_id,
@@ -497,6 +571,7 @@ def parse_robot_description(data, source='robot file'):
         solver=_parse_solver(data), sections=sections, cable_model=model,
         warnings=_plausibility(rod, offsets, sections) + _tendon_warnings(tendon_rows, names),
         tendons=_tendons(tendon_rows),
+        cable_routes=tuple(routes) if any(route is not None for route in routes) else (),
         tip_marker=_frozen(_vector(data.get('tip_marker', [0.0, 0.0, 0.0]), 3, 'tip_marker')))
 
 

@@ -11,17 +11,20 @@ import math
 import numba
 import numpy as np
 
+from continuum_statics.core.routing import hole_in
+
 
 @numba.njit(cache=True)
-def path_stretch(states, guide_nodes, cable_last_guide, offsets, base_axis, tensions, friction,
-                 compliance, consumed, motor, mean):
+def path_stretch(states, guide_nodes, cable_last_guide, hole_offsets, base_axis, tensions,
+                 friction, compliance, consumed, motor, mean):
     """Fill, per cable: free length its path takes (m), motor-side and mean tension (N).
 
     :param states: (N, 21) node states of one shape (layout ``core/layout.py``)
+    :param hole_offsets: (n, G, 3) each cable's hole at each guide, local frame, m (routing.py)
     :param tensions: (n,) end-disk tensions (N); ``friction``: (n,) mu times the sign of motion
         (+1 pulled: tension rises toward the motor); ``compliance``: (n,) 1 / EA (1/N)
     """
-    n_cables = offsets.shape[0]
+    n_cables = hole_offsets.shape[0]
     size = guide_nodes.shape[0]
     spans = np.empty(size)
     wraps = np.empty(size)
@@ -33,10 +36,7 @@ def path_stretch(states, guide_nodes, cable_last_guide, offsets, base_axis, tens
         for i in range(3):
             direction[i] = base_axis[i]
         for g in range(last + 1):
-            y = states[guide_nodes[g]]
-            for i in range(3):
-                hole[i] = y[i] + (y[3 + 3 * i] * offsets[j, 0] + y[4 + 3 * i] * offsets[j, 1]
-                                  + y[5 + 3 * i] * offsets[j, 2])
+            hole[0], hole[1], hole[2] = hole_in(states[guide_nodes[g]], hole_offsets[j, g])
             if g > 0:
                 d0, d1, d2 = hole[0] - previous[0], hole[1] - previous[1], hole[2] - previous[2]
                 span = math.sqrt(d0 * d0 + d1 * d1 + d2 * d2)

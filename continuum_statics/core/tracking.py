@@ -62,12 +62,14 @@ def _evaluate(model_args, x, measured, n_free):
     """Length residual (m), tip balance, states and their Jacobians (``n_free`` columns)."""
     (s_grid, params, model, tip_force, tip_moment, step, fixed, section_state_index,
      section_bases, section_ranks, section_cables, section_cable_count, cable_offsets,
-     guide_nodes, cable_last_guide, cable_end_node, section_end_node) = model_args
+     guide_nodes, cable_last_guide, cable_end_node, section_end_node, hole_offsets,
+     stage_routes, route_kinks) = model_args
     values, jacobian, states = probe(s_grid, params, model, tip_force, tip_moment, x, n_free,
                                      step, fixed, section_state_index, section_bases,
                                      section_ranks, section_cables, section_cable_count,
                                      cable_offsets, guide_nodes, cable_last_guide,
-                                     cable_end_node, section_end_node)
+                                     cable_end_node, section_end_node, hole_offsets,
+                                     stage_routes, route_kinks)
     n = cable_offsets.shape[0]
     # rows of probe: core/layout.py ProbeRows (lengths 6:6+n, balance 6+n:9+n)
     return (values[6:6 + n] - measured, values[6 + n:9 + n].copy(), states,
@@ -77,13 +79,14 @@ def _evaluate(model_args, x, measured, n_free):
 @numba.njit(cache=True)
 def track(s_grid, params, model, tip_force, tip_moment, step, fixed, section_state_index,
           section_bases, section_ranks, section_cables, section_cable_count, cable_offsets,
-          guide_nodes, cable_last_guide, cable_end_node, section_end_node, measured, x0, jac0,
+          guide_nodes, cable_last_guide, cable_end_node, section_end_node, hole_offsets,
+          stage_routes, route_kinks, measured, x0, jac0,
           con_jac0, damping0, values0, states0, age0, tolerance, weight, max_iterations,
           probe_runs, max_runs, secant_fraction):
     """Estimate from ``x0``; returns (x, residual, balance, states, jac, con_jac, ...).
 
     The rest: iterations, runs, ok, damping, age. ``runs`` counts IVPs integrated. The
-    first 17 arguments are those of :func:`kernel.probe` but ``x`` and ``n_free`` (flat: a tuple
+    first 20 arguments are those of :func:`kernel.probe` but ``x`` and ``n_free`` (flat: a tuple
     argument would cost numba's dispatcher ~80 us per call to type).
     :param measured: (n_cables,) measured lengths (m)
     :param x0: start state; ``jac0``, ``con_jac0`` its Jacobians (lengths, balance), Broyden-
@@ -105,7 +108,8 @@ def track(s_grid, params, model, tip_force, tip_moment, step, fixed, section_sta
     """
     model_args = (s_grid, params, model, tip_force, tip_moment, step, fixed, section_state_index,
                   section_bases, section_ranks, section_cables, section_cable_count,
-                  cable_offsets, guide_nodes, cable_last_guide, cable_end_node, section_end_node)
+                  cable_offsets, guide_nodes, cable_last_guide, cable_end_node, section_end_node,
+                  hole_offsets, stage_routes, route_kinks)
     fresh = jac0.shape[0] == 0 and con_jac0.shape[0] == 0  # the model's own Jacobians
     n_all = x0.shape[0]
     x = x0.copy()

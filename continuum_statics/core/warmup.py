@@ -35,7 +35,7 @@ ENTRY_POINTS = (
     'continuum_statics.core.rotations._quaternions',
     'continuum_statics.core.backbone_sampling._sample',
     'continuum_statics.core.tendon_kernel.path_stretch',
-    'continuum_statics.core.kernel._section_tensions',
+    'continuum_statics.core.kernel.section_tensions',
 )
 #: Modules whose numba dispatchers the warm-up must cover (see :func:`kernel_signatures`).
 KERNEL_MODULES = (

@@ -1,6 +1,8 @@
 """Where to draw guide disks and cables for a solved shape (numpy only, for RViz markers)."""
 import numpy as np
 
+from continuum_statics.core.routing import holes_at
+
 
 def nearest_nodes(s_nodes, s_values):
     """Index of the node of ``s_nodes`` (sorted, m) nearest to each of ``s_values`` (m)."""
@@ -20,7 +22,9 @@ def guide_and_cable_points(s_nodes, positions, rotations, guides, cable_offsets,
     :param positions: (N, 3) backbone points, m
     :param rotations: (N, 3, 3) backbone orientations, local -> global
     :param guides: (n_guides,) arc lengths of the guide disks, m
-    :param cable_offsets: (n_cables, 3) guide-hole offsets in the rod's local frame, m
+    :param cable_offsets: guide-hole offsets in the rod's local frame, m: (n_cables, 3) one per
+        cable, or (n_cables, 1 + n_guides, 3) one per disk, base disk first
+        (``robot.hole_offsets``, general routing)
     :param cable_ends: (n_cables,) arc length of each cable's end disk, m (its section's last
         guide); None: every cable runs to the last guide
     :returns: guide positions (n_guides, 3), guide rotations (n_guides, 3, 3) and cable points:
@@ -29,12 +33,13 @@ def guide_and_cable_points(s_nodes, positions, rotations, guides, cable_offsets,
     """
     positions = np.asarray(positions, dtype=float)
     rotations = np.asarray(rotations, dtype=float)
-    offsets = np.asarray(cable_offsets, dtype=float).reshape(-1, 3)
     guides = np.asarray(guides, dtype=float)
     nodes = nearest_nodes(s_nodes, guides)
     path_nodes = np.concatenate([[0], nodes])
-    holes = positions[path_nodes][None, :, :] + np.einsum(
-        'kij,cj->cki', rotations[path_nodes], offsets)
+    offsets = np.asarray(cable_offsets, dtype=float)
+    if offsets.ndim < 3:  # one offset per cable: the same hole in every disk
+        offsets = np.repeat(offsets.reshape(-1, 1, 3), len(path_nodes), axis=1)
+    holes = holes_at(positions[path_nodes][None], rotations[path_nodes][None], offsets)
     if cable_ends is None:
         return positions[nodes], rotations[nodes], holes
     counts = 1 + np.searchsorted(guides, np.asarray(cable_ends, dtype=float) + 1e-9)

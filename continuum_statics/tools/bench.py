@@ -213,7 +213,8 @@ def _kernel_rows(robot, u0, force, ivp, repeat):
     state = robot.passive_state(u0)
     moments, tensions = robot.loads(state)
     args = (robot.s_grid, robot.params, robot.model_code, force[None], u0[None], moments[None],
-            tensions[None], robot.cable_offsets, robot.cable_end_node, robot.section_end_node)
+            tensions[None], robot.stage_routes, robot.route_kinks, robot.cable_end_node,
+            robot.section_end_node)
     bare = _row('kernel call (integrate_batch)', timings(lambda: integrate_batch(*args), repeat))
     print('  Python overhead per solve_ivp call: %.1f us' % (ivp - bare))
     old = _row('old classical RK4 kernel (reference)', timings(

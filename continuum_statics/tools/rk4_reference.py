@@ -8,7 +8,15 @@ import numba
 import numpy as np
 
 from continuum_statics.core.inputs import as_vector
-from continuum_statics.core.kernel import _C, _C_INV, _D, _D_INV, _F_BODY, _R0, _ROT0
+from continuum_statics.core.layout import (
+    BASE_POSITION_AT,
+    BASE_ROTATION_AT,
+    BODY_FORCE_AT,
+    C_AT,
+    C_INV_AT,
+    D_AT,
+    D_INV_AT,
+)
 from continuum_statics.core.shape import Shape
 
 STATE_SIZE = 18
@@ -17,9 +25,9 @@ STATE_SIZE = 18
 @numba.njit(cache=True, inline='always')
 def _derivative(y, p, out):
     """Right-hand side of eqs. 1, 2, 8, 9 for the state ``y``; writes ``out``."""
-    c0, c1, c2 = p[_C], p[_C + 1], p[_C + 2]
-    d0, d1, d2 = p[_D], p[_D + 1], p[_D + 2]
-    f0, f1, f2 = p[_F_BODY], p[_F_BODY + 1], p[_F_BODY + 2]
+    c0, c1, c2 = p[C_AT], p[C_AT + 1], p[C_AT + 2]
+    d0, d1, d2 = p[D_AT], p[D_AT + 1], p[D_AT + 2]
+    f0, f1, f2 = p[BODY_FORCE_AT], p[BODY_FORCE_AT + 1], p[BODY_FORCE_AT + 2]
     r00, r01, r02 = y[3], y[4], y[5]
     r10, r11, r12 = y[6], y[7], y[8]
     r20, r21, r22 = y[9], y[10], y[11]
@@ -52,13 +60,13 @@ def _derivative(y, p, out):
     fl1 = r01 * f0 + r11 * f1 + r21 * f2
     fl2 = r02 * f0 + r12 * f1 + r22 * f2
     # eq. 8: v' = D^-1 (-R^T f - u x n^l)
-    out[12] = (-fl0 - (u1 * n2 - u2 * n1)) * p[_D_INV]
-    out[13] = (-fl1 - (u2 * n0 - u0 * n2)) * p[_D_INV + 1]
-    out[14] = (-fl2 - (u0 * n1 - u1 * n0)) * p[_D_INV + 2]
+    out[12] = (-fl0 - (u1 * n2 - u2 * n1)) * p[D_INV_AT]
+    out[13] = (-fl1 - (u2 * n0 - u0 * n2)) * p[D_INV_AT + 1]
+    out[14] = (-fl2 - (u0 * n1 - u1 * n0)) * p[D_INV_AT + 2]
     # eq. 9: u' = C^-1 (-u x m^l - v x n^l)
-    out[15] = (-(u1 * m2 - u2 * m1) - (v1 * n2 - v2 * n1)) * p[_C_INV]
-    out[16] = (-(u2 * m0 - u0 * m2) - (v2 * n0 - v0 * n2)) * p[_C_INV + 1]
-    out[17] = (-(u0 * m1 - u1 * m0) - (v0 * n1 - v1 * n0)) * p[_C_INV + 2]
+    out[15] = (-(u1 * m2 - u2 * m1) - (v1 * n2 - v2 * n1)) * p[C_INV_AT]
+    out[16] = (-(u2 * m0 - u0 * m2) - (v2 * n0 - v0 * n2)) * p[C_INV_AT + 1]
+    out[17] = (-(u0 * m1 - u1 * m0) - (v0 * n1 - v1 * n0)) * p[C_INV_AT + 2]
 
 
 @numba.njit(cache=True, inline='always')
@@ -109,16 +117,16 @@ def integrate_batch(s_grid, params, tip_forces, base_bendings):
     for b in range(n_batch):
         y = states[b, 0]
         for i in range(3):
-            y[i] = params[_R0 + i]
+            y[i] = params[BASE_POSITION_AT + i]
         for i in range(9):
-            y[3 + i] = params[_ROT0 + i]
+            y[3 + i] = params[BASE_ROTATION_AT + i]
         # eq. 10: n(0) = F + rho*A*g*L*e_g, so v(0) - e3 = D^-1 R(0)^T n(0)
         for i in range(3):
             n_base = 0.0
             for j in range(3):
-                n_base += params[_ROT0 + 3 * j + i] * (
-                    tip_forces[b, j] + params[_F_BODY + j] * length)
-            y[12 + i] = n_base * params[_D_INV + i]
+                n_base += params[BASE_ROTATION_AT + 3 * j + i] * (
+                    tip_forces[b, j] + params[BODY_FORCE_AT + j] * length)
+            y[12 + i] = n_base * params[D_INV_AT + i]
             y[15 + i] = base_bendings[b, i]
         for node in range(1, n_nodes):
             h = s_grid[node] - s_grid[node - 1]
