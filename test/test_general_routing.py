@@ -97,9 +97,11 @@ def test_helical_cable_matches_the_rucker_webster_reference(tensions, tip_force)
 
 
 def test_helical_tendon_twists_the_rod_as_first_order_statics_says():
-    """Free rod, one helical tendon at small tension t: the rod-plus-tendon body beyond s is
-    free, so the rod's moment balances the tendon's, C u = -t l x tau with tau = (e3 + l') / k,
-    k = sqrt(1 + r^2 phi'^2). Its z part: GJ u_z = -t r^2 phi' / k, the same all along.
+    """A helical tendon on a free rod twists it by GJ u_z = -t r^2 phi' / k all along.
+
+    Free rod, one helical tendon at small tension t: the rod-plus-tendon body beyond s is free,
+    so the rod's moment balances the tendon's, C u = -t l x tau with tau = (e3 + l') / k,
+    k = sqrt(1 + r^2 phi'^2).
     """
     tension, turns = 0.02, 2.0
     robot = make(robot_file(helix_turns=turns, gravity=(0.0, 0.0, 0.0)))
@@ -152,8 +154,9 @@ def test_straight_routing_three_ways_is_one_robot():
 
 
 def test_per_disk_offsets_turn_the_cable_at_each_disk():
-    """Holes stepping round the rod disk by disk: the cable's length on the straight rod is the
-    sum of the straight hole-to-hole spans (eq. 11), computed here by hand.
+    """Holes stepping round the rod disk by disk: straight spans between them (eq. 11).
+
+    The cable's length on the straight rod is the sum of the hole-to-hole spans, by hand here.
     """
     angles = np.linspace(0.0, math.pi / 2.0, 11)
     holes = [_hole(a) for a in angles]
