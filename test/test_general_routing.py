@@ -14,7 +14,10 @@ import math
 import numpy as np
 import pytest
 from reference_rucker_webster import solve_reference
+import yaml
 
+from continuum_statics.calibration.parameters import candidate_robot
+from continuum_statics.calibration.robot_writer import write_robot_file
 from continuum_statics.core.layout import BENDING
 from continuum_statics.core.robot import Robot
 from continuum_statics.core.robot_file import parse_robot_description
@@ -195,3 +198,26 @@ def test_routing_mistakes_name_the_field(change, message):
     change(data)
     with pytest.raises(ValueError, match=message):
         parse_robot_description(data)
+
+
+def test_calibration_turns_routes_and_writes_them_back(tmp_path):
+    """A fitted cable angle turns a helix and per-disk holes alike; the file reads back."""
+    robot = make(robot_file(helix_entry={'name': 'helix', 'offsets': [_hole(0.1 * i)
+                                                                      for i in range(11)]}))
+    turned = candidate_robot(robot, {'cable_angle': np.array([0.0, 0.0, 0.0, 0.3])})
+    expected = [_hole(0.1 * i + 0.3) for i in range(11)]
+    np.testing.assert_allclose(turned.hole_offsets[3], expected, atol=1e-15)
+    np.testing.assert_allclose(turned.hole_offsets[:3], robot.hole_offsets[:3], atol=0.0)
+    source = tmp_path / 'routed.yaml'
+    source.write_text(yaml.safe_dump(robot_file(helix_entry={
+        'name': 'helix', 'offsets': [_hole(0.1 * i) for i in range(11)]})))
+    output = tmp_path / 'calibrated.yaml'
+    write_robot_file(output, source, turned, ('cable_angle',), ())
+    again = Robot(parse_robot_description(yaml.safe_load(output.read_text())))
+    np.testing.assert_allclose(again.hole_offsets, turned.hole_offsets, atol=1e-7)
+
+    helical = make(robot_file())
+    turned = candidate_robot(helical, {'cable_angle': np.array([0.0, 0.0, 0.0, 0.3])})
+    assert turned.description.cable_routes[3].start_angle == pytest.approx(0.8)
+    with pytest.raises(ValueError, match='section_length'):
+        candidate_robot(helical, {'section_length': np.array([0.26])})

@@ -231,6 +231,11 @@ def candidate_robot(robot, values, registered=False, shear_fixed=False):
         offsets = offsets * float(np.ravel(values['cable_offset_scale'])[0])
     if offsets is not description.cable_offsets:
         changes['cable_offsets'] = offsets
+        if description.cable_routes:  # offsets and helices turn and scale the same way
+            scale = float(np.ravel(values.get('cable_offset_scale', [1.0]))[0])
+            changes['cable_routes'] = tuple(
+                None if route is None else route.turned(angle, scale)
+                for route, angle in zip(description.cable_routes, angles))
     tendons = robot.tendons
     arrays = {f.name: np.array(getattr(tendons, f.name)) for f in dataclasses.fields(Tendons)}
     for k, section in enumerate(robot.sections):
@@ -251,6 +256,9 @@ def candidate_robot(robot, values, registered=False, shear_fixed=False):
         rod = scaled_rod(rod, _scalar(values.get('youngs_modulus'), rod.youngs_modulus),
                          _scalar(values.get('density'), rod.density), shear_fixed)
     if 'section_length' in values:
+        if description.cable_routes:
+            raise ValueError('section_length is not fitted on a robot with offsets or helix '
+                             'routes (their disks and turns would have to stretch too)')
         changes['sections'], changes['guides'], rod = _stretched(description, rod,
                                                                  values['section_length'])
     if rod is not description.rod:

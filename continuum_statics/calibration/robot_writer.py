@@ -8,6 +8,8 @@ import datetime
 import numpy as np
 import yaml
 
+from continuum_statics.core.routing import GuideOffsets, Helix
+
 #: Fit names that change the ``tendons`` blocks.
 TENDON_NAMES = ('cable_zero', 'stiffness', 'cable_stiffness', 'pretension', 'friction')
 
@@ -39,10 +41,11 @@ def write_robot_file(output, robot_file, robot, fit, header):
             holder['guides'] = _rounded(section.guides, 7)
     if set(fit) & set(TENDON_NAMES):
         _write_tendons(document, holders, robot)
+    routes = robot.description.routes()
     j = 0
     for holder in holders:
         for cable in holder.get('cables') or []:
-            cable['offset'] = _rounded(robot.cable_offsets[j], 7)
+            _write_route(cable, routes[j])
             j += 1
     lines = ['Calibrated by `python -m continuum_statics calibrate` on %s UTC'
              % datetime.datetime.now(datetime.timezone.utc).strftime('%Y-%m-%d %H:%M')]
@@ -89,3 +92,15 @@ def _number(value, digits=6):
 
 def _rounded(values, digits=9):
     return [_number(v, digits) for v in np.asarray(values, dtype=float)]
+
+
+def _write_route(cable, route):
+    """Write a cable's route into its file entry, in the form the file gave it."""
+    if isinstance(route, Helix):
+        cable['helix'] = {'radius': _number(route.radius, 9),
+                          'start_angle': _number(route.start_angle, 9),
+                          'turns_per_metre': _number(route.turns_per_metre, 9)}
+    elif isinstance(route, GuideOffsets):
+        cable['offsets'] = [_rounded(offset, 7) for offset in route.offsets]
+    else:
+        cable['offset'] = _rounded(route.offset, 7)

@@ -18,10 +18,11 @@ every cable j, l (columns 6 j..6 j + 2) then l' (6 j + 3..6 j + 5) at the Runge-
 (0 start, 1 middle, 2 end) of integration interval i (the distributed model's tendon tangent
 v + u x l + l', R&W eq. 12 in the body frame; one 2-D table so the kernel's inner loop indexes
 it like the constant offsets it replaces; a single row when every cable is straight),
-``route_kinks`` (N - 1,) whether some cable's l'
-jumps at the start of interval i (the strain jumps there, at a disk where a cable turns), and
+``route_kinks`` (N - 1,) whether some cable's l' jumps at the start of interval i (the strain
+jumps there, at a disk where a cable turns), and
 ``end_offsets`` (n_cables, 3) the hole at each cable's end disk (its pull's arm, e3 x l).
 """
+import dataclasses
 from dataclasses import dataclass
 import math
 
@@ -61,6 +62,11 @@ class Helix:
         tangents = self.radius * rate * np.stack([-np.sin(phi), np.cos(phi), zero], axis=1)
         return offsets, tangents
 
+    def turned(self, angle, scale=1.0):
+        """Return this helix turned about the backbone by ``angle`` (rad), radius x ``scale``."""
+        return dataclasses.replace(self, radius=self.radius * scale,
+                                   start_angle=self.start_angle + angle)
+
 
 @dataclass(frozen=True)
 class GuideOffsets:
@@ -90,6 +96,12 @@ class GuideOffsets:
         offsets = self.offsets[piece] + slope * (np.minimum(s, b) - a)[:, None]
         offsets[beyond] = self.offsets[-1]
         return offsets, slope
+
+    def turned(self, angle, scale=1.0):
+        """Return these holes turned about the backbone by ``angle`` (rad), radius x ``scale``."""
+        c, s = math.cos(angle), math.sin(angle)
+        turn = np.array([[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]]) * scale
+        return dataclasses.replace(self, offsets=self.offsets @ turn.T)
 
 
 @dataclass(frozen=True)
@@ -139,9 +151,9 @@ def hole_in(y, offset):
     """
     r, q = POSITION_AT, ROTATION_AT
     l0, l1, l2 = offset[0], offset[1], offset[2]
-    return (y[r] + y[q] * l0 + y[q + 1] * l1 + y[q + 2] * l2,
-            y[r + 1] + y[q + 3] * l0 + y[q + 4] * l1 + y[q + 5] * l2,
-            y[r + 2] + y[q + 6] * l0 + y[q + 7] * l1 + y[q + 8] * l2)
+    return (y[r] + (y[q] * l0 + y[q + 1] * l1 + y[q + 2] * l2),
+            y[r + 1] + (y[q + 3] * l0 + y[q + 4] * l1 + y[q + 5] * l2),
+            y[r + 2] + (y[q + 6] * l0 + y[q + 7] * l1 + y[q + 8] * l2))
 
 
 def holes_at(positions, rotations, offsets):
