@@ -17,6 +17,7 @@ from continuum_statics.core.kernel import (
     loads_from_state,
     probe,
 )
+from continuum_statics.core.layout import MOMENT_AT
 from continuum_statics.core.tendon_kernel import path_stretch
 
 #: Balance tolerance (relative) of a converged solve; cable rows: the estimate tolerance (m).
@@ -185,7 +186,8 @@ def jacobian_pieces(s_grid, params, model, tip_force, tip_moment, step, section_
     for c in range(size):
         h = step if c < 3 else tension_step
         for i in range(3):
-            balance[i, c] = (states[1 + c, tip, 18 + i] - states[0, tip, 18 + i]) * scale / h
+            balance[i, c] = ((states[1 + c, tip, MOMENT_AT + i] - states[0, tip, MOMENT_AT + i])
+                            * scale / h)
         for j in range(n):
             stretch = 1.0 + mean[j] * compliance[j]
             d_consumed[j, c] = (lengths[1 + c, j] - lengths[0, j]) / h / stretch

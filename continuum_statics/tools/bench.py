@@ -24,6 +24,7 @@ import numpy as np
 from scipy.integrate import solve_ivp as scipy_solve_ivp
 
 from continuum_statics import load_robot
+from continuum_statics.core.layout import MOMENT, POSITION, ROTATION
 
 CONFIG = Path(__file__).resolve().parents[2] / 'config'
 
@@ -124,7 +125,7 @@ def scipy_sections_tip(robot, state, fixed, tip_force, rtol=1e-3, atol=1e-6):
             length - s))])
 
     first = robot.integrate_state(state, tip_force, fixed)[0]  # r(0), R(0), M(0) as the kernel
-    y = np.concatenate([first[0:12], first[18:21]])
+    y = np.concatenate([first[POSITION], first[ROTATION], first[MOMENT]])  # SciPy's state
     ends = sorted({robot.s_grid[n] for n in robot.section_end_node if n >= 0} | {length})
     start = 0.0
     for end in ends:
