@@ -20,6 +20,7 @@ name                   kinds       variables
 ``pretension``         run         N per section
 ``friction``           run         one capstan coefficient for every cable
 ``section_length``     run         log factor per section on its length (guides scale with it)
+``section_bending``    run         log of each section's ``bending_scale`` (factor on E I, G J)
 ``youngs_modulus``     both        log factor on E (G follows, see :func:`scaled_rod`)
 ``density``            both        log factor on the density
 ``gravity``            run         m/s^2 in the tracker frame (|g| goes into the density)
@@ -34,11 +35,13 @@ import math
 import numpy as np
 
 from continuum_statics.core.robot import Robot
+from continuum_statics.core.robot_file import BENDING_SCALE_RANGE
 from continuum_statics.core.tendons import Tendons
 
 RUN_PARAMETERS = ('registration', 'base_position', 'section_rotation', 'cable_angle',
                   'cable_zero', 'stiffness', 'pretension', 'friction', 'youngs_modulus',
-                  'density', 'gravity', 'tip_marker', 'cable_stiffness', 'section_length')
+                  'density', 'gravity', 'tip_marker', 'cable_stiffness', 'section_length',
+                  'section_bending')
 TIP_LOAD_PARAMETERS = ('youngs_modulus', 'density', 'base_roll', 'base_pitch', 'base_yaw',
                        'cable_offset_scale')
 DEFAULT_FIT = ('registration', 'section_rotation', 'cable_angle', 'cable_zero', 'stiffness',
@@ -59,14 +62,17 @@ SECTION_LENGTH_BOUND = 0.2
 #: tension by 6 % over a full turn of wrap.
 DIFFERENCE_STEPS = {'section_rotation': 1e-4, 'cable_angle': 1e-4, 'cable_zero': 1e-6,
                     'stiffness': 1e-4, 'cable_stiffness': 1e-4, 'pretension': 1e-3,
-                    'friction': 1e-2, 'section_length': 1e-4, 'youngs_modulus': 1e-4,
+                    'friction': 1e-2, 'section_length': 1e-4, 'section_bending': 1e-4,
+                    'youngs_modulus': 1e-4,
                     'density': 1e-4, 'gravity': 1e-3, 'tip_marker': 1e-6, 'base_roll': 1e-3,
                     'base_pitch': 1e-3, 'base_yaw': 1e-3, 'cable_offset_scale': 1e-4}
 #: Blocks whose variables are logarithms of their values.
-LOG_VARIABLES = ('stiffness', 'cable_stiffness', 'youngs_modulus', 'density', 'section_length')
+LOG_VARIABLES = ('stiffness', 'cable_stiffness', 'youngs_modulus', 'density', 'section_length',
+                 'section_bending')
 #: Units of each name's values (after :meth:`SearchVector.values`).
 UNITS = {'section_rotation': 'rad', 'cable_angle': 'rad', 'cable_zero': 'm', 'stiffness': 'N',
          'cable_stiffness': 'N', 'pretension': 'N', 'friction': '1', 'section_length': 'm',
+         'section_bending': '1',
          'youngs_modulus': 'Pa', 'density': 'kg/m^3', 'gravity': 'm/s^2', 'tip_marker': 'm',
          'base_roll': 'deg', 'base_pitch': 'deg', 'base_yaw': 'deg', 'cable_offset_scale': '1'}
 
@@ -135,6 +141,8 @@ class SearchVector:
             'friction': (np.array([float(np.mean(tendons.friction))]), 0.0, 1.0),
             'section_length': (np.zeros(n_sections), -SECTION_LENGTH_BOUND,
                                SECTION_LENGTH_BOUND),
+            'section_bending': (np.log([s.bending_scale for s in robot.sections]),
+                                np.log(BENDING_SCALE_RANGE[0]), np.log(BENDING_SCALE_RANGE[1])),
             'youngs_modulus': log,
             'density': log,
             'gravity': (np.array(robot.gravity, dtype=float), -100.0, 100.0),
@@ -183,7 +191,7 @@ class SearchVector:
         rod, out = self.robot.rod, {}
         for block in self.blocks:
             v = np.array(x[block.index], dtype=float)
-            if block.name in ('stiffness', 'cable_stiffness'):
+            if block.name in ('stiffness', 'cable_stiffness', 'section_bending'):
                 v = np.exp(v)
             elif block.name == 'youngs_modulus':
                 v = rod.youngs_modulus * np.exp(v)
@@ -261,6 +269,13 @@ def candidate_robot(robot, values, registered=False, shear_fixed=False):
                              'routes (their disks and turns would have to stretch too)')
         changes['sections'], changes['guides'], rod = _stretched(description, rod,
                                                                  values['section_length'])
+    if 'section_bending' in values:
+        if not robot.description.sections or robot.sections[0].name == 'section_0':
+            raise ValueError('section_bending needs a robot file with sections: (one '
+                             "section's factor is youngs_modulus)")
+        changes['sections'] = tuple(
+            dataclasses.replace(section, bending_scale=float(scale)) for section, scale in
+            zip(changes.get('sections', description.sections), values['section_bending']))
     if rod is not description.rod:
         changes['rod'] = rod
     if 'tip_marker' in values:

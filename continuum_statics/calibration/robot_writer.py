@@ -39,6 +39,9 @@ def write_robot_file(output, robot_file, robot, fit, header):
         document['rod']['length'] = _number(rod.length, 9)
         for holder, section in zip(holders, robot.sections):
             holder['guides'] = _rounded(section.guides, 7)
+    if 'section_bending' in fit:
+        for holder, section in zip(holders, robot.sections):
+            holder['bending_scale'] = _number(section.bending_scale)
     if set(fit) & set(TENDON_NAMES):
         _write_tendons(document, holders, robot)
     routes = robot.description.routes()

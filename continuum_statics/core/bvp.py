@@ -9,7 +9,6 @@ each solve warm-started from the previous one.
 """
 import numpy as np
 
-from continuum_statics.core.kernel import pack_params
 from continuum_statics.core.layout import ProbeRows
 
 
@@ -107,8 +106,7 @@ def solve_loaded(robot, loads, fixed, tip_force, tip_moment, start=None):
         for k in range(1, increments + 1):
             fraction = k / increments
             body_force = fraction * robot.body_force
-            params = pack_params(robot.c, robot.d, body_force, robot.base_position,
-                                 robot.base_rotation)
+            params = robot.params_for(body_force)
             step_loads = fraction * loads
             force, moment = fraction * tip_force, fraction * tip_moment
             if k == 1:

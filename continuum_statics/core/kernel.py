@@ -41,6 +41,7 @@ from continuum_statics.core.layout import (  # the node and parameter layouts, s
     C_INV_AT,
     D_INV_AT,
     MOMENT_AT,
+    PARAMS_SIZE,
     POSITION_AT,
     ROTATION_AT,
     STATE_SIZE,
@@ -54,18 +55,24 @@ STRAIN_ITERATIONS = 8  # Newton steps at most; 3 reach round-off at 30 N on 10 m
 _SIXTH, _TWELFTH = 1.0 / 6.0, 1.0 / 12.0  # multiplications: a division is ~15 cycles
 
 
-def pack_params(c, d, f_body, r0, rot0):
+def pack_params(c, d, f_body, r0, rot0, interval_scale=None):
     """Pack the rod constants into the flat vector the kernel reads.
 
     :param c: (3,) diagonal of C, bending and torsional stiffness (N m^2), eq. 7
     :param d: (3,) diagonal of D, shear and axial stiffness (N), eq. 6
     :param f_body: (3,) distributed body force rho*A*g*e_g in the global frame (N/m)
     :param r0: (3,) base position (m); ``rot0``: (3, 3) base orientation R(0)
+    :param interval_scale: (N - 1,) factor on C over each integration interval (sections whose
+        disks stiffen the rod), appended with its reciprocals; None: C everywhere
     """
     c = np.asarray(c, dtype=float)
     d = np.asarray(d, dtype=float)
-    return np.concatenate([c, 1.0 / c, d, 1.0 / d, np.asarray(f_body, dtype=float),
-                           np.asarray(r0, dtype=float), np.asarray(rot0, dtype=float).ravel()])
+    parts = [c, 1.0 / c, d, 1.0 / d, np.asarray(f_body, dtype=float),
+             np.asarray(r0, dtype=float), np.asarray(rot0, dtype=float).ravel()]
+    if interval_scale is not None:
+        scale = np.asarray(interval_scale, dtype=float)
+        parts += [scale, 1.0 / scale]
+    return np.concatenate(parts)
 
 
 # Taylor coefficients of sin t / t, (1 - cos t) / t^2 and (t - sin t) / t^3 in t^2, to t^16
@@ -144,26 +151,28 @@ def _to_local(rot, m0, m1, m2):
 
 
 @numba.njit(cache=True)
-def _strain_newton(ml, nl, u, w, p, tensions, routes, point, active):
+def _strain_newton(ml, nl, u, w, c, p, tensions, routes, point, active):
     """Strains (u, v - e3) of the distributed model (eqs. 6, 7 with the cables' pressure).
 
     C u = ml - sum t l x tau, D (v - e3) = nl - sum t tau over the cables passing here, with
     tau = q / |q|, q = v + u x l + l' (R&W 2011 eq. 12 in the body frame; l, l' of cable j in
     ``routes[point, 6 j:6 j + 6]``, :class:`~continuum_statics.core.routing.Routing`).
-    ``ml``, ``nl`` = R^T M, R^T N; ``u``, ``w`` the previous strains, the start of Newton's
+    ``c`` the diagonal of C here (N m^2). ``ml``, ``nl`` = R^T M, R^T N; ``u``, ``w`` the
+    previous strains, the start of Newton's
     iteration (exact Jacobian, quadratic convergence: l' does not depend on u);
     ``active[j]``: cable j passes here.
     """
     ml0, ml1, ml2 = ml
     nl0, nl1, nl2 = nl
+    routed = routes.shape[0] > 1  # one row: every cable straight, l' = 0
     u0, u1, u2 = u
     w0, w1, w2 = w
     for _ in range(STRAIN_ITERATIONS):
         sm0 = sm1 = sm2 = 0.0  # sum t l x tau
         sn0 = sn1 = sn2 = 0.0  # sum t tau
-        k00 = p[C_AT]
-        k11 = p[C_AT + 1]
-        k22 = p[C_AT + 2]
+        k00 = c[0]
+        k11 = c[1]
+        k22 = c[2]
         k01 = k02 = k12 = 0.0
         for j in range(active.shape[0]):
             t = tensions[j]
@@ -172,9 +181,13 @@ def _strain_newton(ml, nl, u, w, p, tensions, routes, point, active):
             # indexed, not a view of the row: a view costs two atomic reference counts
             k = 6 * j
             l0, l1, l2 = routes[point, k], routes[point, k + 1], routes[point, k + 2]
-            q0 = w0 + u1 * l2 - u2 * l1 + routes[point, k + 3]  # v + u x l + l'
-            q1 = w1 + u2 * l0 - u0 * l2 + routes[point, k + 4]
-            q2 = w2 + 1.0 + u0 * l1 - u1 * l0 + routes[point, k + 5]
+            q0 = w0 + u1 * l2 - u2 * l1  # v + u x l + l'
+            q1 = w1 + u2 * l0 - u0 * l2
+            q2 = w2 + 1.0 + u0 * l1 - u1 * l0
+            if routed:
+                q0 += routes[point, k + 3]
+                q1 += routes[point, k + 4]
+                q2 += routes[point, k + 5]
             inv = 1.0 / math.sqrt(q0 * q0 + q1 * q1 + q2 * q2)
             tau0, tau1, tau2 = q0 * inv, q1 * inv, q2 * inv
             sm0 += t * (l1 * tau2 - l2 * tau1)
@@ -197,9 +210,9 @@ def _strain_newton(ml, nl, u, w, p, tensions, routes, point, active):
             k01 -= s * (l0 * l1 + a0 * a1)
             k02 -= s * (l0 * l2 + a0 * a2)
             k12 -= s * (l1 * l2 + a1 * a2)
-        r0 = ml0 - p[C_AT] * u0 - sm0
-        r1 = ml1 - p[C_AT + 1] * u1 - sm1
-        r2 = ml2 - p[C_AT + 2] * u2 - sm2
+        r0 = ml0 - c[0] * u0 - sm0
+        r1 = ml1 - c[1] * u1 - sm1
+        r2 = ml2 - c[2] * u2 - sm2
         # solve the symmetric 3x3 system K du = r by its adjugate
         a00 = k11 * k22 - k12 * k12
         a01 = k02 * k12 - k01 * k22
@@ -335,7 +348,12 @@ def integrate_batch(s_grid, params, model, tip_forces, base_bendings, disk_momen
     active = np.zeros(n_cables, dtype=np.bool_)
     vectors = np.empty((3, 3))  # force, u, w of the base (for _base_stretch)
     sums = np.empty(6)
-    c_inv = (params[C_INV_AT], params[C_INV_AT + 1], params[C_INV_AT + 2])
+    c_rod = (params[C_AT], params[C_AT + 1], params[C_AT + 2])
+    c_inv_rod = (params[C_INV_AT], params[C_INV_AT + 1], params[C_INV_AT + 2])
+    c, c_inv = c_rod, c_inv_rod
+    # per-interval factors on C follow the rod constants when a section's disks stiffen it
+    scaled = params.shape[0] > PARAMS_SIZE
+    inverse_at = PARAMS_SIZE + n_nodes - 1
     d_inv = (params[D_INV_AT], params[D_INV_AT + 1], params[D_INV_AT + 2])
     f_body = (params[BODY_FORCE_AT], params[BODY_FORCE_AT + 1], params[BODY_FORCE_AT + 2])
     q = BASE_ROTATION_AT
@@ -358,7 +376,10 @@ def integrate_batch(s_grid, params, model, tip_forces, base_bendings, disk_momen
         u = (vectors[1, 0], vectors[1, 1], vectors[1, 2])
         w = (vectors[2, 0], vectors[2, 1], vectors[2, 2])
         # M(0) = R(0) (C u(0) + sum t l x tau)
-        ml0, ml1, ml2 = params[C_AT] * u[0], params[C_AT + 1] * u[1], params[C_AT + 2] * u[2]
+        if scaled:
+            sc = params[PARAMS_SIZE]
+            c = (c_rod[0] * sc, c_rod[1] * sc, c_rod[2] * sc)
+        ml0, ml1, ml2 = c[0] * u[0], c[1] * u[1], c[2] * u[2]
         if model == DISTRIBUTED:
             _cable_sums(vectors[1], vectors[2], tens, stage_routes, active, sums)
             ml0, ml1, ml2 = ml0 + sums[0], ml1 + sums[1], ml2 + sums[2]
@@ -380,6 +401,12 @@ def integrate_batch(s_grid, params, model, tip_forces, base_bendings, disk_momen
             newton = False  # a tensioned cable of the distributed model passes this interval
             interval = node - 1
             point = 3 * interval if routed else 0  # row of the interval's start in the table
+            if scaled:
+                sc, isc = params[PARAMS_SIZE + interval], params[inverse_at + interval]
+                c = (c_rod[0] * sc, c_rod[1] * sc, c_rod[2] * sc)
+                c_inv = (c_inv_rod[0] * isc, c_inv_rod[1] * isc, c_inv_rod[2] * isc)
+                if interval > 0 and sc != params[PARAMS_SIZE + interval - 1]:
+                    fresh = False  # C changes at this node: so does the strain
             for j in range(n_cables):
                 active[j] = cable_end_node[j] >= node
                 if model == DISTRIBUTED and active[j] and tens[j] != 0.0:
@@ -392,7 +419,7 @@ def integrate_batch(s_grid, params, model, tip_forces, base_bendings, disk_momen
             if not fresh:
                 ml, nl = _to_local(rot, m0, m1, m2), _to_local(rot, n0, n1, n2)
                 if newton:
-                    u, w = _strain_newton(ml, nl, u, w, params, tens, stage_routes, point,
+                    u, w = _strain_newton(ml, nl, u, w, c, params, tens, stage_routes, point,
                                           active)
                 else:
                     u = (ml[0] * c_inv[0], ml[1] * c_inv[1], ml[2] * c_inv[2])
@@ -418,7 +445,7 @@ def integrate_batch(s_grid, params, model, tip_forces, base_bendings, disk_momen
                     f2 + f_body[2] * (length - s)
                 ml, nl = _to_local(rot_stage, ms0, ms1, ms2), _to_local(rot_stage, n0, n1, n2)
                 if newton:
-                    u, w = _strain_newton(ml, nl, u, w, params, tens, stage_routes,
+                    u, w = _strain_newton(ml, nl, u, w, c, params, tens, stage_routes,
                                           point + routed * (1 if stage < 3 else 2), active)
                 else:
                     u = (ml[0] * c_inv[0], ml[1] * c_inv[1], ml[2] * c_inv[2])
@@ -452,7 +479,7 @@ def integrate_batch(s_grid, params, model, tip_forces, base_bendings, disk_momen
                 f2 + f_body[2] * (length - s)
             ml, nl = _to_local(rot, m0, m1, m2), _to_local(rot, n0, n1, n2)
             if newton:
-                u, w = _strain_newton(ml, nl, u, w, params, tens, stage_routes,
+                u, w = _strain_newton(ml, nl, u, w, c, params, tens, stage_routes,
                                       point + 2 * routed, active)
             else:
                 u = (ml[0] * c_inv[0], ml[1] * c_inv[1], ml[2] * c_inv[2])

@@ -64,6 +64,20 @@ def _grid(length, guides, steps):
     return grid, np.array(guide_nodes, dtype=np.int64)
 
 
+def _interval_scale(s_grid, sections):
+    """Factor on C over each integration interval (N - 1,), or None when every one is 1.
+
+    Section k covers the arc lengths from the previous section's end disk to its own.
+    """
+    scales = [getattr(section, 'bending_scale', 1.0) for section in sections]
+    if all(scale == 1.0 for scale in scales):
+        return None
+    middle = 0.5 * (s_grid[:-1] + s_grid[1:])
+    ends = np.array([section.end for section in sections])
+    index = np.minimum(np.searchsorted(ends, middle), len(sections) - 1)
+    return np.asarray(scales, dtype=float)[index]
+
+
 def _moment_basis(offsets):
     """Orthonormal basis (3, rank) of the local moments t (e3 x l) a set of cables can apply."""
     arms = np.cross([0.0, 0.0, 1.0], np.reshape(offsets, (-1, 3)))
@@ -125,9 +139,14 @@ class Robot:
         self.d = rod.shear_stiffness
         # distributed weight rho*A*g*e_g (N/m), the body force f of eqs. 3, 4 and 8
         self.body_force = rod.mass_per_length * np.asarray(self.gravity)
-        self.params = pack_params(self.c, self.d, self.body_force, self.base_position,
-                                  self.base_rotation)
         self.s_grid, self.guide_nodes = _grid(rod.length, self.guides, self.solver.steps)
+        self.interval_scale = _interval_scale(self.s_grid, self.sections)
+        self.params = self.params_for(self.body_force)
+        # C at each node (left limit, as the node's strains; the base: the first interval's),
+        # N m^2: the shapes' moments
+        scale = (np.ones(len(self.s_grid) - 1) if self.interval_scale is None
+                 else self.interval_scale)
+        self.node_c = self.c * np.concatenate([scale[:1], scale])[:, None]
         self._layout()
         self.straight_cable_lengths = self.cable_lengths(self._straight_shape())
         limits = np.asarray(self.cable_length_limits, dtype=float).reshape(-1, 2)
@@ -137,6 +156,11 @@ class Robot:
                 raise ValueError('cable %r: length_limits [%g, %g] m exclude its straight '
                                  'length %.6g m (the homed pose): check the limits, the hole '
                                  'offset and the guides' % (name, low, high, length))
+
+    def params_for(self, body_force):
+        """Return the kernel's rod constants (:func:`kernel.pack_params`) with this body force."""
+        return pack_params(self.c, self.d, body_force, self.base_position, self.base_rotation,
+                           self.interval_scale)
 
     def _layout(self):
         """Index tables the kernel reads: disks, cable ends, routes, moment bases, layout."""
@@ -262,7 +286,7 @@ class Robot:
 
     def make_shape(self, state, tip_force, states, fixed_tensions=None):
         """Wrap kernel states in a :class:`Shape` that remembers its solver state."""
-        return Shape(self.s_grid, states, np.array(state[:3]), tip_force, self.c, self.d,
+        return Shape(self.s_grid, states, np.array(state[:3]), tip_force, self.node_c, self.d,
                      state=np.array(state, dtype=float), fixed_tensions=self.tensions_or_zero(
                          fixed_tensions).copy())
 
@@ -282,7 +306,7 @@ class Robot:
                                  self.section_end_node)[0]
         state = np.zeros(self.state_size)
         state[:3] = u0
-        return Shape(self.s_grid, states, u0, tip_force, self.c, self.d, state=state,
+        return Shape(self.s_grid, states, u0, tip_force, self.node_c, self.d, state=state,
                      fixed_tensions=np.zeros(len(self.cable_names)))
 
     def solve_bvp(self, tip_force=(0.0, 0.0, 0.0), tip_moment=(0.0, 0.0, 0.0), u0_guess=None,

@@ -93,12 +93,14 @@ class Section:
     """One section: guide disks (arc lengths, m; the last is its end disk) and its cables.
 
     A cable of this section runs from the base disk (s = 0) through every guide disk of this and
-    all earlier sections and ends at :attr:`end`.
+    all earlier sections and ends at :attr:`end`. ``bending_scale`` multiplies the rod's bending
+    and torsional stiffness C over the section (its disks stiffen the rod; 1: the bare rod).
     """
 
     name: str
     guides: np.ndarray
     cable_indices: tuple
+    bending_scale: float = 1.0
 
     @property
     def end(self):
@@ -150,7 +152,9 @@ _BASE_KEYS = {'frame_id', 'position', 'orientation'}
 _ROUTE_KEYS = ('offset', 'offsets', 'helix')
 _CABLE_KEYS = {'name', *_ROUTE_KEYS, 'length_limits', 'zero_offset', *TENDON_KEYS}
 _HELIX_KEYS = {'radius', 'start_angle', 'turns_per_metre'}
-_SECTION_KEYS = {'name', 'guides', 'cables', 'tendons'}
+_SECTION_KEYS = {'name', 'guides', 'cables', 'tendons', 'bending_scale'}
+#: Plausible factors on the rod's bending stiffness a section's disks give.
+BENDING_SCALE_RANGE = (0.1, 100.0)
 _TOP_KEYS = {'name', 'description', 'rod', 'base', 'gravity', 'cables', 'guides', 'solver',
              'sections', 'cable_model', 'tendons', 'tip_marker'}
 
@@ -397,7 +401,12 @@ def _parse_sections(data, length, tendons, defaults, routes):
         path_guides = np.concatenate([s.guides for s in sections] + [guides])
         section_offsets, section_limits = _parse_cables(item, guides, prefix, names, tendons,
                                                         section_defaults, routes, path_guides)
-        sections.append(Section(name, _frozen(guides), tuple(range(first, len(names)))))
+        scale = _positive(item.get('bending_scale', 1.0), prefix + 'bending_scale')
+        if not BENDING_SCALE_RANGE[0] <= scale <= BENDING_SCALE_RANGE[1]:
+            raise ValueError("%sbending_scale must be in [%g, %g] (a factor on the rod's E I "
+                             'and G J over the section), got %g'
+                             % (prefix, *BENDING_SCALE_RANGE, scale))
+        sections.append(Section(name, _frozen(guides), tuple(range(first, len(names))), scale))
         offsets.append(section_offsets)
         limits.append(section_limits)
         end = guides[-1]

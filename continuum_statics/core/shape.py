@@ -19,7 +19,7 @@ class Shape:
     :ivar u: (N, 3) local bending and twist (1/m)
     :ivar u0: (3,) base bending u(0) the shape was integrated from (1/m)
     :ivar tip_force: (3,) tip force F, global frame (N)
-    :ivar c: (3,) bending/torsional stiffness diagonal C (N m^2)
+    :ivar c: (3,) or (N, 3) per node: bending/torsional stiffness diagonal C (N m^2)
     :ivar d: (3,) shear/axial stiffness diagonal D (N)
     :ivar state: solver state (see :mod:`continuum_statics.core.robot`), or None
     :ivar fixed_tensions: (n_cables,) tensions given to the solver (N), or None
@@ -78,7 +78,8 @@ class Shape:
     @property
     def tip_moment(self):
         """The rod's internal moment at the tip, m(L) = R C u (global, N m)."""
-        return self.tip_rotation @ (self.c * self.states[-1, BENDING])
+        return self.tip_rotation @ (np.broadcast_to(self.c, (len(self.s), 3))[-1]
+                                    * self.states[-1, BENDING])
 
     def sample(self, count):
         """Evenly spaced poses along the backbone, base and tip included.
