@@ -251,6 +251,37 @@ def test_fit_recovers_section_bending_stiffness_and_writes_it(tmp_path):
     np.testing.assert_allclose([s.bending_scale for s in written.sections], found, rtol=1e-5)
 
 
+def test_fit_recovers_disk_masses():
+    """Guide disks of 0.3 g, 0.2 g and 0.1 g (proximal to distal) under gravity: found.
+
+    On the v6 rod, gravity across its axis (tips 10 mm from the weightless disks'), to 1e-4.
+
+    Heavier disks (4 g) bend this thin rod by centimetres and the fit's trial steps then jump
+    between equilibria of the slack cables; the fit stops short of the truth (noted in
+    issue 21's closing note).
+    """
+    nominal = load_robot(V6)
+    tendons = dataclasses.replace(Tendons.default(9), stiffness=np.full(9, 500.0),
+                                  pretension=np.full(9, 1.0))
+    robot = nominal.__class__(dataclasses.replace(nominal.description, tendons=tendons,
+                                                  gravity=np.array([0.0, -9.81, 0.0])))
+    masses = np.array([0.0003, 0.0002, 0.0001])
+    truth = RunModel(robot, ['disk_mass'], None).vector.robot_for(masses)
+    lengths = pulls(truth)
+    run = RecordedRun(times=np.arange(len(lengths), dtype=float), labels=('',) * len(lengths),
+                      lengths=lengths, tips=np.zeros((len(lengths), 3)), source='synthetic')
+    points, failed = replay(truth, run)
+    assert not failed.any()
+    run = dataclasses.replace(run, tips=points)
+    model = RunModel(robot, ['disk_mass'], run)
+    start = rms(model.residuals(model.start())[:3 * len(run)].reshape(-1, 3))
+    result = fit(model, log=lambda line: None, workers=2)
+    errors, _ = model.errors(result.x, run)
+    assert start > 5e-3
+    assert rms(errors) < 1e-4 * start
+    np.testing.assert_allclose(model.values(result.x)['disk_mass'], masses, rtol=1e-4)
+
+
 def test_selection_keeps_the_physics_the_run_shows_and_drops_what_it_does_not():
     """Truth with capstan friction: cross-validation keeps friction, not a tip-marker shift.
 

@@ -21,6 +21,7 @@ name                   kinds       variables
 ``friction``           run         one capstan coefficient for every cable
 ``section_length``     run         log factor per section on its length (guides scale with it)
 ``section_bending``    run         log of each section's ``bending_scale`` (factor on E I, G J)
+``disk_mass``          run         kg per section: the mass of each of its guide disks
 ``youngs_modulus``     both        log factor on E (G follows, see :func:`scaled_rod`)
 ``density``            both        log factor on the density
 ``gravity``            run         m/s^2 in the tracker frame (|g| goes into the density)
@@ -41,7 +42,7 @@ from continuum_statics.core.tendons import Tendons
 RUN_PARAMETERS = ('registration', 'base_position', 'section_rotation', 'cable_angle',
                   'cable_zero', 'stiffness', 'pretension', 'friction', 'youngs_modulus',
                   'density', 'gravity', 'tip_marker', 'cable_stiffness', 'section_length',
-                  'section_bending')
+                  'section_bending', 'disk_mass')
 TIP_LOAD_PARAMETERS = ('youngs_modulus', 'density', 'base_roll', 'base_pitch', 'base_yaw',
                        'cable_offset_scale')
 DEFAULT_FIT = ('registration', 'section_rotation', 'cable_angle', 'cable_zero', 'stiffness',
@@ -54,6 +55,11 @@ CLOSED_FORM = ('registration', 'base_position')
 STIFFNESS_START = 1000.0
 #: Bounds of a log factor (e^+-3: 0.05 to 20 times the file's value).
 LOG_FACTOR_BOUND = 3.0
+#: Heaviest guide disk a fit may find (kg): a 3-D-printed disk of a lab robot weighs grams.
+DISK_MASS_BOUND = 0.05
+#: Start of a disk mass the file does not give (kg): least_squares scales its first trust
+#: region by the start (x_scale='jac'), and a start on the bound (0) would make it vanish.
+DISK_MASS_START = 1e-4
 #: Bounds of a section length's log factor (+-20 %: a wrong section length is a few mm).
 SECTION_LENGTH_BOUND = 0.2
 #: Finite-difference step of each name's variables (optimiser units): large enough that the
@@ -63,6 +69,7 @@ SECTION_LENGTH_BOUND = 0.2
 DIFFERENCE_STEPS = {'section_rotation': 1e-4, 'cable_angle': 1e-4, 'cable_zero': 1e-6,
                     'stiffness': 1e-4, 'cable_stiffness': 1e-4, 'pretension': 1e-3,
                     'friction': 1e-2, 'section_length': 1e-4, 'section_bending': 1e-4,
+                    'disk_mass': 1e-5,
                     'youngs_modulus': 1e-4,
                     'density': 1e-4, 'gravity': 1e-3, 'tip_marker': 1e-6, 'base_roll': 1e-3,
                     'base_pitch': 1e-3, 'base_yaw': 1e-3, 'cable_offset_scale': 1e-4}
@@ -72,7 +79,7 @@ LOG_VARIABLES = ('stiffness', 'cable_stiffness', 'youngs_modulus', 'density', 's
 #: Units of each name's values (after :meth:`SearchVector.values`).
 UNITS = {'section_rotation': 'rad', 'cable_angle': 'rad', 'cable_zero': 'm', 'stiffness': 'N',
          'cable_stiffness': 'N', 'pretension': 'N', 'friction': '1', 'section_length': 'm',
-         'section_bending': '1',
+         'section_bending': '1', 'disk_mass': 'kg',
          'youngs_modulus': 'Pa', 'density': 'kg/m^3', 'gravity': 'm/s^2', 'tip_marker': 'm',
          'base_roll': 'deg', 'base_pitch': 'deg', 'base_yaw': 'deg', 'cable_offset_scale': '1'}
 
@@ -143,6 +150,8 @@ class SearchVector:
                                SECTION_LENGTH_BOUND),
             'section_bending': (np.log([s.bending_scale for s in robot.sections]),
                                 np.log(BENDING_SCALE_RANGE[0]), np.log(BENDING_SCALE_RANGE[1])),
+            'disk_mass': (np.maximum([s.disk_mass for s in robot.sections], DISK_MASS_START),
+                          0.0, DISK_MASS_BOUND),
             'youngs_modulus': log,
             'density': log,
             'gravity': (np.array(robot.gravity, dtype=float), -100.0, 100.0),
@@ -276,6 +285,12 @@ def candidate_robot(robot, values, registered=False, shear_fixed=False):
         changes['sections'] = tuple(
             dataclasses.replace(section, bending_scale=float(scale)) for section, scale in
             zip(changes.get('sections', description.sections), values['section_bending']))
+    if 'disk_mass' in values:
+        if not robot.description.sections or robot.sections[0].name == 'section_0':
+            raise ValueError('disk_mass needs a robot file with sections:')
+        changes['sections'] = tuple(
+            dataclasses.replace(section, disk_mass=float(mass)) for section, mass in
+            zip(changes.get('sections', description.sections), values['disk_mass']))
     if rod is not description.rod:
         changes['rod'] = rod
     if 'tip_marker' in values:

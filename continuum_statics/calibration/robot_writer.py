@@ -42,6 +42,9 @@ def write_robot_file(output, robot_file, robot, fit, header):
     if 'section_bending' in fit:
         for holder, section in zip(holders, robot.sections):
             holder['bending_scale'] = _number(section.bending_scale)
+    if 'disk_mass' in fit:
+        for holder, section in zip(holders, robot.sections):
+            holder['disk_mass'] = _number(section.disk_mass)
     if set(fit) & set(TENDON_NAMES):
         _write_tendons(document, holders, robot)
     routes = robot.description.routes()

@@ -16,17 +16,22 @@ class ConvergenceError(RuntimeError):
     """A solver did not reach its tolerance within its iteration limit."""
 
 
-def linear_guess(robot, tip_force, tip_moment, body_force=None, loads=None, fixed=None):
+def linear_guess(robot, tip_force, tip_moment, gravity_fraction=1.0, loads=None, fixed=None):
     """u(0) that balances the loads on the straight rod: the small-deflection solution.
 
     m(0) = tau + L d x F + (L^2 / 2) d x f for a straight rod along d (eqs. 3, 5 integrated),
-    plus the cables' moments, which the straight rod carries unchanged down to the base.
+    plus the disks' weights (sum over intervals of h d x W, W the weight beyond) and the cables'
+    moments, which the straight rod carries unchanged down to the base. Gravity is scaled by
+    ``gravity_fraction`` (continuation).
     """
-    body_force = robot.body_force if body_force is None else body_force
+    body_force = gravity_fraction * robot.body_force
     axis = robot.base_rotation[:, 2]
     length = robot.length
     base_moment = (tip_moment + length * _cross(axis, tip_force)
                    + 0.5 * length ** 2 * _cross(axis, body_force))
+    if robot.interval_weight is not None:
+        beyond = gravity_fraction * np.diff(robot.s_grid) @ robot.interval_weight
+        base_moment = base_moment + _cross(axis, beyond)
     local = robot.base_rotation.T @ base_moment
     if loads is not None and len(robot.cable_names):
         moments, tensions = robot.loads(loads, fixed)
@@ -105,12 +110,11 @@ def solve_loaded(robot, loads, fixed, tip_force, tip_moment, start=None):
         state = np.zeros_like(loads)
         for k in range(1, increments + 1):
             fraction = k / increments
-            body_force = fraction * robot.body_force
-            params = robot.params_for(body_force)
+            params = robot.params_for(fraction)
             step_loads = fraction * loads
             force, moment = fraction * tip_force, fraction * tip_moment
             if k == 1:
-                step_loads[:3] = linear_guess(robot, force, moment, body_force, step_loads,
+                step_loads[:3] = linear_guess(robot, force, moment, fraction, step_loads,
                                               fraction * fixed)
             else:
                 step_loads[:3] = state[:3]

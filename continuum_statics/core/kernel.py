@@ -55,7 +55,7 @@ STRAIN_ITERATIONS = 8  # Newton steps at most; 3 reach round-off at 30 N on 10 m
 _SIXTH, _TWELFTH = 1.0 / 6.0, 1.0 / 12.0  # multiplications: a division is ~15 cycles
 
 
-def pack_params(c, d, f_body, r0, rot0, interval_scale=None):
+def pack_params(c, d, f_body, r0, rot0, interval_scale=None, interval_weight=None):
     """Pack the rod constants into the flat vector the kernel reads.
 
     :param c: (3,) diagonal of C, bending and torsional stiffness (N m^2), eq. 7
@@ -63,15 +63,22 @@ def pack_params(c, d, f_body, r0, rot0, interval_scale=None):
     :param f_body: (3,) distributed body force rho*A*g*e_g in the global frame (N/m)
     :param r0: (3,) base position (m); ``rot0``: (3, 3) base orientation R(0)
     :param interval_scale: (N - 1,) factor on C over each integration interval (sections whose
-        disks stiffen the rod), appended with its reciprocals; None: C everywhere
+        disks stiffen the rod); None: C everywhere
+    :param interval_weight: (N - 1, 3) weight of the disks beyond each interval, global (N),
+        the disk at the interval's end included; None: no disk weights
+    The two per-interval blocks follow the 27 rod constants when either is given: the scales,
+    their reciprocals, then the weights (3 per interval).
     """
     c = np.asarray(c, dtype=float)
     d = np.asarray(d, dtype=float)
     parts = [c, 1.0 / c, d, 1.0 / d, np.asarray(f_body, dtype=float),
              np.asarray(r0, dtype=float), np.asarray(rot0, dtype=float).ravel()]
-    if interval_scale is not None:
-        scale = np.asarray(interval_scale, dtype=float)
-        parts += [scale, 1.0 / scale]
+    if interval_scale is not None or interval_weight is not None:
+        size = len(interval_scale if interval_scale is not None else interval_weight)
+        scale = np.ones(size) if interval_scale is None else np.asarray(interval_scale, float)
+        weight = (np.zeros((size, 3)) if interval_weight is None
+                  else np.asarray(interval_weight, dtype=float))
+        parts += [scale, 1.0 / scale, weight.ravel()]
     return np.concatenate(parts)
 
 
@@ -354,6 +361,7 @@ def integrate_batch(s_grid, params, model, tip_forces, base_bendings, disk_momen
     # per-interval factors on C follow the rod constants when a section's disks stiffen it
     scaled = params.shape[0] > PARAMS_SIZE
     inverse_at = PARAMS_SIZE + n_nodes - 1
+    weight_at = inverse_at + n_nodes - 1
     d_inv = (params[D_INV_AT], params[D_INV_AT + 1], params[D_INV_AT + 2])
     f_body = (params[BODY_FORCE_AT], params[BODY_FORCE_AT + 1], params[BODY_FORCE_AT + 2])
     q = BASE_ROTATION_AT
@@ -361,11 +369,18 @@ def integrate_batch(s_grid, params, model, tip_forces, base_bendings, disk_momen
             params[q + 6], params[q + 7], params[q + 8])
     for b in range(n_batch):
         tens = tensions[b]
-        f0, f1, f2 = tip_forces[b, 0], tip_forces[b, 1], tip_forces[b, 2]
+        tf0, tf1, tf2 = tip_forces[b, 0], tip_forces[b, 1], tip_forces[b, 2]
+        f0, f1, f2 = tf0, tf1, tf2  # the point loads beyond the current interval
+        if scaled:  # eq. 10 with the disks' weight
+            f0, f1, f2 = (tf0 + params[weight_at], tf1 + params[weight_at + 1],
+                          tf2 + params[weight_at + 2])
         for i in range(3):
             states[b, 0, POSITION_AT + i] = params[BASE_POSITION_AT + i]
-            vectors[0, i] = tip_forces[b, i] + f_body[i] * length  # eq. 10: n(0)
+            vectors[0, i] = f_body[i] * length  # eq. 10: n(0)
             vectors[1, i] = base_bendings[b, i]
+        vectors[0, 0] += f0
+        vectors[0, 1] += f1
+        vectors[0, 2] += f2
         for i in range(9):
             states[b, 0, ROTATION_AT + i] = rot0[i]
         for j in range(n_cables):
@@ -407,6 +422,11 @@ def integrate_batch(s_grid, params, model, tip_forces, base_bendings, disk_momen
                 c_inv = (c_inv_rod[0] * isc, c_inv_rod[1] * isc, c_inv_rod[2] * isc)
                 if interval > 0 and sc != params[PARAMS_SIZE + interval - 1]:
                     fresh = False  # C changes at this node: so does the strain
+                at = weight_at + 3 * interval
+                if interval > 0 and (params[at] != params[at - 3] or params[at + 1]
+                                     != params[at - 2] or params[at + 2] != params[at - 1]):
+                    fresh = False  # a disk's weight: N jumps at this node (M does not)
+                f0, f1, f2 = tf0 + params[at], tf1 + params[at + 1], tf2 + params[at + 2]
             for j in range(n_cables):
                 active[j] = cable_end_node[j] >= node
                 if model == DISTRIBUTED and active[j] and tens[j] != 0.0:

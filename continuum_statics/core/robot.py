@@ -78,6 +78,23 @@ def _interval_scale(s_grid, sections):
     return np.asarray(scales, dtype=float)[index]
 
 
+def _interval_weight(s_grid, sections, gravity):
+    """Weight (N, global) of the guide disks beyond each interval (N - 1, 3), or None.
+
+    A disk at node i is beyond every interval ending at or after it (its own end included:
+    the node's strain is the left limit, before the disk's point force).
+    """
+    weight = np.zeros(len(s_grid))
+    for section in sections:
+        mass = getattr(section, 'disk_mass', 0.0)
+        for guide in section.guides if mass else ():
+            weight[int(np.argmin(np.abs(s_grid - guide)))] += mass
+    if not np.any(weight):
+        return None
+    beyond = np.cumsum(weight[::-1])[::-1]  # mass at node i and beyond
+    return beyond[1:, None] * np.asarray(gravity, dtype=float)[None, :]
+
+
 def _moment_basis(offsets):
     """Orthonormal basis (3, rank) of the local moments t (e3 x l) a set of cables can apply."""
     arms = np.cross([0.0, 0.0, 1.0], np.reshape(offsets, (-1, 3)))
@@ -141,7 +158,8 @@ class Robot:
         self.body_force = rod.mass_per_length * np.asarray(self.gravity)
         self.s_grid, self.guide_nodes = _grid(rod.length, self.guides, self.solver.steps)
         self.interval_scale = _interval_scale(self.s_grid, self.sections)
-        self.params = self.params_for(self.body_force)
+        self.interval_weight = _interval_weight(self.s_grid, self.sections, self.gravity)
+        self.params = self.params_for()
         # C at each node (left limit, as the node's strains; the base: the first interval's),
         # N m^2: the shapes' moments
         scale = (np.ones(len(self.s_grid) - 1) if self.interval_scale is None
@@ -157,10 +175,14 @@ class Robot:
                                  'length %.6g m (the homed pose): check the limits, the hole '
                                  'offset and the guides' % (name, low, high, length))
 
-    def params_for(self, body_force):
-        """Return the kernel's rod constants (:func:`kernel.pack_params`) with this body force."""
-        return pack_params(self.c, self.d, body_force, self.base_position, self.base_rotation,
-                           self.interval_scale)
+    def params_for(self, fraction=1.0):
+        """Return the kernel's rod constants (:func:`kernel.pack_params`).
+
+        Gravity is scaled by ``fraction``: the rod's weight and the disks' (continuation).
+        """
+        weight = None if self.interval_weight is None else fraction * self.interval_weight
+        return pack_params(self.c, self.d, fraction * self.body_force, self.base_position,
+                           self.base_rotation, self.interval_scale, weight)
 
     def _layout(self):
         """Index tables the kernel reads: disks, cable ends, routes, moment bases, layout."""

@@ -94,13 +94,15 @@ class Section:
 
     A cable of this section runs from the base disk (s = 0) through every guide disk of this and
     all earlier sections and ends at :attr:`end`. ``bending_scale`` multiplies the rod's bending
-    and torsional stiffness C over the section (its disks stiffen the rod; 1: the bare rod).
+    and torsional stiffness C over the section (its disks stiffen the rod; 1: the bare rod);
+    ``disk_mass`` (kg) is the mass of each of its guide disks, a point weight at the disk.
     """
 
     name: str
     guides: np.ndarray
     cable_indices: tuple
     bending_scale: float = 1.0
+    disk_mass: float = 0.0
 
     @property
     def end(self):
@@ -152,7 +154,9 @@ _BASE_KEYS = {'frame_id', 'position', 'orientation'}
 _ROUTE_KEYS = ('offset', 'offsets', 'helix')
 _CABLE_KEYS = {'name', *_ROUTE_KEYS, 'length_limits', 'zero_offset', *TENDON_KEYS}
 _HELIX_KEYS = {'radius', 'start_angle', 'turns_per_metre'}
-_SECTION_KEYS = {'name', 'guides', 'cables', 'tendons', 'bending_scale'}
+_SECTION_KEYS = {'name', 'guides', 'cables', 'tendons', 'bending_scale', 'disk_mass'}
+#: Heaviest guide disk a robot file may give (kg): beyond it the "disk" is a payload.
+MAX_DISK_MASS = 1.0
 #: Plausible factors on the rod's bending stiffness a section's disks give.
 BENDING_SCALE_RANGE = (0.1, 100.0)
 _TOP_KEYS = {'name', 'description', 'rod', 'base', 'gravity', 'cables', 'guides', 'solver',
@@ -406,7 +410,12 @@ def _parse_sections(data, length, tendons, defaults, routes):
             raise ValueError("%sbending_scale must be in [%g, %g] (a factor on the rod's E I "
                              'and G J over the section), got %g'
                              % (prefix, *BENDING_SCALE_RANGE, scale))
-        sections.append(Section(name, _frozen(guides), tuple(range(first, len(names))), scale))
+        disk_mass = _number(item.get('disk_mass', 0.0), prefix + 'disk_mass')
+        if not 0.0 <= disk_mass <= MAX_DISK_MASS:
+            raise ValueError('%sdisk_mass must be in [0, %g] kg (the mass of each guide disk), '
+                             'got %g' % (prefix, MAX_DISK_MASS, disk_mass))
+        sections.append(Section(name, _frozen(guides), tuple(range(first, len(names))), scale,
+                                disk_mass))
         offsets.append(section_offsets)
         limits.append(section_limits)
         end = guides[-1]

@@ -1,8 +1,10 @@
-"""Per-section bending stiffness (``sections[k].bending_scale``) against hand-derived statics.
+"""What a section's disks do to the rod, against hand-derived statics.
 
-A section's disks stiffen the rod over its span: C becomes ``bending_scale`` C there. Checked
-against the Euler-Bernoulli cantilever with piecewise E I (small load), exact torsion of a
-straight rod, and recovery by the run calibration from a synthetic run.
+``sections[k].bending_scale``: the disks stiffen the rod over the section's span, C becomes
+``bending_scale`` C there. ``sections[k].disk_mass``: each guide disk is a point weight.
+Checked against the Euler-Bernoulli/Timoshenko cantilever (piecewise E I; point loads at the
+disks), exact torsion of a straight rod, and recovery by the run calibration (test_run_
+calibration.py) from a synthetic run.
 """
 import copy
 
@@ -16,12 +18,13 @@ from continuum_statics.core.robot_file import parse_robot_description
 LENGTH, SPLIT = 0.30, 0.12  # m: the proximal section ends at SPLIT
 
 
-def robot_file(proximal=3.0, distal=1.0, model='point_moment', gravity=(0.0, 0.0, 0.0)):
+def robot_file(proximal=3.0, distal=1.0, model='point_moment', gravity=(0.0, 0.0, 0.0),
+               orientation=(0.0, 0.0, 0.0, 1.0), density=6450.0):
     return {
         'name': 'stiffened',
         'rod': {'length': LENGTH, 'diameter': 2.0e-3, 'youngs_modulus': 58.0e9,
-                'poisson_ratio': 0.33, 'density': 6450.0},
-        'base': {'frame_id': 'base', 'orientation': [0.0, 0.0, 0.0, 1.0]},
+                'poisson_ratio': 0.33, 'density': density},
+        'base': {'frame_id': 'base', 'orientation': list(orientation)},
         'gravity': list(gravity),
         'cable_model': model,
         'sections': [
@@ -107,3 +110,40 @@ def test_bending_scale_out_of_range_names_the_field():
     data = robot_file(0.01)
     with pytest.raises(ValueError, match=r'sections\[0\]\.bending_scale must be in'):
         parse_robot_description(data)
+
+
+def test_disk_weights_deflect_a_cantilever_as_point_loads():
+    """Weightless rod, horizontal (local z along global x), disks of mass m at s_g under g:
+    tip deflection sum m g [s_g^2 (3 L - s_g) / (6 E I) + s_g / (G A)] (small loads).
+    """
+    data = robot_file(1.0, 1.0, gravity=(0.0, 0.0, -9.81), density=0.0,
+                      orientation=(0.0, 0.5 ** 0.5, 0.0, 0.5 ** 0.5))
+    data['sections'][0]['disk_mass'] = 2e-5
+    data['sections'][1]['disk_mass'] = 1e-5
+    robot = make(data)
+    tip = robot.solve_bvp().positions[-1]
+    ei, ga = robot.c[0], robot.d[0]
+    expected = 0.0
+    for section in robot.sections:
+        for s in section.guides:
+            load = section.disk_mass * 9.81
+            expected += load * (s ** 2 * (3.0 * LENGTH - s) / (6.0 * ei) + s / ga)
+    assert -tip[2] == pytest.approx(expected, rel=1e-5)
+    assert expected > 1e-4 * LENGTH  # not a negligible load
+
+
+def test_disk_weights_enter_the_base_force():
+    """Upright rod: the base carries the rod's and every disk's weight (eq. 10)."""
+    data = robot_file(1.0, 1.0, gravity=(0.0, 0.0, -9.81))
+    data['sections'][0]['disk_mass'] = 0.003
+    data['sections'][1]['disk_mass'] = 0.001
+    robot = make(data)
+    shape = robot.solve_bvp()
+    rod_weight = robot.rod.mass_per_length * LENGTH * 9.81
+    disks = (3 * 0.003 + 3 * 0.001) * 9.81
+    assert shape.n[0][2] == pytest.approx(-(rod_weight + disks), rel=1e-9)
+    # and beyond the proximal section's end disk only the distal disks and rod remain
+    beyond = shape.s > SPLIT + 1e-9
+    first = np.argmax(beyond)
+    expected = robot.rod.mass_per_length * (LENGTH - shape.s[first]) * 9.81 + 3 * 0.001 * 9.81
+    assert shape.n[first][2] == pytest.approx(-expected, rel=1e-9)
