@@ -113,8 +113,9 @@ def test_bending_scale_out_of_range_names_the_field():
 
 
 def test_disk_weights_deflect_a_cantilever_as_point_loads():
-    """Weightless rod, horizontal (local z along global x), disks of mass m at s_g under g:
-    tip deflection sum m g [s_g^2 (3 L - s_g) / (6 E I) + s_g / (G A)] (small loads).
+    """Disks as point weights: tip deflection sum m g [s_g^2 (3 L - s_g) / (6 E I) + s_g / (G A)].
+
+    Weightless rod, horizontal (local z along global x), disks of mass m at s_g, small loads.
     """
     data = robot_file(1.0, 1.0, gravity=(0.0, 0.0, -9.81), density=0.0,
                       orientation=(0.0, 0.5 ** 0.5, 0.0, 0.5 ** 0.5))
