@@ -40,7 +40,7 @@ from continuum_statics.core.shape import Shape
 from continuum_statics.core.tendons import Tendons
 
 
-def load_robot(path):
+def load_robot(path) -> 'Robot':
     """Load a robot file (YAML) into a :class:`Robot`; ``ValueError`` names any bad field."""
     return Robot(read_robot_description(path))
 
@@ -175,7 +175,7 @@ class Robot:
                                  'length %.6g m (the homed pose): check the limits, the hole '
                                  'offset and the guides' % (name, low, high, length))
 
-    def params_for(self, fraction=1.0):
+    def params_for(self, fraction=1.0) -> np.ndarray:
         """Return the kernel's rod constants (:func:`kernel.pack_params`).
 
         Gravity is scaled by ``fraction``: the rod's weight and the disks' (continuation).
@@ -251,19 +251,19 @@ class Robot:
                     self.section_bases[k][:, :rank].T @ arms[cables].T / self.c[0])
         return table
 
-    def with_solver(self, **settings):
+    def with_solver(self, **settings) -> 'Robot':
         """Copy of this robot with some solver settings replaced (e.g. ``steps=200``)."""
         solver = dataclasses.replace(self.solver, **settings)
         return Robot(dataclasses.replace(self.description, solver=solver))
 
     # -- state and loads ---------------------------------------------------------------------
-    def passive_state(self, u0=(0.0, 0.0, 0.0)):
+    def passive_state(self, u0=(0.0, 0.0, 0.0)) -> np.ndarray:
         """Solver state with base bending ``u0`` and no cable load."""
         x = np.zeros(self.state_size)
         x[:3] = u0
         return x
 
-    def loads(self, state, fixed_tensions=None):
+    def loads(self, state, fixed_tensions=None) -> tuple:
         """Section point moments (S, 3; local, N m) and cable tensions (n_cables, N) of a state."""
         fixed = self.tensions_or_zero(fixed_tensions)
         moments = np.zeros((len(self.section_ranks), 3))
@@ -279,7 +279,7 @@ class Robot:
             return np.zeros(len(self.cable_names))
         return np.array(fixed_tensions, dtype=float)  # a copy: never a read-only view
 
-    def integrate_state(self, state, tip_force, fixed_tensions=None, params=None):
+    def integrate_state(self, state, tip_force, fixed_tensions=None, params=None) -> np.ndarray:
         """(N, 21) kernel states of one solver state under a tip force F (N, global)."""
         moments, tensions = self.loads(state, fixed_tensions)
         return integrate_batch(self.s_grid, self.params if params is None else params,
@@ -306,14 +306,14 @@ class Robot:
                 np.array(tip_force, dtype=float), np.array(tip_moment, dtype=float),
                 self.bending_step(), self.tensions_or_zero(fixed_tensions), *self.arrays)
 
-    def make_shape(self, state, tip_force, states, fixed_tensions=None):
+    def make_shape(self, state, tip_force, states, fixed_tensions=None) -> Shape:
         """Wrap kernel states in a :class:`Shape` that remembers its solver state."""
         return Shape(self.s_grid, states, np.array(state[:3]), tip_force, self.node_c, self.d,
                      state=np.array(state, dtype=float), fixed_tensions=self.tensions_or_zero(
                          fixed_tensions).copy())
 
     # -- initial- and boundary-value problems -------------------------------------------------
-    def solve_ivp(self, u0, tip_force=(0.0, 0.0, 0.0)):
+    def solve_ivp(self, u0, tip_force=(0.0, 0.0, 0.0)) -> Shape:
         """Shape for a base bending u(0) (1/m, local) and a tip force F (N, global), no cables.
 
         Integrates eqs. 1, 2, 8, 9 from the base with v(0) from eq. 10: no iteration, which is
@@ -332,7 +332,7 @@ class Robot:
                      fixed_tensions=np.zeros(len(self.cable_names)))
 
     def solve_bvp(self, tip_force=(0.0, 0.0, 0.0), tip_moment=(0.0, 0.0, 0.0), u0_guess=None,
-                  warm_start=None):
+                  warm_start=None) -> Shape:
         """Shape of the rod with slack cables under a tip force F (N) and moment (N m), global.
 
         ``warm_start``: a previous result whose u(0) starts the solve. See
@@ -345,7 +345,7 @@ class Robot:
         return self.make_shape(state, tip_force, self.integrate_state(state, tip_force))
 
     def solve_tensions(self, tensions, tip_force=(0.0, 0.0, 0.0), tip_moment=(0.0, 0.0, 0.0),
-                       warm_start=None):
+                       warm_start=None) -> Shape:
         """Forward statics: the shape under cable tensions (N, >= 0) and a tip load (global).
 
         A boundary-value problem on u(0) with the robot's cable model; ``warm_start`` is a
@@ -366,7 +366,7 @@ class Robot:
                                tensions)
 
     def solve_lengths(self, lengths, tip_force=(0.0, 0.0, 0.0), tip_moment=(0.0, 0.0, 0.0),
-                      warm_start=None):
+                      warm_start=None) -> length_statics.LengthSolution:
         """Equilibrium when the motors hold cable lengths (m): shape, tensions, slack cables.
 
         The tendon model of the robot file (stiffness, pretension, friction, zero offsets);
@@ -375,7 +375,7 @@ class Robot:
         return length_statics.solve_lengths(self, lengths, tip_force, tip_moment, warm_start)
 
     def equilibrium_between(self, start, goal, fraction, tip_force=(0.0, 0.0, 0.0),
-                            tip_moment=(0.0, 0.0, 0.0), warm_start=None):
+                            tip_moment=(0.0, 0.0, 0.0), warm_start=None) -> 'Equilibrium':
         """Solve the equilibrium a fraction (0..1) of the way from one result's loads to another's.
 
         The section moments and fixed tensions are interpolated linearly and the base state is
@@ -402,22 +402,22 @@ class Robot:
         return Equilibrium(shape, self.cable_lengths(shape), converged)
 
     # -- cables ----------------------------------------------------------------------------
-    def cable_lengths(self, shape):
+    def cable_lengths(self, shape) -> np.ndarray:
         """Cable lengths (n_cables,) in m of a shape, order ``cable_names`` (eq. 11, errata)."""
         states = np.ascontiguousarray(shape.states)[None]
         return cable_lengths_batch(states, self.guide_nodes, self.hole_offsets,
                                    self.cable_last_guide)[0]
 
     # -- Jacobians -------------------------------------------------------------------------
-    def force_step(self):
+    def force_step(self) -> float:
         """Finite-difference step for tip forces (N): 1e-7 of the load scale E I / L^2."""
         return 1e-7 * self.c[0] / self.length ** 2
 
-    def bending_step(self):
+    def bending_step(self) -> float:
         """Finite-difference step for u(0) and section moments (1/m): 1e-7 rad over L."""
         return 1e-7 / self.length
 
-    def jacobian(self, u0, tip_force=(0.0, 0.0, 0.0)):
+    def jacobian(self, u0, tip_force=(0.0, 0.0, 0.0)) -> np.ndarray:
         """6x6 tip Jacobian with slack cables: rows [linear (m); angle (rad)], cols [F (N); u(0)].
 
         Forward differences as in the paper (section V.B), all seven IVPs in one kernel call;
@@ -431,7 +431,7 @@ class Robot:
                             self.section_end_node,
                             self.force_step(), self.bending_step())
 
-    def cable_jacobian(self, u0, tip_force=(0.0, 0.0, 0.0)):
+    def cable_jacobian(self, u0, tip_force=(0.0, 0.0, 0.0)) -> np.ndarray:
         """d(cable lengths)/d u(0) with slack cables, (n_cables, 3) in m per 1/m."""
         state = self.passive_state(as_vector(u0, 3, 'u0'))
         _, jac, _ = self.probe(state, 3, as_vector(tip_force, 3, 'tip_force'), np.zeros(3))
@@ -440,7 +440,7 @@ class Robot:
     # -- inverse problems ------------------------------------------------------------------
     def estimate_shape(self, cable_lengths, tip_force=(0.0, 0.0, 0.0),
                        tip_moment=(0.0, 0.0, 0.0), tensions=None, warm_start=None,
-                       u0_guess=None, tracking=None):
+                       u0_guess=None, tracking=None) -> estimation.ShapeEstimate:
         """Shape from measured cable lengths (m) and a tip load (N, N m); :mod:`estimation`.
 
         ``tracking``: an :class:`estimation.Tracking` when a node calls it once per measurement
@@ -456,7 +456,8 @@ class Robot:
                                          warm_start, tracking)
 
     def estimate_tip_wrench(self, lengths=None, tensions=None, tip_position=None,
-                            tip_rotation=None, noise=None, moment=False, warm_start=None):
+                            tip_rotation=None, noise=None, moment=False,
+                            warm_start=None) -> load_estimation.WrenchEstimate:
         """Tip force (N) and moment (N m), base frame, that explain the measurements given.
 
         Lengths (m) and tensions (N) at the motors, the tracked tip point (m) and orientation;
@@ -467,7 +468,7 @@ class Robot:
 
     def solve_tip_goal(self, goal_position, tip_force=(0.0, 0.0, 0.0), tolerance=None,
                        goal_direction=None, warm_start=None, tip_moment=(0.0, 0.0, 0.0),
-                       u0_guess=None):
+                       u0_guess=None) -> tip_goal.TipGoalSolution:
         """Cable lengths that put the tip at a goal (m), inside their limits; :mod:`tip_goal`."""
         return tip_goal.solve_tip_goal(self, goal_position, tip_force, tolerance,
                                        goal_direction, _warm_or_guess(self, warm_start, u0_guess),
