@@ -250,7 +250,7 @@ def test_goals_on_a_robot_without_cables_are_rejected_at_once(harness):
     response = call(service, Stack.request((0.3, 0.0, -0.05), 1e-3), 10.0)
     assert time.monotonic() - started < 1.5, 'no wait for a state that never comes'
     assert len(response.plan.poses) == 0
-    assert 'robot has no cables' in controller._last_outcome
+    assert 'robot has no cables' in controller.control.last_outcome
 
 
 def test_a_float32_tolerance_of_the_rod_length_means_that_length(harness):

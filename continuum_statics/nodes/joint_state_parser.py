@@ -99,6 +99,22 @@ def _float64_sequence(data, offset, what):
     return np.frombuffer(data, dtype='<f8', count=count, offset=offset), offset + 8 * count
 
 
+def header_stamp_ns(data):
+    """Return the header stamp (int ns) of any serialized stamped message, reading 12 bytes.
+
+    Every message that starts with a std_msgs/Header (Path, PoseStamped, JointState) has its
+    stamp right after the 4-byte encapsulation header, in the byte order that header names.
+
+    :raises ValueError: fewer bytes than a stamp needs
+    """
+    try:
+        byte_order = '<' if data[1:2] == b'\x01' else '>'  # CDR encapsulation header
+        sec, nanosec = struct.unpack_from(byte_order + 'iI', data, 4)
+    except struct.error:
+        raise ValueError('malformed message (%d bytes)' % len(data)) from None
+    return sec * 1_000_000_000 + nanosec
+
+
 def check_stamp(sec, nanosec):
     """Raise ValueError unless ``nanosec`` < 1e9 (a builtin_interfaces/Time invariant)."""
     if not 0 <= nanosec < 1_000_000_000:
