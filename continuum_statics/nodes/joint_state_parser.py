@@ -187,7 +187,10 @@ def check_cable_view(view, index, cable_names):
 
 
 class CableStatesReader:
-    """Serialized ``cable_states`` -> checked lengths in robot order (the nodes off the hot path).
+    """Serialized ``cable_states`` -> checked lengths in robot order, for every node.
+
+    The one rule every node applies to ``cable_states`` (:func:`check_cable_view`: every cable
+    named once, a positive finite length each; velocity and effort empty or one per cable).
 
     Keeps the name index of the last good message, so a driver's stream decodes no names.
     """
@@ -196,8 +199,11 @@ class CableStatesReader:
         self.cable_names = tuple(cable_names)
         self._name_bytes, self.index = None, None
 
-    def read(self, data):
-        """Return (view, lengths (n,) m in robot order); ``ValueError`` says what is wrong."""
+    def read(self, data, out=None):
+        """Return (view, lengths (n,) m in robot order); ``ValueError`` says what is wrong.
+
+        :param out: an (n,) array to write the lengths into (none allocated), or None
+        """
         try:
             view = parse_joint_state(data, self._name_bytes)
             if view.name_bytes != self._name_bytes:
@@ -207,9 +213,24 @@ class CableStatesReader:
         except ValueError:
             self._name_bytes = None
             raise
-        lengths = np.empty(len(self.cable_names))
+        lengths = np.empty(len(self.cable_names)) if out is None else out
         lengths[self.index] = view.position
         return view, lengths
+
+    def tensions(self, view, out=None):
+        """Return (tensions (n,) N in robot order, or None, and why not ('' when given)).
+
+        ``effort`` is a tension only when finite and >= 0 for every cable (a signed motor
+        current is not); an empty ``effort`` gives (None, '').
+        """
+        if not view.effort.shape[0]:
+            return None, ''
+        tensions = np.empty(len(self.cable_names)) if out is None else out
+        tensions[self.index] = view.effort
+        if (tensions >= 0.0).all() and np.isfinite(tensions).all():
+            return tensions, ''
+        return None, 'effort (tensions) not finite and >= 0 N: %s' % np.round(
+            tensions, 4).tolist()
 
 
 def _parse_with_rclpy(data):
