@@ -298,14 +298,14 @@ class DriverHealth:
         self.problems = Problems(warn, clock=clock)
         self.rate = RateMeter(clock)  # published cable_states
         self.empty_payloads = 0
-        self.reconnects = 0
 
-    def report(self, gate, status):
+    def report(self, gate, status, reconnects=0):
         """Return the :class:`Health` of now.
 
         :param gate: the node's :class:`~continuum_statics.control.command_gate.CommandGate`
         :param status: the backend's last ``BackendStatus`` (level, message, values), or None
             while there is no backend (unconfigured)
+        :param reconnects: connections regained after a loss
         """
         refusal = gate.refusal() if self.has_cables else ''
         values = {'backend': self.backend_name, 'lifecycle': gate.lifecycle_state(),
@@ -334,7 +334,7 @@ class DriverHealth:
         values.update({
             'state': 'ready' if self.rate.total else 'starting',
             'connected': gate.connected,
-            'reconnects': self.reconnects,
+            'reconnects': reconnects,
             'publish_rate_hz': self.rate.report(),
             'commands_accepted': gate.accepted,
             'commands_clamped': gate.clamped,

@@ -27,8 +27,6 @@ parameters ``<backend>.<option>``.
   robot that no other node is told about (tensions change under it; the motors hold).
 """
 import sys
-import threading
-import time
 from types import SimpleNamespace
 
 from geometry_msgs.msg import WrenchStamped
@@ -38,9 +36,10 @@ from rclpy.qos import qos_profile_sensor_data
 from sensor_msgs.msg import JointState
 from std_srvs.srv import Trigger
 
-from continuum_statics.control.command_gate import FIRST_RETRY, CommandGate
+from continuum_statics.control.actuators import Actuators
+from continuum_statics.control.command_gate import CommandGate
 from continuum_statics.control.health import DriverHealth
-from continuum_statics.drivers import BackendStatus, ConnectionLost, backend_class
+from continuum_statics.drivers import backend_class
 from continuum_statics.drivers.home_file import load_home_file, write_home_file
 from continuum_statics.nodes import diagnostics_util as diag
 from continuum_statics.nodes.dedicated_intake import PeriodicThread
@@ -60,9 +59,6 @@ from continuum_statics.nodes.ros_conversions import (
 )
 from continuum_statics.nodes.ros_topic_backend import lend_topics
 from continuum_statics.nodes.timers import steady_timer
-
-THROTTLE_S = 2.0
-
 
 
 class CableDriverNode(LifecycleNode):
@@ -105,12 +101,13 @@ class CableDriverNode(LifecycleNode):
         self._problems = self.health.problems
         # lifecycle, connection and fault state, and what a command becomes (control/)
         self.gate = CommandGate(self.cable_names, self._limits, self.robot.straight_cable_lengths)
+        # every backend call, under one lock (the executor and the publish loop both call in)
+        self.actuators = Actuators(self.gate, self._backend_cls.name, self.get_logger())
+        self.actuators.max_interval = self._params['reconnect_max_interval']
         self._state_msg = JointState()
-        self._lock = threading.Lock()  # backend calls come from the executor and the loop
         self._diagnostics = self.create_publisher(diag.DiagnosticArray, '/diagnostics', 10)
         steady_timer(self, 1.0 / self._params['diagnostics_rate'], self._publish_diagnostics)
         self._loop = None
-        self.backend = None  # created by configure, released by cleanup
         self._backend_options = options
         self._ros_topics = None  # the command sender lent to a ROS-topic backend
         if not self.cable_names:
@@ -159,17 +156,20 @@ class CableDriverNode(LifecycleNode):
         except Exception as error:  # bad options a parameter check could not see
             self.get_logger().error('configure failed: %s' % error)
             return TransitionCallbackReturn.FAILURE
-        backend.power = False
         if backend.takes_tip_wrench:
             backend.set_tip_wrench(self._hidden_load)
-        with self._lock:
-            self.backend, self.gate.configured = backend, True
-            if backend.ros_topics:  # ros2_control: the node lends it topics (made once)
-                self._ros_topics = self._ros_topics or lend_topics(self, lambda: self.backend)
-                backend.attach_ros(self._ros_topics)
-            self.gate.retry_delay = FIRST_RETRY
-            self._connect(time.monotonic())  # a failure is retried by the loop
+        self.actuators.configure(backend, self._lend_topics)
         return TransitionCallbackReturn.SUCCESS
+
+    def _lend_topics(self, backend):
+        if backend.ros_topics:  # ros2_control: the node lends it topics (made once)
+            self._ros_topics = self._ros_topics or lend_topics(self, lambda: self.backend)
+            backend.attach_ros(self._ros_topics)
+
+    @property
+    def backend(self):
+        """The configured :class:`~continuum_statics.drivers.CableBackend`, or None."""
+        return self.actuators.backend
 
     def on_activate(self, state):
         """Torque on / operation enabled at the present positions; accept commands."""
@@ -181,80 +181,28 @@ class CableDriverNode(LifecycleNode):
 
     def on_cleanup(self, state):
         """Release the actuators and the port or bus."""
-        self._release()
+        self.actuators.release()
         return TransitionCallbackReturn.SUCCESS
 
     def on_shutdown(self, state):
         """Power off and release, from any state (finalized: no transition leads back)."""
-        self._release()
+        self.actuators.release()
         self.gate.finalized = True
         return TransitionCallbackReturn.SUCCESS
 
     def _switch_power(self, on):
-        if self.backend is None:
-            self.gate.active = on
-            return TransitionCallbackReturn.SUCCESS
-        with self._lock:
-            self.gate.active = on
-            self.gate.hold()
-            now = time.monotonic()
-            try:
-                if self.gate.connected:
-                    (self.backend.enable if on else self.backend.disable)(now)
-                else:
-                    self.backend.power = on  # the reconnection does it
-            except ConnectionLost as error:
-                self._lost(error, now)  # the reconnection does it
-            except Exception as error:
-                self.get_logger().error('%s failed: %s' % ('activate' if on else 'deactivate',
-                                                          error))
-                return TransitionCallbackReturn.FAILURE
+        if not self.actuators.switch_power(on):
+            return TransitionCallbackReturn.FAILURE
         self.get_logger().info('cable_driver %s' % ('active: torque on, commands accepted' if on
                                                     else 'inactive: torque off, holding'))
         return TransitionCallbackReturn.SUCCESS
-
-    def _release(self):
-        with self._lock:
-            backend, self.backend = self.backend, None
-            gate = self.gate
-            gate.active = gate.connected = gate.configured = False
-            if backend is None:
-                return
-            try:
-                if not gate.connection_error:
-                    backend.hold(time.monotonic())
-            except Exception as error:
-                self.get_logger().warning('hold at release failed: %s' % error)
-            try:
-                backend.close()
-            except Exception as error:
-                self.get_logger().error('backend shutdown failed: %s' % error)
-
-    # -- connection -------------------------------------------------------------------------
-    def _connect(self, now):
-        """Try ``backend.start``; on ConnectionLost schedule the next try (caller holds lock)."""
-        try:
-            self.backend.start(now)
-        except ConnectionLost as error:
-            self._lost(error, now)
-            return False
-        if self.gate.connect():
-            self.health.reconnects += 1
-            self.get_logger().info('reconnected: %s is back' % self._backend_cls.name)
-        return True
-
-    def _lost(self, error, now):
-        delay = self.gate.lose(error, now, self._params['reconnect_max_interval'])
-        if delay is None:
-            self.get_logger().error('%s: %s; reconnecting' % (self._backend_cls.name, error))
-        else:
-            self.get_logger().warning('still no connection: %s (next try in %.2g s)' % (
-                error, delay), throttle_duration_sec=THROTTLE_S)
 
     # -- parameters ---------------------------------------------------------------------------
     def _on_parameter_change(self, name, value):
         if name == 'publish_rate' and self._loop is not None:
             self._loop.rate = value
+        elif name == 'reconnect_max_interval':
+            self.actuators.max_interval = value
         elif name == 'sim_tip_wrench':
             self._set_hidden_load(np.array(value, dtype=float))
 
@@ -268,17 +216,14 @@ class CableDriverNode(LifecycleNode):
 
     def _set_hidden_load(self, wrench):
         """Set the simulated robot's hidden tip load (6,), now and for the next configure."""
-        with self._lock:
-            self._hidden_load = wrench
-            if self.backend is not None and self.backend.takes_tip_wrench:
-                self.backend.set_tip_wrench(wrench)
+        self._hidden_load = wrench
+        if self._backend_cls.takes_tip_wrench:
+            self.actuators.call(lambda backend: backend.set_tip_wrench(wrench))
 
     def _on_option_change(self, name, value):
         key = name.split('.', 1)[1]
-        with self._lock:
-            if self.backend is not None:
-                self.backend.set_option(key, value)
-            self._backend_options[key] = value  # for the next configure
+        self.actuators.call(lambda backend: backend.set_option(key, value))
+        self._backend_options[key] = value  # for the next configure
 
     # -- commands -----------------------------------------------------------------------------
     def _warn(self, text):
@@ -295,86 +240,29 @@ class CableDriverNode(LifecycleNode):
                                          velocity=view.velocity, effort=view.effort))
 
     def _on_command(self, msg):
-        with self._lock:
-            try:
-                index = cable_index(msg.name, self.cable_names, require_all=False)
-                targets = self.gate.admit(index, joint_positions(msg, len(index)),
-                                          self._params['length_margin'])
-            except ValueError as error:  # CommandRefused too
-                self._problems.reject('cable_commands', error)
-                return
-            now = time.monotonic()
-            try:
-                self.backend.command(targets, now)
-            except ConnectionLost as error:
-                self._lost(error, now)
-                return
-            except Exception as error:  # a real backend may fail; the node stays up
-                self._backend_failure('command', error)
-                return
-            self.gate.taken(targets, now)
-
-    def _backend_failure(self, what, error):
-        self.gate.backend_error = '%s failed: %s' % (what, error)
-        self.get_logger().error('backend %s' % self.gate.backend_error,
-                                throttle_duration_sec=THROTTLE_S)
+        try:
+            index = cable_index(msg.name, self.cable_names, require_all=False)
+            self.actuators.command(index, joint_positions(msg, len(index)),
+                                   self._params['length_margin'])
+        except ValueError as error:  # CommandRefused too
+            self._problems.reject('cable_commands', error)
 
     # -- the loop ---------------------------------------------------------------------------
     def _on_timer(self):
-        now = time.monotonic()
-        timeout = self._params['command_timeout']
-        with self._lock:
-            if self.backend is None:  # unconfigured
-                return
-            if not self.gate.connected:
-                if now < self.gate.next_attempt or not self._connect(now):
-                    return
-            try:
-                if self.gate.timed_out(now, timeout):
-                    self.backend.hold(now)
-                    self.get_logger().info('no cable command for %.3g s: holding position'
-                                           % timeout)
-                reading = self.backend.read(now)
-                self.gate.status = self.backend.status()
-                joint_state(self.cable_names, reading.lengths, self.get_clock().now().to_msg(),
-                            reading.velocities, reading.tensions, msg=self._state_msg)
-            except ConnectionLost as error:
-                self._lost(error, now)
-                return
-            except Exception as error:  # ValueError on NaN from a backend, or a hardware error
-                self._backend_failure('read', error)
-                return
-            self.gate.backend_error = ''
-            self.gate.read(reading.lengths)
-        self._publisher.publish(self._state_msg)
-        self.health.rate.tick()
+        def fill(reading):  # ValueError on a non-finite reading: a failed read
+            joint_state(self.cable_names, reading.lengths, self.get_clock().now().to_msg(),
+                        reading.velocities, reading.tensions, msg=self._state_msg)
+
+        if self.actuators.step(self._params['command_timeout'], fill) is not None:
+            self._publisher.publish(self._state_msg)
+            self.health.rate.tick()
 
     # -- services -----------------------------------------------------------------------------
     def _on_reset(self, request, response):
         if self.backend is None:
             response.success, response.message = False, 'robot has no cables: nothing to reset'
             return response
-        with self._lock:
-            try:
-                gate = self.gate
-                if not gate.connected:
-                    self.gate.retry_delay = FIRST_RETRY
-                    ok = self._connect(time.monotonic())
-                    message = 'reconnected' if ok else 'still not connected: %s' % (
-                        gate.connection_error)
-                    response.success, response.message = ok, message
-                    return response
-                message = self.backend.reset()
-                gate.status, gate.backend_error = self.backend.status(), ''
-                gate.hold()
-                response.success = gate.status.level < diag.ERROR
-                response.message = message if response.success else '%s; still: %s' % (
-                    message, gate.status.message)
-            except ConnectionLost as error:
-                self._lost(error, time.monotonic())
-                response.success, response.message = False, str(error)
-            except Exception as error:
-                response.success, response.message = False, 'reset failed: %s' % error
+        response.success, response.message = self.actuators.reset()
         self.get_logger().info('reset: %s' % response.message)
         return response
 
@@ -382,20 +270,12 @@ class CableDriverNode(LifecycleNode):
         if self.backend is None:
             response.success, response.message = False, 'robot has no cables: nothing to home'
             return response
-        with self._lock:
-            try:
-                if not self.gate.connected:
-                    raise ValueError('actuators not connected (%s)' % self.gate.connection_error)
-                refusal = self.gate.home_refusal(self._params['home_tolerance'],
-                                                 self._params['home_force'])
-                if refusal:
-                    raise ValueError(refusal)
-                zeros = self.backend.set_home()
-                self.gate.hold(forget_reading=True, home=True)
-                self.backend.hold(time.monotonic())
-            except Exception as error:
-                response.success, response.message = False, 'set_home failed: %s' % error
-                return response
+        try:
+            zeros = self.actuators.set_home(self._params['home_tolerance'],
+                                            self._params['home_force'])
+        except Exception as error:
+            response.success, response.message = False, 'set_home failed: %s' % error
+            return response
         option = self._backend_cls.zero_option
         message = '%s = %s' % (option, zeros)
         if self._home_file:
@@ -416,19 +296,9 @@ class CableDriverNode(LifecycleNode):
     # -- diagnostics --------------------------------------------------------------------------
     def _publish_diagnostics(self):
         # read by tip_controller: a goal fails at once, naming this, when commands are refused
-        status = None
-        if self.backend is not None and not self.gate.finalized:
-            # a reconnection can hold the lock for seconds (drive timeouts): never let it stall
-            # diagnostics; report the last status read instead
-            if self._lock.acquire(timeout=0.05):
-                try:
-                    if self.backend is not None:
-                        status = self.gate.status = self.backend.status()
-                finally:
-                    self._lock.release()
-            else:
-                status = self.gate.status or BackendStatus(diag.WARN, 'actuators busy')
-        level, message, values = self.health.report(self.gate, status)
+        status = self.actuators.status()
+        level, message, values = self.health.report(self.gate, status,
+                                                    self.actuators.reconnects)
         self._diagnostics.publish(diag.diagnostic_array(
             self.get_clock().now().to_msg(), self.get_fully_qualified_name().lstrip('/'),
             self.robot.name, level, message, values))
@@ -437,8 +307,8 @@ class CableDriverNode(LifecycleNode):
         """Stop publishing, hold and release the actuators, then destroy the node."""
         if getattr(self, '_loop', None) is not None:  # None or unset: __init__ failed early
             self._loop.stop()
-        if getattr(self, 'backend', None) is not None:
-            self._release()
+        if getattr(self, 'actuators', None) is not None:
+            self.actuators.release()
         return super().destroy_node()
 
 
