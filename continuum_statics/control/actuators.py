@@ -131,7 +131,7 @@ class Actuators:
                 return
             self.gate.taken(targets, now)
 
-    def step(self, timeout, accept=None):
+    def step(self, timeout, accept=None) -> object:
         """One loop period: reconnect when due, the watchdog, then read; the reading or None.
 
         :param timeout: command_timeout, s (0: no watchdog)
@@ -163,7 +163,7 @@ class Actuators:
             gate.read(reading.lengths)
         return reading
 
-    def status(self):
+    def status(self) -> object:
         """Return the backend's status now (the last one while the lock is busy), or None."""
         if self.backend is None or self.gate.finalized:
             return None
@@ -179,7 +179,7 @@ class Actuators:
             self.lock.release()
 
     # -- services -------------------------------------------------------------------------------
-    def reset(self):
+    def reset(self) -> tuple:
         """Clear faults (or reconnect when lost): return (success, message)."""
         gate = self.gate
         with self.lock:
@@ -215,7 +215,7 @@ class Actuators:
             self.backend.hold(self.clock())
         return zeros
 
-    def call(self, function, *args):
+    def call(self, function, *args) -> None:
         """Call ``function(backend, *args)`` under the lock when there is a backend."""
         with self.lock:
             if self.backend is not None:

@@ -90,7 +90,7 @@ class CommandGate:
         self.hold(forget_reading=True)
         return reconnected
 
-    def lose(self, error, now, max_interval):
+    def lose(self, error, now, max_interval) -> 'float | None':
         """Record a lost connection and schedule the next attempt.
 
         The delay doubles up to ``max_interval`` s. Return None for a new loss, else the delay
@@ -103,7 +103,7 @@ class CommandGate:
         self.retry_delay = min(2.0 * delay, max_interval)
         return None if first else delay
 
-    def hold(self, forget_reading=False, home=False):
+    def hold(self, forget_reading=False, home=False) -> None:
         """Record a hold of the actuators: the next command starts from the last reading.
 
         :param forget_reading: the last reading no longer holds (a reconnection, a new home)
@@ -115,7 +115,7 @@ class CommandGate:
         if home:
             self.targets = self.straight.copy()
 
-    def read(self, lengths):
+    def read(self, lengths) -> None:
         """Record the lengths (m) just read from the actuators."""
         self.last_reading = np.asarray(lengths, dtype=float)
 
@@ -152,7 +152,7 @@ class CommandGate:
         targets[index] = clamped
         return targets
 
-    def taken(self, targets, now):
+    def taken(self, targets, now) -> None:
         """Record that the backend took ``targets`` (from :meth:`admit`) at monotonic ``now``."""
         self.targets = targets
         self.accepted += 1

@@ -229,7 +229,7 @@ class StaticsHealth:
         if cycle_time is not None:
             self.cycle_times.add(cycle_time)
 
-    def report(self, warn_residual, drop_residual, lost=0, skipped=0):
+    def report(self, warn_residual, drop_residual, lost=0, skipped=0) -> Health:
         """Return the :class:`Health` of now (and start new windows).
 
         :param warn_residual: the warn threshold in force, m (``drop_residual`` likewise)
@@ -299,7 +299,7 @@ class DriverHealth:
         self.rate = RateMeter(clock)  # published cable_states
         self.empty_payloads = 0
 
-    def report(self, gate, status, reconnects=0):
+    def report(self, gate, status, reconnects=0) -> Health:
         """Return the :class:`Health` of now.
 
         :param gate: the node's :class:`~continuum_statics.control.command_gate.CommandGate`
@@ -354,7 +354,7 @@ class ControllerHealth:
     def __init__(self, control):
         self.control = control
 
-    def report(self, command_publishers=1, command_topic='cable_commands'):
+    def report(self, command_publishers=1, command_topic='cable_commands') -> Health:
         """Return the :class:`Health` of now.
 
         :param command_publishers: how many nodes publish ``command_topic`` (this one included)

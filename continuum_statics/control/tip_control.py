@@ -145,7 +145,7 @@ class TipControl:
                 self.teleop.settings = dataclasses.replace(self.teleop.settings,
                                                            **{name: value})
 
-    def set_timer(self, timer):
+    def set_timer(self, timer) -> object:
         """Use ``timer`` (``reset()``/``cancel()``) for the loop from now on; return the old one.
 
         Swapped under the lock goal starts reset it under, so no start resets a destroyed timer.
@@ -247,7 +247,7 @@ class TipControl:
         """Return what the controller does now: a goal run's phase or 'teleoperation'."""
         return 'teleoperation' if self.teleop.active else self.run.phase.value
 
-    def wait_until(self, condition, deadline):
+    def wait_until(self, condition, deadline) -> object:
         """Awaitable of ``condition()`` once it holds, ``deadline`` passes or at shutdown."""
         return self._wait_until(lambda: self.closing or condition(), deadline)
 
