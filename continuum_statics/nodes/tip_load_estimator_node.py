@@ -34,7 +34,7 @@ from continuum_statics.nodes.joint_state_parser import CableStatesReader
 from continuum_statics.nodes.node_params import ParameterTable, load_robot_file
 from continuum_statics.nodes.parameter_tables import tip_load_estimator_parameters
 from continuum_statics.nodes.qos import LATCHED_QOS, LATEST_SENSOR_QOS
-from continuum_statics.nodes.ros_conversions import check_frame
+from continuum_statics.nodes.ros_conversions import check_frame, stamp_or_now
 from continuum_statics.nodes.timers import steady_timer
 
 
@@ -178,10 +178,8 @@ class TipLoadEstimatorNode(Node):
     def _publish(self, estimate):
         msg = WrenchStamped()
         cables = self._cables
-        if cables is not None and (cables[2] or cables[3]):
-            msg.header.stamp.sec, msg.header.stamp.nanosec = cables[2], cables[3]
-        else:
-            msg.header.stamp = self.get_clock().now().to_msg()
+        msg.header.stamp.sec, msg.header.stamp.nanosec = stamp_or_now(
+            *((0, 0) if cables is None else cables[2:4]), self.get_clock())
         msg.header.frame_id = self.base_frame_id
         force, moment = estimate.force, estimate.moment
         msg.wrench.force.x, msg.wrench.force.y, msg.wrench.force.z = (float(v) for v in force)
