@@ -6,8 +6,9 @@ cancel; :mod:`~continuum_statics.nodes.move_tip_action`), the ``tip_goal`` servi
 after arrival or failure), the ``tip_goal_pose`` topic (geometry_msgs/PoseStamped, streaming;
 ``default_tolerance``) and ``tip_goal_point`` (RViz's Publish Point); ``tip_twist``
 (TwistStamped) drives resolved-rate teleoperation instead (:mod:`continuum_statics.control.
-teleop`). The decisions are :class:`~continuum_statics.control.goal_run.GoalRun`'s; this node
-parses, calls and publishes. For a goal the run
+teleop`). The decisions are :class:`~continuum_statics.control.tip_control.TipControl`'s
+(goal intake, teleoperation, outcomes) and its :class:`~continuum_statics.control.goal_run.
+GoalRun`'s; this node parses, calls and publishes. For a goal the run
 
 1. estimates the shape from the measured cable lengths and solves the tip goal from it (warm
    start); when the measured lengths are not where the last command put them (a restarted
@@ -29,8 +30,9 @@ The service answers with the ``backbone`` at the final state, or an empty plan w
 rejected (non-finite numbers, a frame other than the base frame, a non-positive tolerance, an
 unreachable position, no state yet, a robot without cables), not reached in time, or pre-empted by
 a newer goal; the reason is logged and on diagnostics. A failed goal leaves no trace: the next one
-is accepted as soon as the state is fresh. The service runs in its own reentrant callback group,
-so a waiting call never blocks the topics it is waiting for (multi-threaded executor).
+is accepted as soon as the state is fresh. Every goal source (service, action, ``tip_goal_pose``,
+``tip_goal_point``) runs in a reentrant callback group of its own, never the control timer's, so
+a waiting goal never blocks the running goal's ticks or the topics it waits for.
 """
 import sys
 
