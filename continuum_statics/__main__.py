@@ -48,7 +48,7 @@ def main(argv=None):
     elif command == 'teleop':
         from continuum_statics.tools.teleop import main as run
     elif command == 'warmup':
-        from continuum_statics.core.warmup import main as run
+        from continuum_statics.tools.warmup import main as run
     elif command == 'demo':
         from continuum_statics.tools.demo import main as run
     elif command == 'record':

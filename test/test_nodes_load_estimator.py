@@ -145,7 +145,7 @@ def test_a_goal_with_the_estimated_load_lands_on_the_goal_while_the_load_is_on(h
     p.x, p.y, p.z = (float(v) for v in goal)
     request.goal.pose.orientation.w = 1.0
     plan = call(service, request, 60.0).plan
-    assert len(plan.poses) > 0, controller._last_outcome
+    assert len(plan.poses) > 0, controller.control.last_outcome
     # where the simulated robot really is: its motors' lengths under the hidden load
     lengths = np.array(states.last.position)
     loaded = REAL.solve_lengths(lengths, HIDDEN[:3])

@@ -250,7 +250,7 @@ def test_goals_on_a_robot_without_cables_are_rejected_at_once(harness):
     response = call(service, Stack.request((0.3, 0.0, -0.05), 1e-3), 10.0)
     assert time.monotonic() - started < 1.5, 'no wait for a state that never comes'
     assert len(response.plan.poses) == 0
-    assert 'robot has no cables' in controller._last_outcome
+    assert 'robot has no cables' in controller.control.last_outcome
 
 
 def test_a_float32_tolerance_of_the_rod_length_means_that_length(harness):
@@ -367,3 +367,16 @@ def test_a_click_on_the_workspace_markers_is_a_tip_goal(harness):
     publish_until(publisher, msg, lambda: stack.values().get('goals_reached') == '1', 20.0,
                   'the clicked goal reached')
     assert np.linalg.norm(pose_xyz(stack.tip.last.pose) - goal) <= 1e-3
+
+
+def test_streamed_goals_never_run_in_the_control_timers_callback_group(harness):
+    # a streamed goal waits for state (up to state_wait) and solves: in the control timer's
+    # group it would stall the running goal's ticks for that long
+    controller = harness.add(TipControllerNode)
+    control_group = controller.control.timer.callback_group
+    groups = {sub.topic_name.rsplit('/', 1)[-1]: sub.callback_group
+              for sub in controller.subscriptions}
+    services = {srv.srv_name.rsplit('/', 1)[-1]: srv.callback_group
+                for srv in controller.services}
+    for group in (groups['tip_goal_pose'], groups['tip_goal_point'], services['tip_goal']):
+        assert group is not control_group and group is controller.goal_group

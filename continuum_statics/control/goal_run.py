@@ -38,6 +38,17 @@ OFF_COMMAND = 2e-3
 MIN_TIP_SAMPLES = 3
 
 
+class Outcome(str, enum.Enum):
+    """How a goal ended (compares equal to its value: ``Outcome.REACHED == 'reached'``)."""
+
+    REACHED = 'reached'
+    FAILED = 'failed'
+    #: refused before it started (bad numbers, unreachable, no state)
+    REJECTED = 'rejected'
+    #: a newer goal or teleoperation took over
+    PREEMPTED = 'preempted'
+
+
 class Phase(enum.Enum):
     """Where a run is; ``IDLE`` without a goal."""
 
@@ -77,13 +88,16 @@ class Goal:
     tip_stamp: int = None  # ns
     error: float = math.nan
     direction: np.ndarray = None  # unit tip z axis goal (base frame), or None
+    outcome: Outcome = None  # set when it ends (:meth:`GoalRun.finish`)
 
-    @property
-    def outcome(self):
-        """'reached', 'preempted' or 'failed' once done."""
-        if self.reached:
-            return 'reached'
-        return 'preempted' if 'pre-empted' in self.reason else 'failed'
+
+@dataclass(frozen=True, eq=False)
+class Start:
+    """Where a goal or teleoperation starts: the recovery rule's answer."""
+
+    state: object  # equilibrium of the start (an estimate or the last commanded state)
+    recover: np.ndarray  # motor-side lengths (m) of ``state`` to move onto first, or None
+    commanded: np.ndarray  # the command in force (m): the last one, or the measured lengths
 
 
 @dataclass(frozen=True, eq=False)
@@ -153,20 +167,44 @@ class GoalRun:
         self._judge_start = None
 
     @property
-    def fraction(self):
+    def fraction(self) -> float:
         """How far the ramp in progress is (0..1)."""
         return self._fraction
 
-    def model_tolerance(self, tolerance):
+    def model_tolerance(self, tolerance) -> float:
         """Solve the model well inside the goal's tolerance, so the tip lands near its centre."""
         return min(0.01 * tolerance, self.robot.solver.goal_tolerance)
 
     # -- a new goal --------------------------------------------------------------------------
-    def snapshot(self):
+    def snapshot(self) -> tuple:
         """Return what :meth:`plan` starts from: (last commanded state, command, warm start)."""
         return self.command_state, self.commanded, self.warm
 
-    def plan(self, position, tolerance, direction, measured, load, tip_fresh, snapshot):
+    def start_point(self, measured, load, snapshot, tip_fresh=True) -> Start:
+        """Apply the recovery rule: where a goal or teleoperation starts from lengths (m).
+
+        When the cables are within :data:`OFF_COMMAND` of the last command (and statics
+        publishes a tip for them), the last commanded equilibrium; otherwise the estimate of the
+        measurement, with its motor-side lengths (:meth:`command`) to move onto first.
+        """
+        low, high = self.limits[:, 0], self.limits[:, 1]
+        command_state, commanded, warm = snapshot
+        if tip_fresh and command_state is not None and commanded is not None and float(
+                np.max(np.abs(measured - commanded))) <= OFF_COMMAND:
+            # the cables are where the last command put them
+            return Start(command_state, None, commanded)
+        start = self.robot.estimate_shape(measured, tip_force=load[:3], tip_moment=load[3:],
+                                          warm_start=warm)
+        # onto the commands of that shape: slack cables taken up, antagonists at min_tension
+        try:
+            recover = self.command(start)
+        except ValueError:  # the shape needs more than the tension limits: stay
+            recover = np.clip(measured, low, high)
+        # a ramp starts where the cables are, but never commands outside the limits
+        return Start(start, recover, np.clip(measured, low, high))
+
+    def plan(self, position, tolerance, direction, measured, load, tip_fresh,
+             snapshot) -> Plan:
         """Solve a goal from the measured lengths (m); ValueError says why it is rejected.
 
         The expensive part (estimate and tip-goal solve), done without the node's lock, from
@@ -175,21 +213,8 @@ class GoalRun:
             then starts from their nearest shape and moves the cables onto it
         """
         robot = self.robot
-        low, high = self.limits[:, 0], self.limits[:, 1]
-        command_state, commanded, warm = snapshot
-        if tip_fresh and command_state is not None and commanded is not None and float(
-                np.max(np.abs(measured - commanded))) <= OFF_COMMAND:
-            start, recover = command_state, None  # the cables are where the last command put them
-        else:
-            start = robot.estimate_shape(measured, tip_force=load[:3], tip_moment=load[3:],
-                                         warm_start=warm)
-            # onto the commands of that shape: slack cables taken up, antagonists at min_tension
-            try:
-                recover = self.command(start)
-            except ValueError:  # the shape needs more than the tension limits: stay
-                recover = np.clip(measured, low, high)
-            # the ramp starts where the cables are, but never commands outside the limits
-            commanded = np.clip(measured, low, high)
+        begin = self.start_point(measured, load, snapshot, tip_fresh)
+        start, recover, commanded = begin.state, begin.recover, begin.commanded
         solution = robot.solve_tip_goal(position, tip_force=load[:3], tip_moment=load[3:],
                                         tolerance=self.model_tolerance(tolerance),
                                         goal_direction=direction, warm_start=start)
@@ -217,7 +242,7 @@ class GoalRun:
             raise ValueError('goal (%.4f, %.4f, %.4f) m %s' % (*position, error)) from None
         return Plan(start, solution, np.array(load, dtype=float), commanded, recover, target)
 
-    def command(self, result):
+    def command(self, result) -> np.ndarray:
         """Motor-side lengths (m) holding a model result's shape, inside the length limits.
 
         :raises ValueError: the shape needs more tension than ``tension_limits`` allow
@@ -225,11 +250,11 @@ class GoalRun:
         lengths = command_for(self.robot, result.shape, self.settings.min_tension).lengths
         return np.clip(lengths, self.limits[:, 0], self.limits[:, 1])
 
-    def begin(self, goal, plan, now):
+    def begin(self, goal, plan, now) -> 'Goal | None':
         """Make ``goal`` the running one; return the goal it pre-empts (finished) or None."""
         previous = self.goal
         if previous is not None:
-            self.finish(previous, False, 'pre-empted by a new goal')
+            self.finish(previous, False, 'pre-empted by a new goal', Outcome.PREEMPTED)
         self.goal = goal
         if plan.recover is not None or self.commanded is None:
             self.commanded = plan.commanded
@@ -245,15 +270,21 @@ class GoalRun:
         self.moved_onto_model += plan.recover is not None
         return previous
 
-    def adopt(self, state, commanded):
+    def adopt(self, state, commanded) -> None:
         """Continue from an equilibrium commanded elsewhere (teleoperation) with no goal."""
         self.command_state, self.commanded, self.warm = state, np.array(commanded), state
 
-    def finish(self, goal, reached, reason):
-        """End ``goal`` (idempotent); return True if this call ended it."""
+    def finish(self, goal, reached, reason, outcome=None) -> bool:
+        """End ``goal`` (idempotent); return True if this call ended it.
+
+        :param outcome: an :class:`Outcome`; by default ``REACHED`` or ``FAILED`` after
+            ``reached``
+        """
         if goal.done.is_set():
             return False
         goal.reached, goal.reason = reached, reason
+        goal.outcome = Outcome(outcome) if outcome is not None else (
+            Outcome.REACHED if reached else Outcome.FAILED)
         self.judged_error = None
         if self.goal is goal:
             self.goal, self.phase = None, Phase.IDLE
@@ -268,12 +299,12 @@ class GoalRun:
         self._straight = False
 
     # -- the control loop --------------------------------------------------------------------
-    def stale(self, now, measurement, tip):
+    def stale(self, now, measurement, tip) -> str:
         """Why the state is too old for the current phase, or '' (see :func:`stale_state`)."""
         return stale_state(now, measurement, tip, self.settings.max_state_age,
                            need_tip=self.phase in (Phase.SETTLE, Phase.JUDGE))
 
-    def tick(self, now, dt, measurement, tip, tips, load):
+    def tick(self, now, dt, measurement, tip, tips, load) -> 'np.ndarray | None':
         """Advance one control period of ``dt`` s; return the command (m) to publish, or None.
 
         :param measurement: the newest :class:`~continuum_statics.control.records.Measurement`

@@ -437,3 +437,14 @@ def _solution(robot, problem, z, info, converged, iterations, message, parts=Non
                           iterations=iterations, residual=_cable_residual(info),
                           jacobian_parts=parts, slack_lengths=np.where(slack, gap, 0.0),
                           model_at=model)
+
+
+def length_problem(robot, free_lengths, tip_force=(0.0, 0.0, 0.0), tip_moment=(0.0, 0.0, 0.0)):
+    """Return the equations :func:`solve_lengths` solves, for an outside (SciPy) solver.
+
+    :returns: an object with ``evaluate(z)`` -> (F (3 + n, scaled), ...) and ``scale`` (z's
+        scaling: ``evaluate(z * scale)``); no friction history (every cable at rest)
+    """
+    n = len(robot.cable_names)
+    return _Problem(robot, np.asarray(free_lengths, dtype=float), np.zeros(n),
+                    np.asarray(tip_force, dtype=float), np.asarray(tip_moment, dtype=float))

@@ -13,6 +13,15 @@ def quaternion_to_rotation(q):
     ])
 
 
+def quaternion_direction(q):
+    """Return the unit z axis (3,) of quaternion ``q`` [x, y, z, w] (normalised first).
+
+    A goal pose's direction and a tip frame's axis along the rod: the one conversion.
+    """
+    q = np.asarray(q, dtype=float)
+    return quaternion_to_rotation(q / np.linalg.norm(q))[:, 2]
+
+
 @numba.njit(cache=True)
 def quaternion_into(r, out):
     """Write the unit quaternion [x, y, z, w], w >= 0, of rotation ``r`` into ``out``.

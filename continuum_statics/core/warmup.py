@@ -177,18 +177,3 @@ def kernel_signatures():
             if isinstance(value, CPUDispatcher):
                 counts['%s.%s' % (name, attribute)] = len(value.signatures)
     return counts
-
-
-def main(argv=None):
-    """``python -m continuum_statics warmup [--robot FILE ...]``: fill the kernel cache."""
-    import argparse
-
-    from continuum_statics.core.robot import load_robot
-
-    parser = argparse.ArgumentParser(prog='python -m continuum_statics warmup',
-                                     description='compile the kernels into the numba cache')
-    parser.add_argument('--robot', default=None, help='robot file (default: the bundled one)')
-    options = parser.parse_args(argv)
-    robot = None if options.robot is None else load_robot(options.robot)
-    warm_up(robot, log=lambda line: print('warmup: %s' % line, flush=True))
-    return 0

@@ -6,8 +6,9 @@ from continuum_statics.drivers.base import (
     CableBackend,
     CableReading,
     ConnectionLost,
+    RosTopicBackend,
     backend_class,
 )
 
 __all__ = ['backend_class', 'BackendOption', 'BackendStatus', 'CableBackend', 'CableReading',
-           'ConnectionLost', 'ENTRY_POINT_GROUP']
+           'ConnectionLost', 'ENTRY_POINT_GROUP', 'RosTopicBackend']

@@ -100,6 +100,14 @@ class CableBackend(abc.ABC):
     power = True
     #: The backend's options (:class:`BackendOption`), declared by the node as parameters.
     options_spec = ()
+    #: True: the node passes ``robot=`` (its :class:`~continuum_statics.core.robot.Robot`) to
+    #: the constructor (the simulated robot needs the model).
+    wants_robot = False
+    #: True for a :class:`RosTopicBackend`: the node lends it a command publisher and a
+    #: subscription (the backend itself imports no ROS).
+    ros_topics = False
+    #: True when the backend takes a hidden tip load (:meth:`set_tip_wrench`, simulation).
+    takes_tip_wrench = False
 
     def __init__(self, cable_names, length_limits, initial_lengths, **options):
         self.cable_names = tuple(cable_names)
@@ -115,42 +123,42 @@ class CableBackend(abc.ABC):
         self.options = dict(defaults, **options)
 
     @abc.abstractmethod
-    def start(self, now):
+    def start(self, now) -> None:
         """Connect to the actuators and read them (power on if :attr:`power`); now: monotonic s."""
 
-    def enable(self, now):
+    def enable(self, now) -> None:
         """Power stage / torque on, holding where the actuators are (lifecycle activate)."""
         self.power = True
 
-    def disable(self, now):
+    def disable(self, now) -> None:
         """Hold where the actuators are, then power stage / torque off (lifecycle deactivate)."""
         self.power = False
         self.hold(now)
 
     @abc.abstractmethod
-    def command(self, target_lengths, now):
+    def command(self, target_lengths, now) -> None:
         """Move towards ``target_lengths`` (n_cables,) m; finite and inside the limits."""
 
     @abc.abstractmethod
-    def hold(self, now):
+    def hold(self, now) -> None:
         """Stop where the cables are now (command watchdog, shutdown)."""
 
     @abc.abstractmethod
-    def read(self, now):
+    def read(self, now) -> 'CableReading':
         """Return the current :class:`CableReading`; ``now`` is a monotonic time in s."""
 
-    def status(self):
+    def status(self) -> 'BackendStatus':
         """Return the actuators' :class:`BackendStatus` (override to report real health)."""
         return BackendStatus()
 
     #: Option holding the actuator positions of the straight pose (``set_home`` writes it).
     zero_option = None
 
-    def reset(self):
+    def reset(self) -> str:
         """Clear actuator faults (reboot, fault reset) and re-enable; return what was done."""
         return 'nothing to reset'
 
-    def set_home(self):
+    def set_home(self) -> list:
         """Record the current actuator positions as the straight pose; return the new zeros.
 
         :returns: list of positions for :attr:`zero_option` (what the node writes to its home file)
@@ -158,15 +166,41 @@ class CableBackend(abc.ABC):
         """
         raise ValueError('backend %r has no homing' % self.name)
 
-    def set_option(self, key, value):
+    def set_option(self, key, value) -> None:
         """Change one option at run time; raise ValueError if it cannot change while running."""
         raise ValueError('backend %r cannot change option %r while running' % (self.name, key))
 
-    def close(self):
+    def set_tip_wrench(self, wrench) -> None:
+        """Put a hidden tip load (6,) N, N m on a simulated robot (:attr:`takes_tip_wrench`)."""
+        raise ValueError('backend %r has no simulated tip load' % self.name)
+
+    def close(self) -> None:
         """Release the actuators (called once, when the node is destroyed)."""
 
 
-def backend_class(spec):
+class RosTopicBackend(CableBackend):
+    """A backend whose actuators are reached through ROS topics the node owns (ros2_control).
+
+    The node publishes each command on :attr:`command_topic` (std_msgs/Float64MultiArray) through
+    the ``send(positions)`` it passes to :meth:`attach_ros`, and feeds every JointState of
+    :attr:`state_topic` to :meth:`on_joint_state`. No ROS import here.
+    """
+
+    ros_topics = True
+    #: Set by the subclass (usually from its options) before the node configures it.
+    command_topic = ''
+    state_topic = ''
+
+    @abc.abstractmethod
+    def attach_ros(self, send) -> None:
+        """Take the node's publisher: ``send(positions)`` publishes one command."""
+
+    @abc.abstractmethod
+    def on_joint_state(self, names, positions, velocities, efforts, now) -> None:
+        """Take one JointState of :attr:`state_topic`; ``now`` is monotonic s."""
+
+
+def backend_class(spec) -> type:
     """Return the backend class for ``spec``: a built-in or entry-point name, or ``module:Class``.
 
     :raises ValueError: when no backend of that name exists (the message lists the known names)

@@ -21,14 +21,14 @@ from continuum_statics.drivers.base import (
     OK,
     BackendOption,
     BackendStatus,
-    CableBackend,
     CableReading,
     ConnectionLost,
+    RosTopicBackend,
 )
 from continuum_statics.drivers.spool import Spool, per_cable
 
 
-class Ros2ControlCableBackend(CableBackend):
+class Ros2ControlCableBackend(RosTopicBackend):
     """Cable spools behind a ros2_control forward position controller."""
 
     name = 'ros2_control'

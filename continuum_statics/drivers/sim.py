@@ -46,6 +46,7 @@ class SimulatedCableBackend(CableBackend):
 
     #: the node passes ``robot=`` (its :class:`Robot`) to backends that set this
     wants_robot = True
+    takes_tip_wrench = True
 
     def __init__(self, cable_names, length_limits, initial_lengths, robot=None, **options):
         super().__init__(cable_names, length_limits, initial_lengths, **options)

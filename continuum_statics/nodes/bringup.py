@@ -17,7 +17,7 @@ import argparse
 import os
 import sys
 
-from continuum_statics.nodes.node_params import share_dir
+from continuum_statics.config_paths import share_dir
 
 USAGE_EPILOG = ('Arguments after --ros-args go to ROS, e.g. --ros-args --params-file '
                 'config/continuum_robot.params.yaml -r cable_states:=measured_lengths')
@@ -55,7 +55,7 @@ def wants_load_estimator(choice, robot=None):
     """Whether bringup runs tip_load_estimator (``auto``: the robot has a tendon model)."""
     if choice != 'auto':
         return choice == 'on'
-    from continuum_statics.nodes.node_params import default_robot_file, load_robot_file
+    from continuum_statics.config_paths import default_robot_file, load_robot_file
     try:
         model = load_robot_file(robot or default_robot_file())
     except ValueError:

@@ -27,8 +27,6 @@ parameters ``<backend>.<option>``.
   robot that no other node is told about (tensions change under it; the motors hold).
 """
 import sys
-import threading
-import time
 from types import SimpleNamespace
 
 from geometry_msgs.msg import WrenchStamped
@@ -38,7 +36,10 @@ from rclpy.qos import qos_profile_sensor_data
 from sensor_msgs.msg import JointState
 from std_srvs.srv import Trigger
 
-from continuum_statics.drivers import BackendStatus, ConnectionLost, backend_class
+from continuum_statics.control.actuators import Actuators
+from continuum_statics.control.command_gate import CommandGate
+from continuum_statics.control.health import DriverHealth
+from continuum_statics.drivers import backend_class
 from continuum_statics.drivers.home_file import load_home_file, write_home_file
 from continuum_statics.nodes import diagnostics_util as diag
 from continuum_statics.nodes.dedicated_intake import PeriodicThread
@@ -56,12 +57,8 @@ from continuum_statics.nodes.ros_conversions import (
     joint_state,
     tip_load,
 )
+from continuum_statics.nodes.ros_topic_backend import lend_topics
 from continuum_statics.nodes.timers import steady_timer
-
-THROTTLE_S = 2.0
-#: First reconnection delay after a lost port or bus, s (doubles up to reconnect_max_interval).
-FIRST_RETRY_S = 0.1
-
 
 
 class CableDriverNode(LifecycleNode):
@@ -100,32 +97,18 @@ class CableDriverNode(LifecycleNode):
                 self.get_logger().info('home positions from %s: %s = %s' % (
                     self._home_file, zero_option, zeros))
 
-        self._problems = diag.Problems()
-        self._empty_payloads = 0
-        self._clamped = 0
-        self._commands = 0
-        self._refused = 0
-        self._backend_error = ''
-        self._connection_error = ''
-        self._connected = False
-        self._retry_delay = FIRST_RETRY_S
-        self._next_attempt = 0.0
-        self._reconnects = 0
-        self._status = None
-        self._rate = diag.RateMeter()
+        self.health = DriverHealth(self._backend_cls.name, self._warn, bool(self.cable_names))
+        self._problems = self.health.problems
+        # lifecycle, connection and fault state, and what a command becomes (control/)
+        self.gate = CommandGate(self.cable_names, self._limits, self.robot.straight_cable_lengths)
+        # every backend call, under one lock (the executor and the publish loop both call in)
+        self.actuators = Actuators(self.gate, self._backend_cls.name, self.get_logger())
+        self.actuators.max_interval = self._params['reconnect_max_interval']
         self._state_msg = JointState()
-        self._lock = threading.Lock()  # backend calls come from the executor and the loop
-        self._targets = np.array(self.robot.straight_cable_lengths, dtype=float)
-        self._last_reading = None
-        self._last_command_time = None
-        self._holding = True
         self._diagnostics = self.create_publisher(diag.DiagnosticArray, '/diagnostics', 10)
         steady_timer(self, 1.0 / self._params['diagnostics_rate'], self._publish_diagnostics)
         self._loop = None
-        self.backend = None  # created by configure, released by cleanup
         self._backend_options = options
-        self._active = False
-        self._finalized = False  # after the shutdown transition
         self._ros_topics = None  # the command sender lent to a ROS-topic backend
         if not self.cable_names:
             # A passive rod (no cables): say it once, stay up, publish only diagnostics.
@@ -142,7 +125,7 @@ class CableDriverNode(LifecycleNode):
                                  COMMAND_QOS, raw=True)
         self.create_service(Trigger, '~/reset', self._on_reset)
         self._hidden_load = np.array(self._params['sim_tip_wrench'], dtype=float)
-        if hasattr(self._backend_cls, 'set_tip_wrench'):
+        if self._backend_cls.takes_tip_wrench:
             self.create_subscription(WrenchStamped, 'sim_tip_wrench', self._on_sim_tip_wrench,
                                      10)
         self.create_service(Trigger, '~/set_home', self._on_set_home)
@@ -166,24 +149,27 @@ class CableDriverNode(LifecycleNode):
         if not self.cable_names:
             return TransitionCallbackReturn.SUCCESS
         try:
-            extra = {'robot': self.robot} if getattr(self._backend_cls, 'wants_robot',
-                                                     False) else {}
+            extra = {'robot': self.robot} if self._backend_cls.wants_robot else {}
             backend = self._backend_cls(self.cable_names, self._limits,
                                         self.robot.straight_cable_lengths,
                                         **self._backend_options, **extra)
         except Exception as error:  # bad options a parameter check could not see
             self.get_logger().error('configure failed: %s' % error)
             return TransitionCallbackReturn.FAILURE
-        backend.power = False
-        if hasattr(backend, 'set_tip_wrench'):
+        if backend.takes_tip_wrench:
             backend.set_tip_wrench(self._hidden_load)
-        with self._lock:
-            self.backend = backend
-            if hasattr(backend, 'attach_ros'):  # ros2_control: the node lends it topics
-                self._attach_ros_topics()
-            self._retry_delay = FIRST_RETRY_S
-            self._connect(time.monotonic())  # a failure is retried by the loop
+        self.actuators.configure(backend, self._lend_topics)
         return TransitionCallbackReturn.SUCCESS
+
+    def _lend_topics(self, backend):
+        if backend.ros_topics:  # ros2_control: the node lends it topics (made once)
+            self._ros_topics = self._ros_topics or lend_topics(self, lambda: self.backend)
+            backend.attach_ros(self._ros_topics)
+
+    @property
+    def backend(self):
+        """The configured :class:`~continuum_statics.drivers.CableBackend`, or None."""
+        return self.actuators.backend
 
     def on_activate(self, state):
         """Torque on / operation enabled at the present positions; accept commands."""
@@ -195,116 +181,28 @@ class CableDriverNode(LifecycleNode):
 
     def on_cleanup(self, state):
         """Release the actuators and the port or bus."""
-        self._release()
+        self.actuators.release()
         return TransitionCallbackReturn.SUCCESS
 
     def on_shutdown(self, state):
         """Power off and release, from any state (finalized: no transition leads back)."""
-        self._release()
-        self._finalized = True
+        self.actuators.release()
+        self.gate.finalized = True
         return TransitionCallbackReturn.SUCCESS
 
     def _switch_power(self, on):
-        if self.backend is None:
-            self._active = on
-            return TransitionCallbackReturn.SUCCESS
-        with self._lock:
-            self._active = on
-            self._holding = True
-            now = time.monotonic()
-            try:
-                if self._connected:
-                    (self.backend.enable if on else self.backend.disable)(now)
-                else:
-                    self.backend.power = on  # the reconnection does it
-            except ConnectionLost as error:
-                self._lost(error, now)  # the reconnection does it
-            except Exception as error:
-                self.get_logger().error('%s failed: %s' % ('activate' if on else 'deactivate',
-                                                          error))
-                return TransitionCallbackReturn.FAILURE
+        if not self.actuators.switch_power(on):
+            return TransitionCallbackReturn.FAILURE
         self.get_logger().info('cable_driver %s' % ('active: torque on, commands accepted' if on
                                                     else 'inactive: torque off, holding'))
         return TransitionCallbackReturn.SUCCESS
-
-    def _release(self):
-        with self._lock:
-            backend, self.backend = self.backend, None
-            self._active = False
-            self._connected = False
-            if backend is None:
-                return
-            try:
-                if not self._connection_error:
-                    backend.hold(time.monotonic())
-            except Exception as error:
-                self.get_logger().warning('hold at release failed: %s' % error)
-            try:
-                backend.close()
-            except Exception as error:
-                self.get_logger().error('backend shutdown failed: %s' % error)
-
-    def _attach_ros_topics(self):
-        """Lend a ROS-topic backend (ros2_control) a command publisher and joint_states.
-
-        Created once; every later configure hands the same topics to the new backend.
-        """
-        if self._ros_topics is None:
-            from std_msgs.msg import Float64MultiArray
-
-            publisher = self.create_publisher(Float64MultiArray, self.backend.command_topic,
-                                              COMMAND_QOS)
-
-            def send(positions):
-                publisher.publish(Float64MultiArray(data=[float(p) for p in positions]))
-
-            def on_joint_state(msg):
-                backend = self.backend
-                if backend is not None:
-                    backend.on_joint_state(msg.name, msg.position, msg.velocity, msg.effort,
-                                           time.monotonic())
-
-            self.create_subscription(JointState, self.backend.state_topic, on_joint_state,
-                                     qos_profile_sensor_data)
-            self._ros_topics = send
-        self.backend.attach_ros(self._ros_topics)
-
-    # -- connection -------------------------------------------------------------------------
-    def _connect(self, now):
-        """Try ``backend.start``; on ConnectionLost schedule the next try (caller holds lock)."""
-        try:
-            self.backend.start(now)
-        except ConnectionLost as error:
-            self._lost(error, now)
-            return False
-        if self._connection_error:
-            self._reconnects += 1
-            self.get_logger().info('reconnected: %s is back' % self._backend_cls.name)
-        self._connected = True
-        self._connection_error = ''
-        self._retry_delay = FIRST_RETRY_S
-        # After a (re)connection the cables stay where they are until a new command.
-        self._holding = True
-        self._last_reading = None
-        return True
-
-    def _lost(self, error, now):
-        first = self._connected or not self._connection_error
-        self._connected = False
-        self._connection_error = str(error)
-        self._next_attempt = now + self._retry_delay
-        if first:
-            self.get_logger().error('%s: %s; reconnecting' % (self._backend_cls.name, error))
-        else:
-            self.get_logger().warning('still no connection: %s (next try in %.2g s)' % (
-                error, self._retry_delay), throttle_duration_sec=THROTTLE_S)
-        self._retry_delay = min(2.0 * self._retry_delay,
-                                self._params['reconnect_max_interval'])
 
     # -- parameters ---------------------------------------------------------------------------
     def _on_parameter_change(self, name, value):
         if name == 'publish_rate' and self._loop is not None:
             self._loop.rate = value
+        elif name == 'reconnect_max_interval':
+            self.actuators.max_interval = value
         elif name == 'sim_tip_wrench':
             self._set_hidden_load(np.array(value, dtype=float))
 
@@ -312,53 +210,31 @@ class CableDriverNode(LifecycleNode):
         try:
             wrench = tip_load(msg, self.robot.base_frame_id, what='sim_tip_wrench')
         except ValueError as error:
-            self._reject('sim_tip_wrench', error)
+            self._problems.reject('sim_tip_wrench', error)
             return
         self._set_hidden_load(wrench)
 
     def _set_hidden_load(self, wrench):
         """Set the simulated robot's hidden tip load (6,), now and for the next configure."""
-        with self._lock:
-            self._hidden_load = wrench
-            if self.backend is not None and hasattr(self.backend, 'set_tip_wrench'):
-                self.backend.set_tip_wrench(wrench)
+        self._hidden_load = wrench
+        if self._backend_cls.takes_tip_wrench:
+            self.actuators.call(lambda backend: backend.set_tip_wrench(wrench))
 
     def _on_option_change(self, name, value):
         key = name.split('.', 1)[1]
-        with self._lock:
-            if self.backend is not None:
-                self.backend.set_option(key, value)
-            self._backend_options[key] = value  # for the next configure
+        self.actuators.call(lambda backend: backend.set_option(key, value))
+        self._backend_options[key] = value  # for the next configure
 
     # -- commands -----------------------------------------------------------------------------
-    def _reject(self, kind, reason):
-        self._problems.add(kind, reason)
-        self.get_logger().warning('dropped %s: %s' % (kind, reason),
-                                  throttle_duration_sec=THROTTLE_S)
-
-    def _refusal(self):
-        """Why commands cannot be carried out now, or ''."""
-        if self._finalized:
-            return 'cable_driver is shut down (lifecycle finalized): restart it'
-        if not self._active:
-            return 'cable_driver is %s (lifecycle): activate it to accept commands' % (
-                self._lifecycle_state())
-        if not self._connected:
-            return 'actuators not connected (%s)' % self._connection_error
-        if self._backend_error:
-            return 'backend failed (%s)' % self._backend_error
-        status = self._status
-        if status is not None and status.level >= diag.ERROR:
-            return 'actuator fault: %s' % status.message
-        return ''
+    def _warn(self, text):
+        self.get_logger().warning(text)
 
     def _on_raw_command(self, data):
         try:
             view = parse_joint_state(data)
         except ValueError as error:
-            if len(data) == 0:
-                self._empty_payloads += 1
-            self._reject('cable_commands', error)
+            self.health.empty_payloads += len(data) == 0
+            self._problems.reject('cable_commands', error)
             return
         self._on_command(SimpleNamespace(name=view.names, position=view.position,
                                          velocity=view.velocity, effort=view.effort))
@@ -366,110 +242,27 @@ class CableDriverNode(LifecycleNode):
     def _on_command(self, msg):
         try:
             index = cable_index(msg.name, self.cable_names, require_all=False)
-            lengths = joint_positions(msg, len(index))
-        except ValueError as error:
-            self._reject('cable_commands', error)
-            return
-        low, high = self._limits[index, 0], self._limits[index, 1]
-        margin = self._params['length_margin']
-        outside = np.flatnonzero((lengths < low - margin) | (lengths > high + margin))
-        if outside.size:
-            self._reject('cable_commands', 'outside the length limits by more than '
-                         'length_margin %g m: %s' % (margin, ', '.join(
-                             '%s %.4f m not in [%.4f, %.4f]' % (
-                                 msg.name[i], lengths[i], low[i], high[i]) for i in outside)))
-            return
-        clamped = np.clip(lengths, low, high)
-        if np.any(clamped != lengths):
-            self._clamped += 1
-        with self._lock:
-            refusal = self._refusal()
-            if refusal:
-                self._refused += 1
-                self._reject('cable_commands', 'refused: ' + refusal)
-                return
-            now = time.monotonic()
-            targets = self._targets.copy()  # stored only once the backend took it
-            if self._holding and self._last_reading is not None:
-                # After a hold, cables not named in this command stay where they are.
-                targets = np.clip(self._last_reading, self._limits[:, 0], self._limits[:, 1])
-            targets[index] = clamped
-            try:
-                self.backend.command(targets, now)
-            except ConnectionLost as error:
-                self._lost(error, now)
-                return
-            except Exception as error:  # a real backend may fail; the node stays up
-                self._backend_failure('command', error)
-                return
-            self._targets = targets
-            self._commands += 1
-            self._last_command_time = now
-            self._holding = False
-
-    def _backend_failure(self, what, error):
-        self._backend_error = '%s failed: %s' % (what, error)
-        self.get_logger().error('backend %s' % self._backend_error,
-                                throttle_duration_sec=THROTTLE_S)
+            self.actuators.command(index, joint_positions(msg, len(index)),
+                                   self._params['length_margin'])
+        except ValueError as error:  # CommandRefused too
+            self._problems.reject('cable_commands', error)
 
     # -- the loop ---------------------------------------------------------------------------
     def _on_timer(self):
-        now = time.monotonic()
-        timeout = self._params['command_timeout']
-        with self._lock:
-            if self.backend is None:  # unconfigured
-                return
-            if not self._connected:
-                if now < self._next_attempt or not self._connect(now):
-                    return
-            try:
-                if (not self._holding and timeout > 0.0 and self._last_command_time is not None
-                        and now - self._last_command_time > timeout):
-                    self.backend.hold(now)
-                    self._holding = True
-                    self.get_logger().info('no cable command for %.3g s: holding position'
-                                           % timeout)
-                reading = self.backend.read(now)
-                self._status = self.backend.status()
-                joint_state(self.cable_names, reading.lengths, self.get_clock().now().to_msg(),
-                            reading.velocities, reading.tensions, msg=self._state_msg)
-            except ConnectionLost as error:
-                self._lost(error, now)
-                return
-            except Exception as error:  # ValueError on NaN from a backend, or a hardware error
-                self._backend_failure('read', error)
-                return
-            self._backend_error = ''
-            self._last_reading = np.asarray(reading.lengths, dtype=float)
-        self._publisher.publish(self._state_msg)
-        self._rate.tick()
+        def fill(reading):  # ValueError on a non-finite reading: a failed read
+            joint_state(self.cable_names, reading.lengths, self.get_clock().now().to_msg(),
+                        reading.velocities, reading.tensions, msg=self._state_msg)
+
+        if self.actuators.step(self._params['command_timeout'], fill) is not None:
+            self._publisher.publish(self._state_msg)
+            self.health.rate.tick()
 
     # -- services -----------------------------------------------------------------------------
     def _on_reset(self, request, response):
         if self.backend is None:
             response.success, response.message = False, 'robot has no cables: nothing to reset'
             return response
-        with self._lock:
-            try:
-                if not self._connected:
-                    self._retry_delay = FIRST_RETRY_S
-                    ok = self._connect(time.monotonic())
-                    message = 'reconnected' if ok else 'still not connected: %s' % (
-                        self._connection_error)
-                    response.success, response.message = ok, message
-                    return response
-                message = self.backend.reset()
-                self._status = self.backend.status()
-                self._backend_error = ''
-                self._holding = True
-                response.success = self._status.level < diag.ERROR
-                response.message = message if response.success else '%s; still: %s' % (
-                    message, self._status.message)
-            except ConnectionLost as error:
-                self._lost(error, time.monotonic())
-                response.success, response.message = False, str(error)
-            except Exception as error:
-                response.success, response.message = False, 'reset failed: %s' % error
+        response.success, response.message = self.actuators.reset()
         self.get_logger().info('reset: %s' % response.message)
         return response
 
@@ -477,21 +270,12 @@ class CableDriverNode(LifecycleNode):
         if self.backend is None:
             response.success, response.message = False, 'robot has no cables: nothing to home'
             return response
-        with self._lock:
-            try:
-                if not self._connected:
-                    raise ValueError('actuators not connected (%s)' % self._connection_error)
-                refusal = self._home_refusal()
-                if refusal:
-                    raise ValueError(refusal)
-                zeros = self.backend.set_home()
-                self._holding = True
-                self._last_reading = None
-                self._targets = np.array(self.robot.straight_cable_lengths, dtype=float)
-                self.backend.hold(time.monotonic())
-            except Exception as error:
-                response.success, response.message = False, 'set_home failed: %s' % error
-                return response
+        try:
+            zeros = self.actuators.set_home(self._params['home_tolerance'],
+                                            self._params['home_force'])
+        except Exception as error:
+            response.success, response.message = False, 'set_home failed: %s' % error
+            return response
         option = self._backend_cls.zero_option
         message = '%s = %s' % (option, zeros)
         if self._home_file:
@@ -509,72 +293,12 @@ class CableDriverNode(LifecycleNode):
         self.get_logger().info('set_home: %s' % message)
         return response
 
-    def _home_refusal(self):
-        """Why the current positions are no straight pose to home at, or ''."""
-        if self._params['home_force']:
-            return ''
-        if self._last_reading is None:
-            return 'no reading yet (home_force:=true to home anyway)'
-        offset = self._last_reading - self.robot.straight_cable_lengths
-        worst = int(np.argmax(np.abs(offset)))
-        tolerance = self._params['home_tolerance']
-        if abs(offset[worst]) <= tolerance:
-            return ''
-        return ('the robot is not straight: %s reads %+.2f mm from its straight length '
-                '(home_tolerance %.2f mm); straighten it, or set home_force:=true if the '
-                'previous home is wrong' % (self.cable_names[worst], offset[worst] * 1e3,
-                                             tolerance * 1e3))
-
     # -- diagnostics --------------------------------------------------------------------------
     def _publish_diagnostics(self):
         # read by tip_controller: a goal fails at once, naming this, when commands are refused
-        refusal = self._refusal() if self.cable_names else ''
-        values = {'backend': self._backend_cls.name, 'lifecycle': self._lifecycle_state(),
-                  'accepts_commands': not refusal, 'refusal': refusal}
-        if not self.cable_names:
-            level, message = diag.OK, 'robot has no cables: nothing to drive'
-        elif self._finalized:
-            level, message = diag.OK, ('shut down (lifecycle finalized): actuators released; '
-                                       'restart cable_driver to drive the cables')
-        elif self.backend is None:
-            level, message = diag.OK, ('unconfigured (lifecycle): configure and activate '
-                                       'cable_driver to drive the cables')
-        else:
-            # a reconnection can hold the lock for seconds (drive timeouts): never let it stall
-            # diagnostics; report the last status read instead
-            if self._lock.acquire(timeout=0.05):
-                try:
-                    status = self._status = self.backend.status()
-                finally:
-                    self._lock.release()
-            else:
-                status = self._status or BackendStatus(diag.WARN, 'actuators busy')
-            level, message = status.level, status.message
-            if not self._connected:
-                level, message = diag.ERROR, 'connection lost: %s' % self._connection_error
-            elif self._backend_error:
-                level, message = diag.ERROR, self._backend_error
-            elif level < diag.ERROR and self._problems.recent(2.0):
-                level, message = max(level, diag.WARN), 'rejected ' + self._problems.last_reason
-            elif level == diag.OK and self._rate.total == 0:
-                message = diag.STARTING + 'waiting for the first reading (%s)' % message
-            elif level == diag.OK and not self._active:
-                message = 'inactive (lifecycle): torque off, commands refused (%s)' % message
-            elif level == diag.OK and self._holding:
-                message = '%s; holding position (no command)' % message
-            values.update({
-                'state': 'ready' if self._rate.total else 'starting',
-                'connected': self._connected,
-                'reconnects': self._reconnects,
-                'publish_rate_hz': self._rate.report(),
-                'commands_accepted': self._commands,
-                'commands_clamped': self._clamped,
-                'commands_refused': self._refused,
-                'holding': self._holding,
-            })
-            values.update(self._problems.values())
-            values['empty_payloads_total'] = str(self._empty_payloads)
-            values.update(status.values)
+        status = self.actuators.status()
+        level, message, values = self.health.report(self.gate, status,
+                                                    self.actuators.reconnects)
         self._diagnostics.publish(diag.diagnostic_array(
             self.get_clock().now().to_msg(), self.get_fully_qualified_name().lstrip('/'),
             self.robot.name, level, message, values))
@@ -583,18 +307,9 @@ class CableDriverNode(LifecycleNode):
         """Stop publishing, hold and release the actuators, then destroy the node."""
         if getattr(self, '_loop', None) is not None:  # None or unset: __init__ failed early
             self._loop.stop()
-        if getattr(self, 'backend', None) is not None:
-            self._release()
+        if getattr(self, 'actuators', None) is not None:
+            self.actuators.release()
         return super().destroy_node()
-
-    def _lifecycle_state(self):
-        """'unconfigured', 'inactive' (configured), 'active' or 'finalized'."""
-        if self._finalized:
-            return 'finalized'
-        if self._active:
-            return 'active'
-        return 'unconfigured' if self.backend is None else 'inactive'
-
 
 
 def main(args=None):

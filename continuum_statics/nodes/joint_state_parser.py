@@ -99,6 +99,22 @@ def _float64_sequence(data, offset, what):
     return np.frombuffer(data, dtype='<f8', count=count, offset=offset), offset + 8 * count
 
 
+def header_stamp_ns(data):
+    """Return the header stamp (int ns) of any serialized stamped message, reading 12 bytes.
+
+    Every message that starts with a std_msgs/Header (Path, PoseStamped, JointState) has its
+    stamp right after the 4-byte encapsulation header, in the byte order that header names.
+
+    :raises ValueError: fewer bytes than a stamp needs
+    """
+    try:
+        byte_order = '<' if data[1:2] == b'\x01' else '>'  # CDR encapsulation header
+        sec, nanosec = struct.unpack_from(byte_order + 'iI', data, 4)
+    except struct.error:
+        raise ValueError('malformed message (%d bytes)' % len(data)) from None
+    return sec * 1_000_000_000 + nanosec
+
+
 def check_stamp(sec, nanosec):
     """Raise ValueError unless ``nanosec`` < 1e9 (a builtin_interfaces/Time invariant)."""
     if not 0 <= nanosec < 1_000_000_000:
@@ -171,7 +187,10 @@ def check_cable_view(view, index, cable_names):
 
 
 class CableStatesReader:
-    """Serialized ``cable_states`` -> checked lengths in robot order (the nodes off the hot path).
+    """Serialized ``cable_states`` -> checked lengths in robot order, for every node.
+
+    The one rule every node applies to ``cable_states`` (:func:`check_cable_view`: every cable
+    named once, a positive finite length each; velocity and effort empty or one per cable).
 
     Keeps the name index of the last good message, so a driver's stream decodes no names.
     """
@@ -180,8 +199,11 @@ class CableStatesReader:
         self.cable_names = tuple(cable_names)
         self._name_bytes, self.index = None, None
 
-    def read(self, data):
-        """Return (view, lengths (n,) m in robot order); ``ValueError`` says what is wrong."""
+    def read(self, data, out=None):
+        """Return (view, lengths (n,) m in robot order); ``ValueError`` says what is wrong.
+
+        :param out: an (n,) array to write the lengths into (none allocated), or None
+        """
         try:
             view = parse_joint_state(data, self._name_bytes)
             if view.name_bytes != self._name_bytes:
@@ -191,9 +213,24 @@ class CableStatesReader:
         except ValueError:
             self._name_bytes = None
             raise
-        lengths = np.empty(len(self.cable_names))
+        lengths = np.empty(len(self.cable_names)) if out is None else out
         lengths[self.index] = view.position
         return view, lengths
+
+    def tensions(self, view, out=None):
+        """Return (tensions (n,) N in robot order, or None, and why not ('' when given)).
+
+        ``effort`` is a tension only when finite and >= 0 for every cable (a signed motor
+        current is not); an empty ``effort`` gives (None, '').
+        """
+        if not view.effort.shape[0]:
+            return None, ''
+        tensions = np.empty(len(self.cable_names)) if out is None else out
+        tensions[self.index] = view.effort
+        if (tensions >= 0.0).all() and np.isfinite(tensions).all():
+            return tensions, ''
+        return None, 'effort (tensions) not finite and >= 0 N: %s' % np.round(
+            tensions, 4).tolist()
 
 
 def _parse_with_rclpy(data):

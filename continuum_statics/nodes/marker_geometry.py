@@ -35,14 +35,14 @@ def guide_and_cable_points(s_nodes, positions, rotations, guides, cable_offsets,
     rotations = np.asarray(rotations, dtype=float)
     guides = np.asarray(guides, dtype=float)
     nodes = nearest_nodes(s_nodes, guides)
-    path_nodes = np.concatenate([[0], nodes])
+    path_nodes = np.concatenate([[0], nodes[guides > 0.0]])  # a guide at s = 0 is the base disk
     offsets = np.asarray(cable_offsets, dtype=float)
     if offsets.ndim < 3:  # one offset per cable: the same hole in every disk
         offsets = np.repeat(offsets.reshape(-1, 1, 3), len(path_nodes), axis=1)
     holes = holes_at(positions[path_nodes][None], rotations[path_nodes][None], offsets)
     if cable_ends is None:
         return positions[nodes], rotations[nodes], holes
-    counts = 1 + np.searchsorted(guides, np.asarray(cable_ends, dtype=float) + 1e-9)
+    counts = 1 + np.searchsorted(guides[guides > 0.0], np.asarray(cable_ends, dtype=float) + 1e-9)
     return positions[nodes], rotations[nodes], [
         holes[c, :counts[c]] for c in range(offsets.shape[0])]
 

@@ -21,7 +21,13 @@ import time
 from rclpy.action import ActionServer, CancelResponse, GoalResponse
 
 from continuum_statics.nodes.qos import ACTION_SERVICE_QOS
-from continuum_statics.nodes.ros_conversions import goal_direction, goal_position, set_pose
+from continuum_statics.nodes.ros_conversions import (
+    backbone_path,
+    goal_direction,
+    goal_position,
+    ns_to_stamp,
+    set_pose,
+)
 
 #: Feedback rate while a goal runs, Hz.
 FEEDBACK_HZ = 10.0
@@ -40,11 +46,30 @@ def load_interface():
     return MoveTip
 
 
-class MoveTipServer:
-    """Serve ``move_tip`` for a tip_controller node (its goal run does the work)."""
+async def answer_plan(control, goal, base_frame_id):
+    """Return the backbone (nav_msgs/Path) of a reached goal's tip, or None (reason logged)."""
+    data = await control.backbone_after(goal.tip_stamp)
+    if data is None:
+        return None
+    try:
+        return backbone_path(data, base_frame_id)
+    except ValueError as error:
+        control.reject('backbone', error)
+        return None
 
-    def __init__(self, node, action_type, callback_group):
-        self.node = node
+
+class MoveTipServer:
+    """Serve ``move_tip`` for a tip_controller node.
+
+    :param node: the node that hosts the action server
+    :param control: the node's :class:`~continuum_statics.control.tip_control.TipControl`: all
+        this server calls
+    :param base_frame_id: the robot's base frame
+    """
+
+    def __init__(self, node, control, base_frame_id, action_type, callback_group):
+        self.control = control
+        self.base_frame_id = base_frame_id
         self.action_type = action_type
         self.server = ActionServer(node, action_type, 'move_tip', self._execute,
                                    goal_callback=self._on_goal,
@@ -65,8 +90,8 @@ class MoveTipServer:
         if all(map(math.isfinite, values)):
             return GoalResponse.ACCEPT
         # refused before it has a handle: no result carries the reason, the log and count do
-        self.node.goal_rejected('move_tip goal with a non-finite number: position (%g, %g, %g), '
-                                'tolerance %g' % values)
+        self.control.goal_rejected('move_tip goal with a non-finite number: position '
+                                   '(%g, %g, %g), tolerance %g' % values)
         return GoalResponse.REJECT
 
     @staticmethod
@@ -76,42 +101,41 @@ class MoveTipServer:
         return goal_direction(request.target, 'use_direction', 'target')
 
     async def _execute(self, handle):
-        node = self.node
+        control, frame = self.control, self.base_frame_id
         request = handle.request
         result = self.action_type.Result()
-        result.backbone.header.frame_id = node.base_frame_id
+        result.backbone.header.frame_id = frame
         result.error = UNKNOWN
         try:
-            goal = await node.start_goal(goal_position(request.target, node.base_frame_id),
-                                         node.checked_tolerance(request.tolerance),
-                                         'move_tip action', self._direction(request))
+            goal = await control.start_goal(goal_position(request.target, frame),
+                                            control.checked_tolerance(request.tolerance),
+                                            'move_tip action', self._direction(request))
         except ValueError as error:
-            node.goal_rejected(error)
+            control.goal_rejected(error)
             result.message = 'rejected: %s' % error
             handle.abort()
             return result
         feedback = self.action_type.Feedback()
-        feedback.tip.header.frame_id = node.base_frame_id
-        while not await node.goal_end(goal, deadline=_next_feedback()):
+        feedback.tip.header.frame_id = frame
+        while not await control.goal_end(goal, deadline=_next_feedback()):
             if handle.is_cancel_requested:
-                node.finish_goal(goal, False, 'cancelled: the cables hold where they are')
+                control.finish_goal(goal, False, 'cancelled: the cables hold where they are')
                 break
             if not handle.is_active:  # the server shut down
-                node.finish_goal(goal, False, 'shutting down')
+                control.finish_goal(goal, False, 'shutting down')
                 break
-            tip = node.latest_tip()
+            tip = control.latest_tip()
             if tip is not None:
                 set_pose(feedback.tip.pose, tip.position, (0.0, 0.0, 0.0, 1.0))
-                feedback.tip.header.stamp.sec = int(tip.stamp_ns // 1_000_000_000)
-                feedback.tip.header.stamp.nanosec = int(tip.stamp_ns % 1_000_000_000)
+                ns_to_stamp(tip.stamp_ns, feedback.tip.header.stamp)
             feedback.distance = float(goal.error) if math.isfinite(goal.error) else UNKNOWN
-            feedback.phase = node.phase()
+            feedback.phase = control.phase()
             handle.publish_feedback(feedback)
         result.reached = bool(goal.reached)
         result.error = float(goal.error) if math.isfinite(goal.error) else UNKNOWN
         result.message = goal.reason
         if goal.reached:
-            plan = await node.plan_after(goal.tip_stamp)
+            plan = await answer_plan(control, goal, frame)
             if plan is not None:
                 result.backbone = plan
             handle.succeed()

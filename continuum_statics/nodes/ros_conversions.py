@@ -11,19 +11,37 @@ from geometry_msgs.msg import PoseStamped
 import numpy as np
 from sensor_msgs.msg import JointState
 
-from continuum_statics.core.rotations import quaternion_to_rotation
+from continuum_statics.core.rotations import quaternion_direction
 
 #: Quaternion of the identity rotation, [x, y, z, w].
 IDENTITY_QUATERNION = (0.0, 0.0, 0.0, 1.0)
+_NS = 1_000_000_000
 
 
+# -- stamps: the one conversion between builtin_interfaces/Time and integer nanoseconds ---------
+def stamp_ns(stamp):
+    """Return a builtin_interfaces/Time (or anything with ``sec``, ``nanosec``) as int ns."""
+    return stamp.sec * _NS + stamp.nanosec
+
+
+def ns_to_stamp(nanoseconds, stamp=None):
+    """Write int nanoseconds into ``stamp`` (a Time, or a new one when None); return it."""
+    stamp = Time() if stamp is None else stamp
+    stamp.sec, stamp.nanosec = int(nanoseconds // _NS), int(nanoseconds % _NS)
+    return stamp
 
 
 def seconds_to_stamp(seconds):
     """Return float seconds as a builtin_interfaces/Time."""
-    nanoseconds = int(round(seconds * 1e9))
-    return Time(sec=nanoseconds // 1_000_000_000, nanosec=nanoseconds % 1_000_000_000)
+    return ns_to_stamp(int(round(seconds * 1e9)))
 
+
+def stamp_or_now(sec, nanosec, clock):
+    """(sec, nanosec) of a message, or of ``clock``'s now when unstamped (both zero)."""
+    if sec == 0 and nanosec == 0:
+        now = clock.now().to_msg()
+        return now.sec, now.nanosec
+    return sec, nanosec
 
 
 
@@ -137,6 +155,36 @@ def tip_load(msg, base_frame_id, max_force=math.inf, max_torque=math.inf, what='
     return np.array(values)
 
 
+def base_frame_pose(msg, base_frame_id, what, hint=''):
+    """Return (position (3,) m, quaternion [x, y, z, w], stamp ns) of a PoseStamped.
+
+    :param hint: appended to the frame error (what the user should do)
+    :raises ValueError: another frame than the base frame, or a non-finite position
+    """
+    if msg.header.frame_id != base_frame_id:
+        raise ValueError('frame %r is not the base frame %r%s'
+                         % (msg.header.frame_id, base_frame_id, hint))
+    position = pose_position(msg.pose)
+    if not np.all(np.isfinite(position)):
+        raise ValueError('non-finite position')
+    q = msg.pose.orientation
+    return position, np.array([q.x, q.y, q.z, q.w]), stamp_ns(msg.header.stamp)
+
+
+def twist_vectors(msg, base_frame_id):
+    """Return (linear (3,) m/s, angular (3,) rad/s) of a TwistStamped in the base frame.
+
+    An empty frame is taken as the base frame.
+    :raises ValueError: another frame
+    """
+    frame = msg.header.frame_id
+    if frame not in ('', base_frame_id):
+        raise ValueError('frame %r is not the base frame %r' % (frame, base_frame_id))
+    t = msg.twist
+    return (np.array([t.linear.x, t.linear.y, t.linear.z]),
+            np.array([t.angular.x, t.angular.y, t.angular.z]))
+
+
 def float32_value(value):
     """Return the decimal a float32 field was set from (0.3, not 0.30000001192092896).
 
@@ -175,7 +223,7 @@ def goal_direction(pose_stamped, asked, what='goal'):
     if not abs(norm - 1.0) < 1e-3:
         raise ValueError('%s but the %s orientation is not a unit quaternion (norm %.3g)'
                          % (asked, what, norm))
-    return quaternion_to_rotation(quaternion / norm)[:, 2]
+    return quaternion_direction(quaternion)
 
 
 def set_pose(pose, position, quaternion):
@@ -209,6 +257,25 @@ def fill_path(path, header, positions, quaternions):
                                                   quaternions.tolist()):
         pose_stamped.header = header
         set_pose(pose_stamped.pose, position, quaternion)
+    return path
+
+
+def backbone_path(data, base_frame_id):
+    """Return a serialized nav_msgs/Path (a backbone) as a Path, checked.
+
+    :raises ValueError: malformed bytes, no poses, another frame or a non-finite pose
+    """
+    from nav_msgs.msg import Path
+    from rclpy.serialization import deserialize_message
+    try:
+        path = deserialize_message(data, Path)
+    except Exception as error:  # rclpy raises RMWError on bad bytes
+        raise ValueError('malformed Path: %s' % error) from None
+    points = [(p.pose.position.x, p.pose.position.y, p.pose.position.z,
+               p.pose.orientation.x, p.pose.orientation.y, p.pose.orientation.z,
+               p.pose.orientation.w) for p in path.poses]
+    if not points or path.header.frame_id != base_frame_id or not np.all(np.isfinite(points)):
+        raise ValueError('unusable Path: %d poses, frame %r' % (len(points), path.header.frame_id))
     return path
 
 

@@ -42,7 +42,7 @@ import sys
 import time
 
 from builtin_interfaces.msg import Time
-from geometry_msgs.msg import PoseStamped, TransformStamped, WrenchStamped
+from geometry_msgs.msg import PoseStamped, WrenchStamped
 from nav_msgs.msg import Path
 import numpy as np
 from rclpy.node import Node
@@ -51,6 +51,7 @@ from sensor_msgs.msg import JointState
 from std_msgs.msg import Header
 from visualization_msgs.msg import MarkerArray
 
+from continuum_statics.control.health import StaticsHealth, load_values
 from continuum_statics.control.records import TipLoad, current_load
 from continuum_statics.control.shape_tracking import ShapeTracker, Thresholds
 from continuum_statics.core.backbone_sampling import BackboneSampler
@@ -59,7 +60,7 @@ from continuum_statics.core.tendons import full_circle_tension
 from continuum_statics.core.warmup import warm_up
 from continuum_statics.nodes import diagnostics_util as diag
 from continuum_statics.nodes.dedicated_intake import make_intake
-from continuum_statics.nodes.joint_state_parser import check_cable_view, parse_joint_state
+from continuum_statics.nodes.joint_state_parser import CableStatesReader
 from continuum_statics.nodes.marker_geometry import (
     guide_and_cable_points,
     section_layout,
@@ -73,13 +74,11 @@ from continuum_statics.nodes.node_params import (
     tip_wrench_topic,
 )
 from continuum_statics.nodes.parameter_tables import statics_parameters
-from continuum_statics.nodes.pose_encoder import PoseSequenceEncoder, TransformEncoder
-from continuum_statics.nodes.qos import LATCHED_QOS, LATEST_SENSOR_QOS, TF_QOS
-from continuum_statics.nodes.ros_conversions import cable_index, tip_load
-from continuum_statics.nodes.tf_frames import FramePoses, frames, marker_frame
+from continuum_statics.nodes.pose_encoder import PoseSequenceEncoder
+from continuum_statics.nodes.qos import LATCHED_QOS, LATEST_SENSOR_QOS
+from continuum_statics.nodes.ros_conversions import stamp_or_now, tip_load
+from continuum_statics.nodes.tf_outputs import tf_outputs
 from continuum_statics.nodes.timers import steady_timer
-
-THROTTLE_S = 2.0
 
 
 class StaticsNode(Node):
@@ -106,9 +105,8 @@ class StaticsNode(Node):
             np.asarray(self.robot.cable_offsets, dtype=float).reshape(-1, 3), axis=1),
             initial=0.005)) + 0.006
 
-        # Hot-path state: the serialized name list of the last good message and its index map.
-        self._name_bytes = None
-        self._index = None
+        # Hot path: the name index of the last good message is kept; no array allocated.
+        self._cable_states = CableStatesReader(self.cable_names)
         self._lengths = np.empty(len(self.cable_names))
         self._tensions = np.empty(len(self.cable_names))
         self._shape = None
@@ -126,27 +124,14 @@ class StaticsNode(Node):
         # Multi-section robots: each cable drawn to its own end disk, the tube by section.
         self._cable_ends, self._section_ends = section_layout(self.robot)
         self._cable_sections = section_of(self._cable_ends, self._section_ends)
-        self._last = {'residual': math.nan, 'iterations': 0, 'converged': False,
-                      'message': 'waiting for cable_states', 'time': None, 'tensions': False}
-        self._residuals = diag.ValueWindow()
-        self._best_fits = 0  # published with a residual above the warn threshold
-        self._capped = 0  # estimates that hit max_iterations/max_model_runs (refined next)
-        self._empty_payloads = 0
-        self._limit_rejections = 0
-        self._solve_times = diag.TimingWindow()
-        self._cycle_times = diag.TimingWindow()
-        self._input_rate = diag.RateMeter()
-        self._output_rate = diag.RateMeter()
-        self._problems = diag.Problems()
-        self._not_converged = 0
-        self._lost_reported = 0
-        self._tensions_distrusted = 0
-        self._distrust = ('', None)  # (why the tensions were not used, monotonic time)
+        self.health = StaticsHealth(self.cable_names, self.get_logger().warning, self._passive)
+        self._problems = self.health.problems
         self._full_circle_tension = full_circle_tension(self.robot)
 
         self._backbone_pub = self.create_publisher(Path, 'backbone', LATCHED_QOS)
         self._tip_pub = self.create_publisher(PoseStamped, 'tip_pose', LATCHED_QOS)
-        self._tf = self._make_tf() if self._params['publish_tf'] else None
+        self._tf = tf_outputs(self, self.robot, self._params['tip_frame_id'],
+                              self._params['tf_disks']) if self._params['publish_tf'] else None
         self._marker_pub = self.create_publisher(MarkerArray, 'backbone_markers', LATCHED_QOS)
         input_qos = QoSProfile(history=HistoryPolicy.KEEP_LAST,
                                depth=self._params['input_queue_depth'],
@@ -163,7 +148,6 @@ class StaticsNode(Node):
                                  self._on_tip_wrench, LATEST_SENSOR_QOS)
         self._passive_load = None
         if self._passive:
-            self._last['message'] = 'passive rod (no cables): shape from gravity and tip_wrench'
             self._solve_passive(None)
         self._marker_timer = None
         self._set_marker_timer(self._params['marker_rate'])
@@ -191,17 +175,12 @@ class StaticsNode(Node):
             self._marker_timer = steady_timer(self, 1.0 / rate, self._publish_markers)
 
     # -- inputs ----------------------------------------------------------------------------
-    def _reject(self, kind, reason):
-        self._problems.add(kind, reason)
-        self.get_logger().warning('dropped %s: %s' % (kind, reason),
-                                  throttle_duration_sec=THROTTLE_S)
-
     def _on_tip_wrench(self, msg):
         force_limit, torque_limit = tip_wrench_limits(self.robot, self._params)
         try:
             load = tip_load(msg, self.base_frame_id, force_limit, torque_limit)
         except ValueError as error:
-            self._reject('tip_wrench', error)
+            self._problems.reject('tip_wrench', error)
             return
         self._load = TipLoad(load, time.monotonic())
         if self._wrench_expired:
@@ -228,66 +207,33 @@ class StaticsNode(Node):
     def _on_cable_states(self, data):
         """Solve one serialized JointState (raw subscription: parsed without a message object)."""
         start = time.perf_counter()
-        self._input_rate.tick()
+        self.health.received(data)
         try:
-            if not data:
-                self._empty_payloads += 1
-            view = parse_joint_state(data, self._name_bytes)
-            if view.name_bytes != self._name_bytes:
-                index = cable_index(view.names, self.cable_names)
-                self._name_bytes, self._index = view.name_bytes, index
-            check_cable_view(view, self._index, self.cable_names)
-            positions = view.position
+            view, lengths = self._cable_states.read(data, self._lengths)
         except ValueError as error:
-            self._reject_input(error)
+            self.health.rejected(error)
             return
-        lengths = self._lengths
-        lengths[self._index] = positions
         tensions = None
-        if view.effort.shape[0] and self._params['use_measured_tensions']:
-            self._tensions[self._index] = view.effort
-            if (self._tensions >= 0.0).all() and np.isfinite(self._tensions).all():
-                tensions = self._tensions
+        if self._params['use_measured_tensions']:
+            tensions, _ = self._cable_states.tensions(view, self._tensions)  # else unused
         result = self._tracker.update(lengths, tensions,
                                       self._current_tip_load(time.monotonic()),
                                       self._thresholds(), self._tension_limit())
         if result.load_problem:
-            self._reject('tip_wrench', result.load_problem)
+            self._problems.reject('tip_wrench', result.load_problem)
             self._load = None
         if result.estimate is None:
-            self._limit_rejections += result.outside_limits
-            self._reject_input(result.rejection)
+            self.health.rejected(result.rejection, result.outside_limits)
             return
-        self._solve_times.add(time.perf_counter() - start)
-        if result.distrust:
-            self._tensions_distrusted += 1
-            self._distrust = (result.distrust, time.monotonic())
-        self._capped += result.capped
-        self._last.update(residual=result.residual, iterations=result.estimate.iterations,
-                          converged=result.converged, message=result.message,
-                          time=time.monotonic(), tensions=result.tensions_used,
-                          model_tensions=result.estimate.tensions,
-                          slack=result.estimate.slack)
-        self._residuals.add(result.residual)
-        if not (result.estimate.converged or result.capped):
-            self._not_converged += 1
-        if result.rejection:
-            self._reject('cable_states', result.rejection)
-            return
-        self._best_fits += result.best_fit
-        if self._publish_shape(result.estimate.shape, view.sec, view.nanosec):
+        self.health.estimated(result, time.perf_counter() - start)
+        if not result.rejection and self._publish_shape(result.estimate.shape, view.sec,
+                                                        view.nanosec):
             self._tracker.accept(result)
-            self._cycle_times.add(time.perf_counter() - start)
+            self.health.published(time.perf_counter() - start)
 
     def _tension_limit(self):
         """Largest plausible measured tension, N (max_tension, or the full-circle tension)."""
         return self._params['max_tension'] or self._full_circle_tension
-
-    def _reject_input(self, reason):
-        """Drop one cable_states; the diagnostics no longer show the last estimate's values."""
-        self._last.update(residual=math.nan, iterations=0, converged=False,
-                          message='no estimate: the last cable_states was rejected')
-        self._reject('cable_states', reason)
 
     def _solve_passive(self, stamp):
         """Passive rod: solve and publish the shape under gravity and the current tip load."""
@@ -298,16 +244,14 @@ class StaticsNode(Node):
         try:
             shape = self.robot.solve_bvp(tip_force=load[:3], tip_moment=load[3:])
         except Exception as error:  # ConvergenceError or ValueError: keep the last shape
-            self._reject('tip_wrench', 'no equilibrium of the passive rod under %s: %s'
+            self._problems.reject('tip_wrench', 'no equilibrium of the passive rod under %s: %s'
                          % (np.array2string(load, precision=3), error))
             return
-        self._solve_times.add(time.perf_counter() - start)
-        if stamp is None or (stamp.sec == 0 and stamp.nanosec == 0):
-            stamp = self.get_clock().now().to_msg()
-        if self._publish_shape(shape, stamp.sec, stamp.nanosec):
+        sec, nanosec = (0, 0) if stamp is None else (stamp.sec, stamp.nanosec)
+        if self._publish_shape(shape, sec, nanosec):
             self._passive_load = load
-            self._last.update(residual=0.0, iterations=0, converged=True,
-                              time=time.monotonic())
+            self.health.published()
+            self.health.solved_passive(time.perf_counter() - start)
 
     def _publish_shape(self, shape, sec, nanosec):
         """Publish backbone and tip pose of ``shape``; return False if it was not finite."""
@@ -316,9 +260,7 @@ class StaticsNode(Node):
         if not sampler.matches(shape.s, samples):
             sampler = self._sampler = BackboneSampler(shape.s, samples)
         points, quaternions = sampler.sample(shape.positions, shape.rotations)
-        if sec == 0 and nanosec == 0:  # unstamped measurement: stamp it on arrival
-            now = self.get_clock().now().to_msg()
-            sec, nanosec = now.sec, now.nanosec
+        sec, nanosec = stamp_or_now(sec, nanosec, self.get_clock())  # unstamped: on arrival
         if self._path_encoder.count != samples:
             self._path_encoder = PoseSequenceEncoder(self.base_frame_id, samples)
         try:
@@ -328,7 +270,7 @@ class StaticsNode(Node):
                 publisher, encoder, poses = self._tf
                 transforms = encoder.encode(sec, nanosec, *poses.of(shape))
         except ValueError as error:
-            self._reject('shape', error)
+            self._problems.reject('shape', error)
             return False
         self._backbone_pub.publish(backbone)
         self._tip_pub.publish(tip)
@@ -337,33 +279,9 @@ class StaticsNode(Node):
         self._stamp = (sec, nanosec)
         self._tip_position = points[-1]
         self._shape, self._shape_is_new = shape, True
-        self._output_rate.tick()
         return True
 
     # -- outputs ---------------------------------------------------------------------------
-    def _make_tf(self):
-        """Return the publisher, encoder and frame poses of /tf (:mod:`~.tf_frames`), or None."""
-        try:
-            from tf2_msgs.msg import TFMessage
-        except ImportError:
-            self.get_logger().warning('tf2_msgs is not installed: no /tf (make venv builds it; '
-                                      'on a robot computer rosdep installs it)')
-            return None
-        names, arc_lengths = frames(self.robot, self._params['tip_frame_id'],
-                                    self._params['tf_disks'])
-        marker = np.asarray(self.robot.tip_marker, dtype=float)
-        if marker.any():  # the tracker's marker: fixed on the tip frame, /tf_static (latched)
-            static = TransformStamped(child_frame_id=marker_frame(names[0]))
-            static.header.frame_id = names[0]
-            static.header.stamp = self.get_clock().now().to_msg()
-            t = static.transform.translation
-            t.x, t.y, t.z = (float(v) for v in marker)
-            static.transform.rotation.w = 1.0
-            self._tf_static = self.create_publisher(TFMessage, '/tf_static', LATCHED_QOS)
-            self._tf_static.publish(TFMessage(transforms=[static]))
-        return (self.create_publisher(TFMessage, '/tf', TF_QOS),
-                TransformEncoder(self.base_frame_id, names), FramePoses(arc_lengths))
-
     def _publish_markers(self):
         if not self._shape_is_new:
             return
@@ -372,7 +290,7 @@ class StaticsNode(Node):
         try:
             guide_points, guide_rotations, cable_points = guide_and_cable_points(
                 shape.s, shape.positions, shape.rotations, self.robot.guides,
-                self.robot.cable_offsets, self._cable_ends)
+                self.robot.hole_offsets, self._cable_ends)
             positions, quaternions = sampler.sample(shape.positions, shape.rotations)
             self._markers.tube_diameter = self._params['tube_diameter']
             markers = self._markers.update(
@@ -382,7 +300,7 @@ class StaticsNode(Node):
                 guide_points, rotation_to_quaternion(guide_rotations), cable_points,
                 section_of(sampler.s, self._section_ends), self._cable_sections)
         except ValueError as error:
-            self._reject('markers', error)
+            self._problems.reject('markers', error)
             return
         self._marker_pub.publish(markers)
 
@@ -392,83 +310,17 @@ class StaticsNode(Node):
             self._solve_passive(None)  # a tip load that expired: back to the unloaded shape
         else:
             self._current_tip_load(now)  # expire a stale tip load while no measurement comes
-        last = self._last
-        thresholds = self._thresholds()
-        warn = thresholds.warn
-        input_rate = self._input_rate.report()
-        output_rate = self._output_rate.report()
-        solves, solve_median, solve_max = self._solve_times.report()
-        _, cycle_median, cycle_max = self._cycle_times.report()
-        fits, residual_median, residual_max = self._residuals.report()
-        level, message = diag.OK, 'estimating the shape'
-        lost = 0 if self._input is None else max(self._input.lost, 0)
-        lost_now, self._lost_reported = lost - self._lost_reported, lost
-        if self._passive:
-            message = last['message']
-        elif self._output_rate.total == 0:
-            message = diag.STARTING + (
-                'waiting for the first cable_states (is cable_driver running?)'
-                if last['time'] is None else 'no cable_states fits a shape yet: %s'
-                % (self._problems.last_reason or last['message']))
-        elif last['time'] is None or now - last['time'] > 1.0:
-            level, message = diag.WARN, 'no cable_states for over 1 s'
-        elif residual_median > warn:
-            level, message = diag.WARN, (
-                'publishing best fits: residual median %.3g m > warn_residual %.3g m (cable '
-                'slack, stretch or encoder noise above length_noise_std?)'
-                % (residual_median, warn))
-        if self._distrust[1] is not None and now - self._distrust[1] < 2.0:
-            level, message = diag.WARN, self._distrust[0]
-        if self._problems.recent(2.0):
-            level, message = diag.WARN, 'rejected ' + self._problems.last_reason
-        if lost_now > 0:  # the node stalled (or the transport dropped): never under an OK
-            level, message = diag.WARN, '%d cable_states lost since the last report (%s)' % (
-                lost_now, message)
-        wrench_age = math.inf if self._load is None else now - self._load.received
-        load = current_load(self._load, now, self._params['tip_wrench_timeout'])
-        force_limit, torque_limit = tip_wrench_limits(self.robot, self._params)
-        values = {
-            'status': message,
-            'state': 'starting' if self._output_rate.total == 0 else 'ready',
-            'input_rate_hz': input_rate,
-            'output_rate_hz': output_rate,
-            'solves': solves,
-            'received_total': self._input_rate.total,
-            'published_total': self._output_rate.total,
-            'input_skipped_total': 0 if self._input is None else self._input.skipped,
-            'input_lost_total': 0 if self._input is None else self._input.lost,
-            'empty_payloads_total': self._empty_payloads,
-            'outside_limits_total': self._limit_rejections,
-            'solve_time_median_ms': solve_median,
-            'solve_time_max_ms': solve_max,
-            'cycle_time_median_ms': cycle_median,
-            'cycle_time_max_ms': cycle_max,
-            'residual_m': last['residual'],
-            'residual_median_m': residual_median,
-            'residual_max_m': residual_max,
-            'warn_residual_m': warn,
-            'max_residual_m': thresholds.drop,
-            'best_fits_total': self._best_fits,
-            'iterations': last['iterations'],
-            'converged': last['converged'],
-            'estimate_message': last['message'] or 'none',
-            'not_converged_total': self._not_converged,
-            'iteration_capped_total': self._capped,
-            'measured_tensions_used': last['tensions'],
-            'tensions_distrusted_total': self._tensions_distrusted,
-            'max_tension_n': self._tension_limit(),
-            'tip_force_n': ' '.join('%.4g' % f for f in load[:3]),
-            'tip_moment_nm': ' '.join('%.4g' % f for f in load[3:]),
-            'max_tip_force_n': force_limit,
-            'max_tip_torque_nm': torque_limit,
-            'tip_wrench_age_s': wrench_age,
-            'tip_wrench_expired': self._wrench_expired,
-        }
+        thresholds, intake = self._thresholds(), self._input
+        level, message, values = self.health.report(
+            thresholds.warn, thresholds.drop, 0 if intake is None else max(intake.lost, 0),
+            0 if intake is None else intake.skipped)
+        values['max_tension_n'] = self._tension_limit()
+        values.update(load_values(
+            current_load(self._load, now, self._params['tip_wrench_timeout']),
+            math.inf if self._load is None else now - self._load.received, self._wrench_expired,
+            *tip_wrench_limits(self.robot, self._params)))
         if self._tip_position is not None:
             values['tip_position_m'] = '%.5f %.5f %.5f' % tuple(self._tip_position)
-        values.update(diag.tendon_values(self.cable_names, last.get('model_tensions'),
-                                    last.get('slack')))
-        values.update(self._problems.values())
         self._diagnostics.publish(diag.diagnostic_array(
             self.get_clock().now().to_msg(), self.get_fully_qualified_name().lstrip('/'),
             self.robot.name, level, message, values))

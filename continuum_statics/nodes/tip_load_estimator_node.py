@@ -34,10 +34,8 @@ from continuum_statics.nodes.joint_state_parser import CableStatesReader
 from continuum_statics.nodes.node_params import ParameterTable, load_robot_file
 from continuum_statics.nodes.parameter_tables import tip_load_estimator_parameters
 from continuum_statics.nodes.qos import LATCHED_QOS, LATEST_SENSOR_QOS
-from continuum_statics.nodes.ros_conversions import check_frame
+from continuum_statics.nodes.ros_conversions import check_frame, stamp_or_now
 from continuum_statics.nodes.timers import steady_timer
-
-THROTTLE_S = 2.0
 
 
 class TipLoadEstimatorNode(Node):
@@ -61,7 +59,7 @@ class TipLoadEstimatorNode(Node):
         self._estimate = None  # the last good WrenchEstimate (warm start)
         self._published = None  # (force, sigma) last published
         self._contact = ContactDetector(self._contact_threshold())
-        self._problems = diag.Problems()
+        self._problems = diag.Problems(self.get_logger().warning)
         self._failures = 0
         self._times = diag.TimingWindow()
         self._rate = diag.RateMeter()
@@ -98,25 +96,15 @@ class TipLoadEstimatorNode(Node):
                 'tip_position': params['noise_tip_position'],
                 'tip_angle': params['noise_tip_angle']}
 
-    def _reject(self, kind, reason):
-        self._problems.add(kind, reason)
-        self.get_logger().warning('dropped %s: %s' % (kind, reason),
-                                  throttle_duration_sec=THROTTLE_S)
-
     def _on_cable_states(self, data):
         try:
             view, lengths = self._cable_states.read(data)
         except ValueError as error:
-            self._reject('cable_states', error)
+            self._problems.reject('cable_states', error)
             return
-        tensions = None
-        if view.effort.shape[0]:
-            tensions = np.empty(len(self.cable_names))
-            tensions[self._cable_states.index] = view.effort
-            if not (np.isfinite(tensions).all() and (tensions >= 0.0).all()):
-                self._reject('cable_states', 'effort (tensions) not finite and >= 0 N: %s'
-                             % np.round(tensions, 4).tolist())
-                tensions = None
+        tensions, problem = self._cable_states.tensions(view)
+        if problem:
+            self._problems.reject('cable_states', problem)
         self._cables = (lengths, tensions, view.sec, view.nanosec, time.monotonic())
         self._fresh = True
 
@@ -129,7 +117,7 @@ class TipLoadEstimatorNode(Node):
             if not (np.isfinite(position).all() and np.isfinite(quaternion).all()):
                 raise ValueError('non-finite pose')
         except ValueError as error:
-            self._reject('tip_pose_measured', error)
+            self._problems.reject('tip_pose_measured', error)
             return
         rotation = None
         if self._params['use_tip_orientation'] and abs(np.linalg.norm(quaternion) - 1.0) < 1e-3:
@@ -175,12 +163,12 @@ class TipLoadEstimatorNode(Node):
                 warm_start=self._estimate, **kwargs)
         except ValueError as error:
             self._failures += 1
-            self._reject('estimate', error)
+            self._problems.reject('estimate', error)
             return
         self._times.add(time.perf_counter() - start)
         if not (np.isfinite(estimate.wrench).all() and np.isfinite(estimate.covariance).all()):
             self._failures += 1
-            self._reject('estimate', 'non-finite estimate (kept the last good one)')
+            self._problems.reject('estimate', 'non-finite estimate (kept the last good one)')
             return
         if not estimate.converged:
             self._problems.add('estimate', estimate.message or 'not converged')
@@ -190,10 +178,8 @@ class TipLoadEstimatorNode(Node):
     def _publish(self, estimate):
         msg = WrenchStamped()
         cables = self._cables
-        if cables is not None and (cables[2] or cables[3]):
-            msg.header.stamp.sec, msg.header.stamp.nanosec = cables[2], cables[3]
-        else:
-            msg.header.stamp = self.get_clock().now().to_msg()
+        msg.header.stamp.sec, msg.header.stamp.nanosec = stamp_or_now(
+            *((0, 0) if cables is None else cables[2:4]), self.get_clock())
         msg.header.frame_id = self.base_frame_id
         force, moment = estimate.force, estimate.moment
         msg.wrench.force.x, msg.wrench.force.y, msg.wrench.force.z = (float(v) for v in force)

@@ -24,17 +24,8 @@ import numpy as np
 from scipy.integrate import solve_ivp as scipy_solve_ivp
 
 from continuum_statics import load_robot
+from continuum_statics.config_paths import config_file
 from continuum_statics.core.layout import MOMENT, POSITION, ROTATION
-
-CONFIG = Path(__file__).resolve().parents[2] / 'config'
-
-
-def _config(name):
-    """Robot file from the repository, or from the installed share directory."""
-    if (CONFIG / name).exists():
-        return CONFIG / name
-    from ament_index_python.packages import get_package_share_directory
-    return Path(get_package_share_directory('continuum_statics')) / 'config' / name
 
 
 def timings(call, repeat, warmup=20):
@@ -49,7 +40,8 @@ def timings(call, repeat, warmup=20):
     return times
 
 
-def _row(label, times, unit=1e-6):
+def row(label, times, unit=1e-6):
+    """Print one benchmark line (median and 90th percentile); return the median."""
     median, p90 = np.median(times) / unit, np.percentile(times, 90) / unit
     print('  %-34s median %9.1f us   p90 %9.1f us' % (label, median, p90))
     return median
@@ -151,11 +143,11 @@ def bench_sections(path, repeat):
     tensions = rng.uniform(0.0, 6.0, len(robot.cable_names))
     shape = robot.solve_tensions(tensions, force)
     state, fixed = shape.state, shape.fixed_tensions
-    ivp = _row('shape solve (IVP, tensions)', timings(
+    ivp = row('shape solve (IVP, tensions)', timings(
         lambda: robot.integrate_state(state, force, fixed), repeat))
     baseline = timings(lambda: scipy_sections_tip(robot, state, fixed, force),
                        max(5, repeat // 200), warmup=1)
-    scipy_median = _row('SciPy solve_ivp RK45 (1e-3, 1e-6)', baseline)
+    scipy_median = row('SciPy solve_ivp RK45 (1e-3, 1e-6)', baseline)
     reference = robot.with_solver(steps=4096).solve_tensions(tensions, force).tip_position
     tight = scipy_sections_tip(robot, state, fixed, force, 1e-10, 1e-12)
     print('  speed-up over SciPy: %.0fx; tip vs converged (4096 steps): ours %.1e m, SciPy '
@@ -163,8 +155,8 @@ def bench_sections(path, repeat):
               scipy_median / ivp, np.linalg.norm(shape.tip_position - reference),
               np.linalg.norm(scipy_sections_tip(robot, state, fixed, force) - reference),
               np.linalg.norm(tight - reference)))
-    _row('tension solve (cold)', timings(lambda: robot.solve_tensions(tensions, force),
-                                         max(20, repeat // 20), warmup=3))
+    row('tension solve (cold)', timings(lambda: robot.solve_tensions(tensions, force),
+                                        max(20, repeat // 20), warmup=3))
     # warm estimate: a nearby equilibrium of the estimator's own model (section moments, the
     # least tensions that carry them) whose largest cable change is 1 mm
     previous = robot.estimate_shape(robot.cable_lengths(shape), force)
@@ -177,14 +169,14 @@ def bench_sections(path, repeat):
         direction *= 1e-3 / np.max(np.abs(nearby.cable_lengths - lengths))
     changed = nearby.cable_lengths
     est = robot.estimate_shape(changed, force, warm_start=previous)
-    _row('shape estimate (warm, 1 mm change)', timings(
+    row('shape estimate (warm, 1 mm change)', timings(
         lambda: robot.estimate_shape(changed, force, warm_start=previous), repeat))
     print('  estimate: %d iterations, %d IVPs, residual %.1e m, max cable change %.2f mm'
           % (est.iterations, est.model_runs, est.residual,
              1e3 * np.max(np.abs(changed - lengths))))
     goal = robot.solve_tensions(rng.uniform(0.0, 6.0, len(tensions)), force).tip_position
     sol = robot.solve_tip_goal(goal, force)
-    _row('tip-goal solve (cold, %.0f mm from straight)' % (
+    row('tip-goal solve (cold, %.0f mm from straight)' % (
         1e3 * np.linalg.norm(goal - robot.solve_bvp(force).tip_position)),
         timings(lambda: robot.solve_tip_goal(goal, force), max(10, repeat // 100),
                 warmup=2))
@@ -216,12 +208,12 @@ def _kernel_rows(robot, u0, force, ivp, repeat):
     args = (robot.s_grid, robot.params, robot.model_code, force[None], u0[None], moments[None],
             tensions[None], robot.stage_routes, robot.route_kinks, robot.cable_end_node,
             robot.section_end_node)
-    bare = _row('kernel call (integrate_batch)', timings(lambda: integrate_batch(*args), repeat))
+    bare = row('kernel call (integrate_batch)', timings(lambda: integrate_batch(*args), repeat))
     print('  Python overhead per solve_ivp call: %.1f us' % (ivp - bare))
-    old = _row('old classical RK4 kernel (reference)', timings(
+    old = row('old classical RK4 kernel (reference)', timings(
         lambda: rk4_reference.integrate_batch(robot.s_grid, robot.params, force[None],
                                               u0[None]), repeat))
-    old_ivp = _row('old classical RK4 shape (reference)', timings(
+    old_ivp = row('old classical RK4 shape (reference)', timings(
         lambda: rk4_reference.solve_ivp(robot, u0, force), repeat))
     print('  SE(3) RKMK4 / old classical RK4: kernel %.2fx, shape solve %.2fx'
           % (bare / old, ivp / old_ivp))
@@ -240,12 +232,12 @@ def bench_robot(path, repeat):
     else:
         force = np.array([0.0, 0.0, -0.045 * 9.81])
         u0 = robot.solve_bvp(tip_force=force).u0
-    ivp = _row('shape solve (IVP)', timings(lambda: robot.solve_ivp(u0, force), repeat))
+    ivp = row('shape solve (IVP)', timings(lambda: robot.solve_ivp(u0, force), repeat))
     if len(robot.s_grid) == robot.solver.steps + 1:  # no guide breaks: the old kernel's grid
         _kernel_rows(robot, u0, force, ivp, repeat)
-    _row('6x6 Jacobian (7 IVPs, one call)', timings(lambda: robot.jacobian(u0, force), repeat))
+    row('6x6 Jacobian (7 IVPs, one call)', timings(lambda: robot.jacobian(u0, force), repeat))
     baseline = timings(lambda: scipy_tip(robot, u0, force), max(20, repeat // 50), warmup=2)
-    scipy_median = _row('SciPy solve_ivp RK45 (1e-3, 1e-6)', baseline)
+    scipy_median = row('SciPy solve_ivp RK45 (1e-3, 1e-6)', baseline)
     reference = reference_robot.solve_ivp(u0, force).tip_position
     ours = robot.solve_ivp(u0, force).tip_position
     theirs = scipy_tip(robot, u0, force)
@@ -263,22 +255,22 @@ def bench_robot(path, repeat):
         du *= 1e-3 / np.max(np.abs(robot.cable_jacobian(u0, force) @ du))
         changed = robot.cable_lengths(robot.solve_ivp(u0 + du, force))
         est = robot.estimate_shape(changed, force, warm_start=previous)
-        _row('shape estimate (warm, 1 mm change)', timings(
+        row('shape estimate (warm, 1 mm change)', timings(
             lambda: robot.estimate_shape(changed, force, warm_start=previous), repeat))
         print('  estimate: %d iterations, %d IVPs, residual %.1e m, max cable change %.2f mm'
               % (est.iterations, est.model_runs, est.residual,
                  1e3 * np.max(np.abs(changed - lengths))))
         cold = robot.estimate_shape(changed, force)
-        _row('shape estimate (cold)', timings(lambda: robot.estimate_shape(changed, force),
-                                              max(100, repeat // 4)))
+        row('shape estimate (cold)', timings(lambda: robot.estimate_shape(changed, force),
+                                             max(100, repeat // 4)))
         print('  cold estimate: %d iterations, %d IVPs, residual %.1e m'
               % (cold.iterations, cold.model_runs, cold.residual))
         # a reachable goal about 5 cm from the current tip
         goal = robot.solve_ivp(u0 + [0.0, 1.3, 0.0], force).tip_position
         start_tip = shape.tip_position
         sol = robot.solve_tip_goal(goal, force, warm_start=previous)
-        _row('tip-goal solve (cold, goal %.0f mm away)' % (1e3 * np.linalg.norm(goal - start_tip)),
-             timings(lambda: robot.solve_tip_goal(goal, force, warm_start=previous),
+        row('tip-goal solve (cold, goal %.0f mm away)' % (1e3 * np.linalg.norm(goal - start_tip)),
+            timings(lambda: robot.solve_tip_goal(goal, force, warm_start=previous),
                      max(20, repeat // 20), warmup=3), unit=1e-6)
         print('  tip goal: converged %s, error %.1e m, %d iterations'
               % (sol.converged, sol.error, sol.iterations))
@@ -318,7 +310,7 @@ def bench_three_cable_rod(repeat):
     print('\n%s (in bench.py): 1 section, 24 steps + guide breaks = %d nodes, 3 cables, 20 g tip'
           % (robot.name, len(robot.s_grid)))
     u0 = np.array([2.0, -1.0, 0.0])
-    _row('shape solve (IVP)', timings(lambda: robot.solve_ivp(u0, force), repeat))
+    row('shape solve (IVP)', timings(lambda: robot.solve_ivp(u0, force), repeat))
     rng = np.random.default_rng(3)
     rows = [robot.cable_lengths(robot.solve_ivp(rng.uniform(-4.0, 4.0, 3) * [1, 1, 0], force))
             for _ in range(50)]
@@ -331,7 +323,7 @@ def bench_three_cable_rod(repeat):
     print('  shape estimate (cold, 49 far-apart shapes) median %.1f us, p99 %.1f us, max %.1f us'
           % (np.median(times), np.percentile(times, 99), times.max()))
     baseline = timings(lambda: scipy_tip(robot, u0, force), max(20, repeat // 50), warmup=2)
-    _row('SciPy solve_ivp RK45 (1e-3, 1e-6)', baseline)
+    row('SciPy solve_ivp RK45 (1e-3, 1e-6)', baseline)
 
 
 STARTUP = """
@@ -350,7 +342,7 @@ print('%%.3f %%.3f' %% (t1 - t0, t2 - t1))
 
 def bench_startup():
     """Import and first-call time of a fresh process, with and without the numba cache."""
-    script = STARTUP % str(_config('tendon_robot.yaml'))
+    script = STARTUP % str(config_file('tendon_robot.yaml'))
     print('\nfresh process: import + load_robot, then first IVP + estimate + Jacobian')
     with tempfile.TemporaryDirectory() as empty_cache:
         for label, env in (('no numba cache (compiles)', {'NUMBA_CACHE_DIR': empty_cache}),
@@ -369,10 +361,10 @@ def main(argv=None):
     args = parser.parse_args(argv)
     print('continuum_statics core benchmark, one core, %d calls per figure' % args.repeat)
     for name in ('jones2009_nitinol_rod.yaml', 'tendon_robot.yaml'):
-        bench_robot(_config(name), args.repeat)
+        bench_robot(config_file(name), args.repeat)
     bench_three_cable_rod(args.repeat)
     for name in ('two_section_robot.yaml', 'three_section_robot.yaml'):
-        bench_sections(_config(name), args.repeat)
+        bench_sections(config_file(name), args.repeat)
     if not args.no_startup:
         bench_startup()
     return 0

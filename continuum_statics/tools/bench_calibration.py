@@ -20,9 +20,9 @@ from continuum_statics.calibration.parameters import DEFAULT_FIT
 from continuum_statics.calibration.recorded_run import ColumnMap
 from continuum_statics.calibration.replay import replay
 from continuum_statics.calibration.runs import calibrate_run, read_run
-from continuum_statics.tools.bench import _config
+from continuum_statics.config_paths import config_file
 
-V6_ROBOT = _config('ftdcr_v6_robot.yaml')
+V6_ROBOT = config_file('ftdcr_v6_robot.yaml')
 V6_DATA = V6_ROBOT.parents[1] / 'test' / 'data' / 'ftdcr_v6'
 V6_COLUMNS = ColumnMap(cables=('servo_1_mm', 'servo_20_mm', 'servo_23_mm', 'servo_9_mm',
                                'servo_6_mm', 'servo_11_mm', 'servo_24_mm', 'servo_2_mm',
@@ -111,7 +111,7 @@ def main(argv=None):
                         help='also time the default fit on a 1600-row run of training data')
     args = parser.parse_args(argv)
     print('continuum_statics calibration benchmark (FTDCR v6, %s)' % V6_DATA)
-    bench_replay(_config('ftdcr_v6_calibrated.yaml'))  # a candidate near the fit's end
+    bench_replay(config_file('ftdcr_v6_calibrated.yaml'))  # a candidate near the fit's end
     if args.long:
         bench_long_run()
     bench_fit(args.fit, args.select)

@@ -20,13 +20,13 @@ import numpy as np
 from scipy.optimize import least_squares
 
 from continuum_statics import load_robot
+from continuum_statics.config_paths import config_file
 from continuum_statics.control.shape_tracking import Thresholds
 from continuum_statics.core.estimation import Tracking
 from continuum_statics.core.layout import ProbeRows
 from continuum_statics.core.robot import Robot
 from continuum_statics.core.tracking import TRACK_RUNS
 from continuum_statics.core.warmup import warm_up
-from continuum_statics.tools.bench import CONFIG
 
 ROBOT_FILES = ('jones2009_nitinol_rod.yaml', 'tendon_robot.yaml', 'tendon_robot_real_tendons.yaml',
                'two_section_robot.yaml', 'three_section_robot.yaml',
@@ -127,7 +127,7 @@ def main(argv=None):
     options = parser.parse_args(argv)
     print('continuum_statics estimate on noisy, inconsistent lengths (warm: statics per cycle, '
           'max_model_runs %d)' % TRACK_RUNS)
-    for path in options.robot or [CONFIG / name for name in ROBOT_FILES]:
+    for path in options.robot or [config_file(name) for name in ROBOT_FILES]:
         base = load_robot(path)
         if not base.cable_names:
             continue

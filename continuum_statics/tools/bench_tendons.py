@@ -15,10 +15,11 @@ import numpy as np
 from scipy.optimize import root
 
 from continuum_statics import load_robot
+from continuum_statics.config_paths import config_file
 from continuum_statics.core import length_statics
 from continuum_statics.core.robot import Robot
 from continuum_statics.core.tendons import Tendons
-from continuum_statics.tools.bench import _config, _row
+from continuum_statics.tools.bench import row
 
 
 def with_tendons(robot, stiffness=2000.0, pretension=2.0, friction=0.05):
@@ -47,7 +48,7 @@ def scipy_baseline(robot, lengths):
     """Solve the same equilibrium by scipy.optimize.root (LM, SciPy finite differences), cold."""
     n = len(robot.cable_names)
     free = robot.tendons.free_lengths(lengths, robot.straight_cable_lengths)
-    problem = length_statics._Problem(robot, free, np.zeros(n), np.zeros(3), np.zeros(3))
+    problem = length_statics.length_problem(robot, free)
     z0 = np.zeros(3 + n)
     result = root(lambda z: problem.evaluate(z * problem.scale)[0], z0 / problem.scale,
                   method='lm', options={'xtol': 1e-12})
@@ -76,9 +77,9 @@ def bench_solve_lengths(robot, label, count=200):
         start = time.perf_counter()
         scipy_fail += not scipy_baseline(robot, lengths).success
         scipy_times.append(time.perf_counter() - start)
-    _row('solve_lengths warm (tracking)', np.array(warm_times))
-    _row('solve_lengths cold', np.array(cold_times))
-    _row('SciPy root (LM) cold, same residual', np.array(scipy_times))
+    row('solve_lengths warm (tracking)', np.array(warm_times))
+    row('solve_lengths cold', np.array(cold_times))
+    row('SciPy root (LM) cold, same residual', np.array(scipy_times))
     print('  not converged: solve_lengths %d of %d, SciPy %d of %d'
           % (failures, len(warm_times) + len(cold_times), scipy_fail, len(scipy_times)))
 
@@ -88,7 +89,7 @@ def main(argv=None):
     parser = argparse.ArgumentParser(prog='python -m continuum_statics.tools.bench_tendons')
     parser.parse_args(argv)
     print('continuum_statics real-tendon benchmark')
-    three = load_robot(_config('three_section_robot.yaml'))
+    three = load_robot(config_file('three_section_robot.yaml'))
     bench_solve_lengths(three, 'three_section_9c, ideal cables')
     bench_solve_lengths(with_tendons(three), 'three_section_9c, EA 2 kN, 2 N pretension, '
                                              'mu 0.05')

@@ -20,7 +20,7 @@ import sys
 
 import numpy as np
 
-from continuum_statics.nodes.node_params import share_dir
+from continuum_statics.config_paths import share_dir
 from continuum_statics.tools.goal_client import GOAL_BENDINGS, run_client
 from continuum_statics.tools.processes import ros_environment, stop
 

@@ -133,9 +133,9 @@ def highest_rate(servos, rates, window, workdir):
             for rate in rates:
                 node.set_parameters([Parameter('publish_rate', value=float(rate))])
                 time.sleep(0.3)  # settle on the new rate
-                before, started = node._rate.total, time.monotonic()
+                before, started = node.health.rate.total, time.monotonic()
                 time.sleep(window)
-                achieved = (node._rate.total - before) / (time.monotonic() - started)
+                achieved = (node.health.rate.total - before) / (time.monotonic() - started)
                 figures.append((rate, achieved))
                 if achieved >= 0.95 * rate:
                     best = max(best, rate)

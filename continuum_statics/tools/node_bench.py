@@ -21,7 +21,7 @@ import time
 
 import numpy as np
 
-from continuum_statics.nodes.node_params import default_robot_file
+from continuum_statics.config_paths import default_robot_file
 from continuum_statics.tools.processes import cpu_seconds, ros_environment, stop
 
 

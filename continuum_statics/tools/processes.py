@@ -4,7 +4,7 @@ import random
 import signal
 import subprocess
 
-from continuum_statics.nodes.node_params import share_dir
+from continuum_statics.config_paths import share_dir
 
 
 def ros_environment():
