@@ -20,6 +20,8 @@ rclpy = pytest.importorskip('rclpy')
 from geometry_msgs.msg import PoseStamped  # noqa: E402
 from nav_msgs.msg import Path  # noqa: E402
 from nav_msgs.srv import GetPlan  # noqa: E402
+from scipy.spatial.transform import Rotation  # noqa: E402
+from visualization_msgs.msg import MarkerArray  # noqa: E402
 
 from continuum_statics import load_robot  # noqa: E402
 
@@ -167,4 +169,75 @@ def test_bringup_with_a_passive_rod_publishes_its_shape_and_rejects_goals():
     assert code == 0, output
     assert 'robot has no cables' in output
     assert 'no cable names in the message' not in output, output
+    assert 'Traceback' not in output, output
+
+
+def test_bringup_with_a_helical_cable_reaches_goals_and_draws_the_helix():
+    """The helical example robot with the simulated driver: goals served, the helix drawn.
+
+    config/helical_robot.yaml: three straight cables and a half-turn helix. A goal the helix's
+    pull reaches is served, and the helix's marker runs through its holes (at 60 degrees at the
+    base disk, at 240 degrees at the tip disk).
+    """
+    robot_file = REPO / 'config' / 'helical_robot.yaml'
+    robot = load_robot(robot_file)
+    namespace = 'helix_' + uuid.uuid4().hex[:8]
+    process = start_bringup('--robot', str(robot_file), '--namespace', namespace)
+    context = rclpy.Context()
+    rclpy.init(context=context)
+    executor = rclpy.executors.SingleThreadedExecutor(context=context)
+    node = None
+    try:
+        node = rclpy.create_node('helix_client', namespace=namespace, context=context)
+        executor.add_node(node)
+        markers = Collector(node, MarkerArray, 'backbone_markers', LATCHED)
+        tip = Collector(node, PoseStamped, 'tip_pose', LATCHED)
+        service = node.create_client(GetPlan, 'tip_goal')
+
+        def spin_until(predicate, timeout, what):
+            deadline = time.monotonic() + timeout
+            while not predicate():
+                assert process.poll() is None, 'bringup exited: %s' % process.stdout.read()
+                assert time.monotonic() < deadline, 'timed out after %g s: %s' % (timeout, what)
+                executor.spin_once(timeout_sec=0.02)
+
+        spin_until(service.service_is_ready, 30.0, 'the tip_goal service')
+        goal = robot.solve_tensions([0.0, 0.0, 0.0, 2.0]).tip_position
+        future = service.call_async(request(goal, 1e-3))
+        spin_until(future.done, 30.0, 'the answer to a goal of the helix')
+        plan = future.result().plan
+        assert len(plan.poses) > 0
+        assert np.linalg.norm(pose_xyz(plan.poses[-1].pose) - goal) <= 1e-3
+        spin_until(lambda: tip.last is not None
+                   and np.linalg.norm(pose_xyz(tip.last.pose) - goal) < 2e-3, 30.0,
+                   'the measured tip at the goal')
+
+        def helix_line():
+            for array in reversed(markers.messages):
+                lines = [m for m in array.markers if m.ns.endswith('cables')]
+                if len(lines) == 4:
+                    return lines[3]
+            return None
+
+        spin_until(lambda: helix_line() is not None, 10.0, 'the cable markers')
+        points = np.array([[p.x, p.y, p.z] for p in helix_line().points])
+        radius, start = 0.010, np.pi / 3.0
+        np.testing.assert_allclose(points[0], [radius * np.cos(start), radius * np.sin(start),
+                                               0.0], atol=1e-9)
+        assert len(points) == 1 + len(robot.guides)
+        # at the tip disk the hole has turned half a turn about the rod: opposite the base's
+        pose = tip.last.pose
+        quaternion = [pose.orientation.x, pose.orientation.y, pose.orientation.z,
+                      pose.orientation.w]
+        local = Rotation.from_quat(quaternion).inv().apply(points[-1] - pose_xyz(pose))
+        np.testing.assert_allclose(local, [radius * np.cos(start + np.pi),
+                                           radius * np.sin(start + np.pi), 0.0], atol=2e-4)
+    finally:
+        executor.shutdown()
+        if node is not None:
+            node.destroy_node()
+        rclpy.try_shutdown(context=context)
+        code = stop_process(process)
+    output = process.stdout.read()
+    assert code == 0, output
     assert 'Traceback' not in output, output
