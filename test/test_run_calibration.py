@@ -69,6 +69,25 @@ def synthetic_run(robot, noise=5e-5, seed=3):
     return dataclasses.replace(run, tips=tips), rotation
 
 
+def stretchy_v6(**changes):
+    """Return the v6 file with stretchy, pretensioned cables (500 N, 1 N), as real ones are."""
+    nominal = load_robot(V6)
+    tendons = dataclasses.replace(Tendons.default(9), stiffness=np.full(9, 500.0),
+                                  pretension=np.full(9, 1.0))
+    return nominal.__class__(dataclasses.replace(nominal.description, tendons=tendons,
+                                                 **changes))
+
+
+def run_of(truth):
+    """Return the exact run of :func:`pulls` on ``truth``: its replayed tips, no noise."""
+    lengths = pulls(truth)
+    run = RecordedRun(times=np.arange(len(lengths), dtype=float), labels=('',) * len(lengths),
+                      lengths=lengths, tips=np.zeros((len(lengths), 3)), source='synthetic')
+    points, failed = replay(truth, run)
+    assert not failed.any()
+    return dataclasses.replace(run, tips=points)
+
+
 def write_run_csv(path, robot, run):
     """Write a run as a lab's CSV (motor displacements and tips in mm); returns (path, header)."""
     header = ['timestamp'] + ['%s_mm' % n for n in robot.cable_names] + ['tip_x', 'tip_y',
@@ -186,19 +205,11 @@ def test_fit_recovers_section_lengths_and_writes_them(tmp_path):
     The truth moves the guides with their section; the run's motor lengths are the truth's
     (homed straight). Cables stretch and carry a pretension, as real ones do.
     """
-    nominal = load_robot(V6)
-    tendons = dataclasses.replace(Tendons.default(9), stiffness=np.full(9, 500.0),
-                                  pretension=np.full(9, 1.0))
-    robot = nominal.__class__(dataclasses.replace(nominal.description, tendons=tendons))
+    robot = stretchy_v6()
     truth_lengths = np.array([0.101, 0.099, 0.0225])
     truth = RunModel(robot, ['section_length'], None).vector.robot_for(
         np.log(truth_lengths / np.array([0.1, 0.1, 0.022])))
-    lengths = pulls(truth)
-    run = RecordedRun(times=np.arange(len(lengths), dtype=float), labels=('',) * len(lengths),
-                      lengths=lengths, tips=np.zeros((len(lengths), 3)), source='synthetic')
-    points, failed = replay(truth, run)
-    assert not failed.any()
-    run = dataclasses.replace(run, tips=points)
+    run = run_of(truth)
     model = RunModel(robot, ['registration', 'section_length'], run)
     start = rms(model.residuals(model.start())[:3 * len(run)].reshape(-1, 3))
     result = fit(model, log=lambda line: None, workers=2)
@@ -222,21 +233,13 @@ def test_fit_recovers_section_lengths_and_writes_them(tmp_path):
 def test_fit_recovers_section_bending_stiffness_and_writes_it(tmp_path):
     """Disks that stiffen the proximal section 2.5x and the middle 1.6x (distal bare): found.
 
-    Under gravity (the v6 file's) and stretchy, pretensioned cables, as a real robot has.
+    Without gravity (as the v6 file) and with stretchy, pretensioned cables.
     """
-    nominal = load_robot(V6)
-    tendons = dataclasses.replace(Tendons.default(9), stiffness=np.full(9, 500.0),
-                                  pretension=np.full(9, 1.0))
-    robot = nominal.__class__(dataclasses.replace(nominal.description, tendons=tendons))
+    robot = stretchy_v6()
     scales = np.array([2.5, 1.6, 1.0])
     truth = RunModel(robot, ['section_bending'], None).vector.robot_for(np.log(scales))
     assert [s.bending_scale for s in truth.sections] == pytest.approx(scales.tolist())
-    lengths = pulls(truth)
-    run = RecordedRun(times=np.arange(len(lengths), dtype=float), labels=('',) * len(lengths),
-                      lengths=lengths, tips=np.zeros((len(lengths), 3)), source='synthetic')
-    points, failed = replay(truth, run)
-    assert not failed.any()
-    run = dataclasses.replace(run, tips=points)
+    run = run_of(truth)
     model = RunModel(robot, ['registration', 'section_bending'], run)
     start = rms(model.residuals(model.start())[:3 * len(run)].reshape(-1, 3))
     result = fit(model, log=lambda line: None, workers=2)
@@ -260,19 +263,10 @@ def test_fit_recovers_disk_masses():
     between equilibria of the slack cables; the fit stops short of the truth (noted in
     issue 21's closing note).
     """
-    nominal = load_robot(V6)
-    tendons = dataclasses.replace(Tendons.default(9), stiffness=np.full(9, 500.0),
-                                  pretension=np.full(9, 1.0))
-    robot = nominal.__class__(dataclasses.replace(nominal.description, tendons=tendons,
-                                                  gravity=np.array([0.0, -9.81, 0.0])))
+    robot = stretchy_v6(gravity=np.array([0.0, -9.81, 0.0]))
     masses = np.array([0.0003, 0.0002, 0.0001])
     truth = RunModel(robot, ['disk_mass'], None).vector.robot_for(masses)
-    lengths = pulls(truth)
-    run = RecordedRun(times=np.arange(len(lengths), dtype=float), labels=('',) * len(lengths),
-                      lengths=lengths, tips=np.zeros((len(lengths), 3)), source='synthetic')
-    points, failed = replay(truth, run)
-    assert not failed.any()
-    run = dataclasses.replace(run, tips=points)
+    run = run_of(truth)
     model = RunModel(robot, ['disk_mass'], run)
     start = rms(model.residuals(model.start())[:3 * len(run)].reshape(-1, 3))
     result = fit(model, log=lambda line: None, workers=2)
