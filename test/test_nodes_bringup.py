@@ -44,27 +44,59 @@ def request(position, tolerance):
     return msg
 
 
+class BringupClient:
+    """The bringup entry point as a subprocess and a client node of our own in its namespace.
+
+    ``with BringupClient(...) as client``: ``client.node`` to subscribe and call with,
+    ``client.spin_until`` to wait (failing at once if bringup exits); afterwards
+    ``client.code`` and ``client.output`` hold the process's exit code and output.
+    """
+
+    def __init__(self, name, namespace, *args):
+        self.name, self.namespace = name, namespace
+        self.process = start_bringup(*args)
+        self.code = self.output = None
+
+    def __enter__(self):
+        self.context = rclpy.Context()
+        rclpy.init(context=self.context)
+        self.executor = rclpy.executors.SingleThreadedExecutor(context=self.context)
+        self.node = None
+        try:
+            self.node = rclpy.create_node(self.name, namespace=self.namespace,
+                                          context=self.context)
+            self.executor.add_node(self.node)
+        except BaseException:
+            self.__exit__(None, None, None)
+            raise
+        return self
+
+    def spin_until(self, predicate, timeout, what):
+        deadline = time.monotonic() + timeout
+        while not predicate():
+            assert self.process.poll() is None, 'bringup exited: %s' % self.process.stdout.read()
+            assert time.monotonic() < deadline, 'timed out after %g s: %s' % (timeout, what)
+            self.executor.spin_once(timeout_sec=0.02)
+
+    def __exit__(self, *_):
+        self.executor.shutdown()
+        if self.node is not None:
+            self.node.destroy_node()
+        rclpy.try_shutdown(context=self.context)
+        self.code = stop_process(self.process)
+        self.output = self.process.stdout.read()
+        return False
+
+
 def test_bringup_serves_backbone_and_tip_goals_to_another_process():
     namespace = 'cross_' + uuid.uuid4().hex[:8]
-    process = start_bringup('--namespace', namespace, '--ros-args', '--params-file',
-                            str(REPO / 'config' / 'continuum_robot.params.yaml'))
-    context = rclpy.Context()
-    rclpy.init(context=context)
-    executor = rclpy.executors.SingleThreadedExecutor(context=context)
-    node = None
-    try:
-        node = rclpy.create_node('cross_process_client', namespace=namespace, context=context)
-        executor.add_node(node)
-        backbone = Collector(node, Path, 'backbone', LATCHED)
-        tip = Collector(node, PoseStamped, 'tip_pose', LATCHED)
-        service = node.create_client(GetPlan, 'tip_goal')
-
-        def spin_until(predicate, timeout, what):
-            deadline = time.monotonic() + timeout
-            while not predicate():
-                assert process.poll() is None, 'bringup exited: %s' % process.stdout.read()
-                assert time.monotonic() < deadline, 'timed out after %g s: %s' % (timeout, what)
-                executor.spin_once(timeout_sec=0.02)
+    with BringupClient('cross_process_client', namespace, '--namespace', namespace,
+                       '--ros-args', '--params-file',
+                       str(REPO / 'config' / 'continuum_robot.params.yaml')) as client:
+        backbone = Collector(client.node, Path, 'backbone', LATCHED)
+        tip = Collector(client.node, PoseStamped, 'tip_pose', LATCHED)
+        service = client.node.create_client(GetPlan, 'tip_goal')
+        spin_until = client.spin_until
 
         spin_until(lambda: len(backbone) > 0 and len(tip) > 0, 30.0, 'backbone and tip_pose')
         # The newest backbone and tip pose of one measurement agree.
@@ -89,15 +121,8 @@ def test_bringup_serves_backbone_and_tip_goals_to_another_process():
         spin_until(future.done, 10.0, 'the answer to an unreachable goal')
         assert time.monotonic() - started < 5.0
         assert len(future.result().plan.poses) == 0
-    finally:
-        executor.shutdown()
-        if node is not None:
-            node.destroy_node()
-        rclpy.try_shutdown(context=context)
-        code = stop_process(process)
-    output = process.stdout.read()
-    assert code == 0, output
-    assert 'Traceback' not in output, output
+    assert client.code == 0, client.output
+    assert 'Traceback' not in client.output, client.output
 
 
 def test_bringup_rejects_a_missing_robot_file_quickly():
@@ -131,23 +156,11 @@ def test_bringup_with_a_passive_rod_publishes_its_shape_and_rejects_goals():
     rod_file = REPO / 'config' / 'jones2009_nitinol_rod.yaml'
     rod = load_robot(rod_file)
     namespace = 'rod_' + uuid.uuid4().hex[:8]
-    process = start_bringup('--robot', str(rod_file), '--namespace', namespace)
-    context = rclpy.Context()
-    rclpy.init(context=context)
-    executor = rclpy.executors.SingleThreadedExecutor(context=context)
-    node = None
-    try:
-        node = rclpy.create_node('rod_client', namespace=namespace, context=context)
-        executor.add_node(node)
-        backbone = Collector(node, Path, 'backbone', LATCHED)
-        service = node.create_client(GetPlan, 'tip_goal')
-
-        def spin_until(predicate, timeout, what):
-            deadline = time.monotonic() + timeout
-            while not predicate():
-                assert process.poll() is None, 'bringup exited: %s' % process.stdout.read()
-                assert time.monotonic() < deadline, 'timed out after %g s: %s' % (timeout, what)
-                executor.spin_once(timeout_sec=0.02)
+    with BringupClient('rod_client', namespace, '--robot', str(rod_file),
+                       '--namespace', namespace) as client:
+        backbone = Collector(client.node, Path, 'backbone', LATCHED)
+        service = client.node.create_client(GetPlan, 'tip_goal')
+        spin_until = client.spin_until
 
         spin_until(lambda: len(backbone) > 0, 30.0, 'the passive backbone')
         np.testing.assert_allclose(pose_xyz(backbone.last.poses[-1].pose),
@@ -159,14 +172,8 @@ def test_bringup_with_a_passive_rod_publishes_its_shape_and_rejects_goals():
         assert time.monotonic() - started < 2.0
         assert len(future.result().plan.poses) == 0
         time.sleep(2.5)  # long enough for a repeated warning to show
-    finally:
-        executor.shutdown()
-        if node is not None:
-            node.destroy_node()
-        rclpy.try_shutdown(context=context)
-        code = stop_process(process)
-    output = process.stdout.read()
-    assert code == 0, output
+    output = client.output
+    assert client.code == 0, output
     assert 'robot has no cables' in output
     assert 'no cable names in the message' not in output, output
     assert 'Traceback' not in output, output
@@ -182,24 +189,12 @@ def test_bringup_with_a_helical_cable_reaches_goals_and_draws_the_helix():
     robot_file = REPO / 'config' / 'helical_robot.yaml'
     robot = load_robot(robot_file)
     namespace = 'helix_' + uuid.uuid4().hex[:8]
-    process = start_bringup('--robot', str(robot_file), '--namespace', namespace)
-    context = rclpy.Context()
-    rclpy.init(context=context)
-    executor = rclpy.executors.SingleThreadedExecutor(context=context)
-    node = None
-    try:
-        node = rclpy.create_node('helix_client', namespace=namespace, context=context)
-        executor.add_node(node)
-        markers = Collector(node, MarkerArray, 'backbone_markers', LATCHED)
-        tip = Collector(node, PoseStamped, 'tip_pose', LATCHED)
-        service = node.create_client(GetPlan, 'tip_goal')
-
-        def spin_until(predicate, timeout, what):
-            deadline = time.monotonic() + timeout
-            while not predicate():
-                assert process.poll() is None, 'bringup exited: %s' % process.stdout.read()
-                assert time.monotonic() < deadline, 'timed out after %g s: %s' % (timeout, what)
-                executor.spin_once(timeout_sec=0.02)
+    with BringupClient('helix_client', namespace, '--robot', str(robot_file),
+                       '--namespace', namespace) as client:
+        markers = Collector(client.node, MarkerArray, 'backbone_markers', LATCHED)
+        tip = Collector(client.node, PoseStamped, 'tip_pose', LATCHED)
+        service = client.node.create_client(GetPlan, 'tip_goal')
+        spin_until = client.spin_until
 
         spin_until(service.service_is_ready, 30.0, 'the tip_goal service')
         goal = robot.solve_tensions([0.0, 0.0, 0.0, 2.0]).tip_position
@@ -232,12 +227,5 @@ def test_bringup_with_a_helical_cable_reaches_goals_and_draws_the_helix():
         local = Rotation.from_quat(quaternion).inv().apply(points[-1] - pose_xyz(pose))
         np.testing.assert_allclose(local, [radius * np.cos(start + np.pi),
                                            radius * np.sin(start + np.pi), 0.0], atol=2e-4)
-    finally:
-        executor.shutdown()
-        if node is not None:
-            node.destroy_node()
-        rclpy.try_shutdown(context=context)
-        code = stop_process(process)
-    output = process.stdout.read()
-    assert code == 0, output
-    assert 'Traceback' not in output, output
+    assert client.code == 0, client.output
+    assert 'Traceback' not in client.output, client.output
