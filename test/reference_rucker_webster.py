@@ -26,7 +26,8 @@ equilibrium holds to round-off); without it, that wrench jumps by the kink load,
 non-zero only where shear or twist strain jumps at a disk (tip loads, gravity).
 
 General routing (R&W 2011 eqs. 12-17 in full): ``cable_routes`` gives, per tendon, a function
-s -> (l, l', l'') of its hole position in the body frame and its first two derivatives. Then
+(s, inside) -> (l, l', l'') of its hole position in the body frame and its first two derivatives
+(on the piece holding ``inside`` where the route turns at a disk; None: at s). Then
 p_j^b' = v + u x l_j + l_j', and a_j = A_j (u x p_j^b' + u x l_j' + l_j''); everything else is
 as above (the end-disk pull along the tendon's own tangent p_j^b'). Written from the paper's
 equations, not from the package's rod-plus-tendons cut formulation.
@@ -80,13 +81,17 @@ class _Rod:
 
 
 def _straight(offset):
-    """Return the route s -> (l, l', l'') of a tendon at a constant offset."""
+    """Return the route (s, inside) -> (l, l', l'') of a tendon at a constant offset."""
     zero = np.zeros(3)
-    return lambda _s: (offset, zero, zero)
+    return lambda _s, inside=None: (offset, zero, zero)
 
 
-def _rhs(rod, offsets, tensions, model, routes=None):
-    """Return the right-hand side y' = F(s, y), y = [r, R (row-major), v, u]."""
+def _rhs(rod, offsets, tensions, model, routes=None, inside=None):
+    """Return the right-hand side y' = F(s, y), y = [r, R (row-major), v, u].
+
+    ``inside``: an arc length inside the piece integrated (a route's piece between the disks
+    where it turns: its derivatives there, also at the piece's ends).
+    """
     routes = routes or [_straight(l_j) for l_j in offsets]
 
     def rhs(s, y):
@@ -105,7 +110,7 @@ def _rhs(rod, offsets, tensions, model, routes=None):
             for route, t_j in zip(routes, tensions):
                 if t_j == 0.0:
                     continue
-                l_j, dl_j, ddl_j = route(s)
+                l_j, dl_j, ddl_j = route(s, inside)
                 l_hat = hat(l_j)
                 pb = v + np.cross(u, l_j) + dl_j
                 norm = np.linalg.norm(pb)
@@ -148,33 +153,40 @@ def _end_loads(rot, v, u, offsets, tensions, model, tangents=None):
     return force, moment
 
 
-def _tendon_wrench(rot, v, u, offsets, tensions, indices):
-    """Return sum t_j tau_j and sum (R l_j) x t_j tau_j over the given tendons (global)."""
+def _tendon_wrench(rot, v, u, offsets, tensions, indices, tangents=None):
+    """Return sum t_j tau_j and sum (R l_j) x t_j tau_j over the given tendons (global).
+
+    ``tangents``: each tendon's l' here (general routing; default zero).
+    """
     force = np.zeros(3)
     moment = np.zeros(3)
+    tangents = np.zeros_like(offsets) if tangents is None else tangents
     for j in indices:
-        pb = v + np.cross(u, offsets[j])
+        pb = v + np.cross(u, offsets[j]) + tangents[j]
         pull = tensions[j] * rot @ pb / np.linalg.norm(pb)
         force += pull
         moment += np.cross(rot @ offsets[j], pull)
     return force, moment
 
 
-def _kinked(rod, rot, v, u, v_new, u_new, n_new, m_new, offsets, tensions, continuing):
+def _kinked(rod, rot, v, u, v_new, u_new, n_new, m_new, offsets, tensions, continuing,
+            before=None, after=None):
     """Return v, u beyond a disk where the continuing tendons' tangents kink.
 
     The strains jump at the disk, so a continuing tendon's tangent R (v + u x l) jumps too and
     the tendon pushes on its hole with t (tau+ - tau-). Its point wrench is fixed by requiring
     that the rod-plus-tendons wrench (n + sum t tau, m + sum (R l) x t tau) is continuous.
+    ``before``, ``after``: the tendons' l' on either side (general routing: a route that turns
+    at the disk kinks the tendon there even where the strains would not jump).
     """
-    force_minus, moment_minus = _tendon_wrench(rot, v, u, offsets, tensions, continuing)
+    force_minus, moment_minus = _tendon_wrench(rot, v, u, offsets, tensions, continuing, before)
     scale = np.concatenate([np.full(3, rod.ei / rod.length ** 2), np.full(3, rod.ei / rod.length)])
 
     def jump(x):
         """Return the rod-plus-tendons wrench mismatch across the disk (scaled)."""
         n_k, m_k = x[:3] * scale[:3], x[3:] * scale[3:]
         force_plus, moment_plus = _tendon_wrench(rot, *rod.strains(rot.T @ n_k, rot.T @ m_k),
-                                                 offsets, tensions, continuing)
+                                                 offsets, tensions, continuing, after)
         return np.concatenate([n_k + force_plus - n_new - force_minus,
                                m_k + moment_plus - m_new - moment_minus]) / scale
 
@@ -193,45 +205,46 @@ def _shoot(rod, problem, x, s_eval=None, rtol=1e-12, atol=1e-14):
     moment_scale = rod.ei / rod.length
     v, u = rod.strains(x[:3] * force_scale, x[3:] * moment_scale)
     y = np.concatenate([problem['base_position'], problem['base_rotation'].ravel(), v, u])
-    breaks = sorted({float(e) for e in ends if 0.0 < e < rod.length} | {rod.length})
+    breaks = sorted({float(e) for e in ends if 0.0 < e < rod.length} | {rod.length}
+                    | {float(b) for b in problem.get('route_breaks', ()) if 0.0 < b < rod.length})
     start = 0.0
     nodes = []
     for stop in breaks:
         active = [j for j in range(len(tensions)) if ends[cable_sections[j]] >= stop - 1e-12]
         rhs = _rhs(rod, offsets[active], tensions[active], model,
-                   None if routes is None else [routes[j] for j in active])
-        t_eval = None
-        if s_eval is not None:
-            t_eval = s_eval[(s_eval >= start) & (s_eval <= stop)]
+                   None if routes is None else [routes[j] for j in active],
+                   0.5 * (start + stop))
+        wanted = [] if s_eval is None else s_eval[(s_eval >= start) & (s_eval <= stop)]
         sol = solve_ivp(rhs, (start, stop), y, method='DOP853', rtol=rtol, atol=atol,
-                        t_eval=t_eval)
+                        t_eval=np.union1d(wanted, [stop]))  # the piece's end: the next start
         if not sol.success:
             raise RuntimeError(f'reference integration failed: {sol.message}')
-        if s_eval is not None:
-            nodes.append((sol.t, sol.y.T))
+        if len(wanted):
+            keep = np.isin(sol.t, wanted)
+            nodes.append((sol.t[keep], sol.y.T[keep]))
         y = sol.y[:, -1].copy()
         rot = y[3:12].reshape(3, 3)
         v, u = y[12:15], y[15:18]
         ending = [j for j in range(len(tensions))
                   if abs(ends[cable_sections[j]] - stop) <= 1e-12]
-        if routes is None:
-            force, moment = _end_loads(rot, v, u, offsets[ending], tensions[ending], model)
-        else:
-            if stop < rod.length:
-                raise NotImplementedError('reference: routed tendons end at the tip only')
-            ends_l = np.array([routes[j](stop)[0] for j in ending]).reshape(-1, 3)
-            ends_dl = np.array([routes[j](stop)[1] for j in ending]).reshape(-1, 3)
-            force, moment = _end_loads(rot, v, u, ends_l, tensions[ending], model, ends_dl)
+        holes, before, after = offsets, None, None
+        if routes is not None:  # l here, l' on either side (one-sided where a route turns)
+            holes = np.array([route(stop)[0] for route in routes]).reshape(-1, 3)
+            before = np.array([route(stop, stop - 1e-9)[1] for route in routes]).reshape(-1, 3)
+            after = np.array([route(stop, stop + 1e-9)[1] for route in routes]).reshape(-1, 3)
+        force, moment = _end_loads(rot, v, u, holes[ending], tensions[ending], model,
+                                   None if before is None else before[ending])
         n = rot @ rod.d @ (v - E3)
         m = rot @ rod.c @ u
         if stop < rod.length:
             # the point loads act on the rod: internal wrench beyond the disk
             n_new, m_new = n - force, m - moment
             v_new, u_new = rod.strains(rot.T @ n_new, rot.T @ m_new)
-            if problem['disk_kinks'] and model == 'distributed':
-                v_new, u_new = _kinked(rod, rot, v, u, v_new, u_new, n_new, m_new, offsets,
+            if (problem['disk_kinks'] or routes is not None) and model == 'distributed':
+                v_new, u_new = _kinked(rod, rot, v, u, v_new, u_new, n_new, m_new, holes,
                                        tensions, [j for j in range(len(tensions))
-                                                  if ends[cable_sections[j]] > stop + 1e-12])
+                                                  if ends[cable_sections[j]] > stop + 1e-12],
+                                       before, after)
             y[12:15], y[15:18] = v_new, u_new
         start = stop
     residual = np.concatenate([
@@ -301,13 +314,14 @@ def _polish(rod, problem, x, iterations=30):
 def solve_reference(length, diameter, youngs_modulus, poisson_ratio, density, base_position,
                     base_rotation, gravity, section_ends, cable_offsets, cable_sections,
                     tensions, tip_force, tip_moment, model, s_eval, disk_kinks=False,
-                    cable_routes=None):
+                    cable_routes=None, route_breaks=()):
     """Solve the tendon-driven rod's statics; return positions and rotations at s_eval.
 
     Lengths in m, moduli in Pa, density in kg/m^3, gravity in m/s^2, tensions in N, tip force in
     N and tip moment in N m (global frame). ``model`` is 'distributed' or 'point_moment'.
-    ``cable_routes``: per tendon s -> (l, l', l'') (general routing, distributed model, one
-    section ending at the tip); ``cable_offsets`` then only seeds the first guess (l(0)).
+    ``cable_routes``: per tendon s -> (l, l', l'') (general routing, distributed model; the
+    disk kinks are then always on); ``cable_offsets`` then only seeds the first guess (l(0));
+    ``route_breaks``: arc lengths where a route turns (l' jumps: its disks), m.
     Returns a dict with ``positions`` (len(s_eval), 3), ``rotations`` (len(s_eval), 3, 3), the
     rod's internal force ``n`` (N) and moment ``m`` (N m) there (global frame; left limits at a
     disk) and ``residual`` (scaled tip residual).
@@ -329,6 +343,7 @@ def solve_reference(length, diameter, youngs_modulus, poisson_ratio, density, ba
             'tip_moment': load * np.asarray(tip_moment, float),
             'disk_kinks': bool(disk_kinks),
             'routes': cable_routes,
+            'route_breaks': tuple(route_breaks),
             'cables': ([float(e) for e in section_ends], offsets,
                        [int(k) for k in cable_sections], load * tensions, model),
         }

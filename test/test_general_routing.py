@@ -60,7 +60,7 @@ def helix_route(turns, start_angle):
     """S -> (l, l', l'') of the helix, written out for the reference."""
     rate = 2.0 * math.pi * turns
 
-    def route(s):
+    def route(s, inside=None):
         phi = start_angle + rate * s
         c, si = math.cos(phi), math.sin(phi)
         return (RADIUS * np.array([c, si, 0.0]), RADIUS * rate * np.array([-si, c, 0.0]),
@@ -70,7 +70,19 @@ def helix_route(turns, start_angle):
 
 def straight_route(offset):
     zero = np.zeros(3)
-    return lambda _s: (np.array(offset, dtype=float), zero, zero)
+    return lambda _s, inside=None: (np.array(offset, dtype=float), zero, zero)
+
+
+def disk_route(disks, holes):
+    """(s, inside) -> (l, l', l'') of holes straight in the local frame between disks."""
+    disks, holes = np.asarray(disks, dtype=float), np.asarray(holes, dtype=float)
+
+    def route(s, inside=None):
+        inside = s if inside is None else inside
+        k = int(np.clip(np.searchsorted(disks, inside, side='right') - 1, 0, len(disks) - 2))
+        slope = (holes[k + 1] - holes[k]) / (disks[k + 1] - disks[k])
+        return holes[k] + slope * (s - disks[k]), slope, np.zeros(3)
+    return route
 
 
 @pytest.mark.parametrize('tensions, tip_force', [
@@ -221,3 +233,59 @@ def test_calibration_turns_routes_and_writes_them_back(tmp_path):
     assert turned.description.cable_routes[3].start_angle == pytest.approx(0.8)
     with pytest.raises(ValueError, match='section_length'):
         candidate_robot(helical, {'section_length': np.array([0.26])})
+
+
+def test_holes_stepping_round_the_rod_match_the_reference_with_a_kink_at_every_disk():
+    """Per-disk offsets: the cable turns at every disk (l' jumps), pushing on each hole."""
+    angles = np.linspace(0.0, 0.8 * math.pi, 11)
+    holes = [_hole(a) for a in angles]
+    robot = make(robot_file(helix_entry={'name': 'stepped', 'offsets': holes}))
+    tensions, tip_force = [0.3, 0.0, 0.0, 2.5], [0.0, 0.01, 0.0]
+    shape = robot.solve_tensions(tensions, tip_force=tip_force)
+    disks = [0.0] + GUIDES
+    routes = [straight_route(_hole(2.0 * math.pi * k / 3.0)) for k in range(3)]
+    routes.append(disk_route(disks, holes))
+    reference = solve_reference(
+        LENGTH, DIAMETER, YOUNGS, NU, DENSITY, robot.base_position, robot.base_rotation,
+        robot.gravity, section_ends=[LENGTH],
+        cable_offsets=[route(0.0)[0] for route in routes], cable_sections=[0, 0, 0, 0],
+        tensions=tensions, tip_force=tip_force, tip_moment=[0.0, 0.0, 0.0],
+        model='distributed', s_eval=np.array([LENGTH]), cable_routes=routes,
+        route_breaks=GUIDES)
+    error = np.linalg.norm(shape.positions[-1] - reference['positions'][-1])
+    assert error <= 1e-6, error
+    # without the kinks (l' jumps ignored: a smooth route through the same holes) the tip
+    # moves by more than the tolerance, so the comparison sees them
+    smooth = make(robot_file(helix_entry={'name': 'helix', 'helix': {
+        'radius': RADIUS, 'start_angle': 0.0, 'turns_per_metre': 0.4 / LENGTH}}))
+    assert np.linalg.norm(smooth.solve_tensions(tensions, tip_force=tip_force).positions[-1]
+                          - shape.positions[-1]) > 1e-5
+
+
+def test_two_sections_with_helices_match_the_reference():
+    """A helix ending at the proximal section's end disk and one running to the tip."""
+    split = 0.125
+    data = robot_file()
+    data.pop('guides')
+    cables = data.pop('cables')
+    data['sections'] = [
+        {'name': 'proximal', 'guides': [g for g in GUIDES if g <= split],
+         'cables': [cables[0], {'name': 'p_helix', 'helix': {
+             'radius': RADIUS, 'start_angle': 1.0, 'turns_per_metre': 3.0}}]},
+        {'name': 'distal', 'guides': [g for g in GUIDES if g > split],
+         'cables': [cables[1], cables[3]]},
+    ]
+    robot = make(data)
+    tensions, tip_force = [0.2, 1.5, 0.4, 2.0], [0.0, 0.0, 0.01]
+    shape = robot.solve_tensions(tensions, tip_force=tip_force)
+    routes = [straight_route(_hole(0.0)), helix_route(3.0, 1.0),
+              straight_route(_hole(2.0 * math.pi / 3.0)), helix_route(2.0, 0.5)]
+    reference = solve_reference(
+        LENGTH, DIAMETER, YOUNGS, NU, DENSITY, robot.base_position, robot.base_rotation,
+        robot.gravity, section_ends=[split, LENGTH],
+        cable_offsets=[route(0.0)[0] for route in routes], cable_sections=[0, 0, 1, 1],
+        tensions=tensions, tip_force=tip_force, tip_moment=[0.0, 0.0, 0.0],
+        model='distributed', s_eval=np.array([split, LENGTH]), cable_routes=routes)
+    for s, expected in zip((split, LENGTH), reference['positions']):
+        ours = shape.positions[np.argmin(np.abs(shape.s - s))]
+        assert np.linalg.norm(ours - expected) <= 1e-6, (s, np.linalg.norm(ours - expected))
