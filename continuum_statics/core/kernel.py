@@ -5,16 +5,18 @@ State along the unstretched arc length s (m), SI units:
   R (3x3)  orientation, local -> global                  R' = R hat(u)     (eq. 2)
   M (3)    moment of every load beyond s about r(s): external (tip, gravity) and, for the
            distributed cable model, the cables' own tension (global)   M' = -r' x N
-with N(s) = F + f (L - s) the force of the tip load F and the weight f beyond s (eqs. 3, 4 and 10
-integrated: no cable term, because a cable's pull on its end disk and its pressure along the
-backbone are internal to the rod-and-cable system). The strains follow algebraically from the
-constitutive laws (eqs. 6, 7):
+with N(s) = F + f (L - s) + W(s) the force of the tip load F, the weight f beyond s and the
+guide disks' weight W beyond s (eqs. 3, 4 and 10 integrated, with point loads at the disks: no
+cable term, because a cable's pull on its end disk and its pressure along the backbone are
+internal to the rod-and-cable system). The strains follow algebraically from the constitutive
+laws (eqs. 6, 7), with C scaled per section where its disks stiffen the rod:
   point_moment (the paper):  C u = R^T M,  D (v - e3) = R^T N;  the cables of a section add a
                              point moment t_j R (e3 x l_j) at its end disk, where M jumps
   distributed (R&W 2011):    C u = R^T M - sum_j t_j l_j x tau_j,
                              D (v - e3) = R^T N - sum_j t_j tau_j
-                             over the cables passing s, tau_j = (v + u x l_j) / |v + u x l_j| the
-                             cable's local tangent (straight routing), by a few Newton steps.
+                             over the cables passing s, tau_j = (v + u x l_j + l_j') / |...| the
+                             cable's local tangent (R&W eq. 12; l_j(s) its route, l_j' = 0 when
+                             straight), by a few Newton steps.
 
 The frame is integrated on SE(3) by the fourth-order Runge-Kutta-Munthe-Kaas method: the classical
 RK4 tableau applied to the twist (v, u) in the Lie algebra with dexp^-1 truncated after the double
@@ -165,9 +167,8 @@ def _strain_newton(ml, nl, u, w, c, p, tensions, routes, point, active):
     tau = q / |q|, q = v + u x l + l' (R&W 2011 eq. 12 in the body frame; l, l' of cable j in
     ``routes[point, 6 j:6 j + 6]``, :class:`~continuum_statics.core.routing.Routing`).
     ``c`` the diagonal of C here (N m^2). ``ml``, ``nl`` = R^T M, R^T N; ``u``, ``w`` the
-    previous strains, the start of Newton's
-    iteration (exact Jacobian, quadratic convergence: l' does not depend on u);
-    ``active[j]``: cable j passes here.
+    previous strains, the start of Newton's iteration (exact Jacobian, quadratic convergence:
+    l' does not depend on u); ``active[j]``: cable j passes here.
     """
     ml0, ml1, ml2 = ml
     nl0, nl1, nl2 = nl
@@ -332,7 +333,8 @@ def integrate_batch(s_grid, params, model, tip_forces, base_bendings, disk_momen
     :param stage_routes: (3 (N - 1), 6 n_cables) l (m) and l' of every cable at the start,
         middle and end of each interval, local frame (``Routing.stage_routes``); one row
         (1, 6 n_cables) when every cable is straight
-    :param route_kinks: (N,) a cable turns at the node (l' jumps): its strain is recomputed
+    :param route_kinks: (N - 1,) a cable turns where interval i starts (l' jumps): the strain is
+        recomputed there
     :param cable_end_node: (n_cables,) node of each cable's end disk
     :param section_end_node: (S,) node of each section's end disk
     :returns: (B, N, 21) states, layout in the module docstring
@@ -358,8 +360,9 @@ def integrate_batch(s_grid, params, model, tip_forces, base_bendings, disk_momen
     c_rod = (params[C_AT], params[C_AT + 1], params[C_AT + 2])
     c_inv_rod = (params[C_INV_AT], params[C_INV_AT + 1], params[C_INV_AT + 2])
     c, c_inv = c_rod, c_inv_rod
-    # per-interval factors on C follow the rod constants when a section's disks stiffen it
-    scaled = params.shape[0] > PARAMS_SIZE
+    # per-interval factors on C and disk weights follow the rod constants when a robot file
+    # gives bending_scale or disk_mass (pack_params)
+    per_interval = params.shape[0] > PARAMS_SIZE
     inverse_at = PARAMS_SIZE + n_nodes - 1
     weight_at = inverse_at + n_nodes - 1
     d_inv = (params[D_INV_AT], params[D_INV_AT + 1], params[D_INV_AT + 2])
@@ -371,7 +374,7 @@ def integrate_batch(s_grid, params, model, tip_forces, base_bendings, disk_momen
         tens = tensions[b]
         tf0, tf1, tf2 = tip_forces[b, 0], tip_forces[b, 1], tip_forces[b, 2]
         f0, f1, f2 = tf0, tf1, tf2  # the point loads beyond the current interval
-        if scaled:  # eq. 10 with the disks' weight
+        if per_interval:  # eq. 10 with the disks' weight
             f0, f1, f2 = (tf0 + params[weight_at], tf1 + params[weight_at + 1],
                           tf2 + params[weight_at + 2])
         for i in range(3):
@@ -391,7 +394,7 @@ def integrate_batch(s_grid, params, model, tip_forces, base_bendings, disk_momen
         u = (vectors[1, 0], vectors[1, 1], vectors[1, 2])
         w = (vectors[2, 0], vectors[2, 1], vectors[2, 2])
         # M(0) = R(0) (C u(0) + sum t l x tau)
-        if scaled:
+        if per_interval:
             sc = params[PARAMS_SIZE]
             c = (c_rod[0] * sc, c_rod[1] * sc, c_rod[2] * sc)
         ml0, ml1, ml2 = c[0] * u[0], c[1] * u[1], c[2] * u[2]
@@ -416,7 +419,7 @@ def integrate_batch(s_grid, params, model, tip_forces, base_bendings, disk_momen
             newton = False  # a tensioned cable of the distributed model passes this interval
             interval = node - 1
             point = 3 * interval if routed else 0  # row of the interval's start in the table
-            if scaled:
+            if per_interval:
                 sc, isc = params[PARAMS_SIZE + interval], params[inverse_at + interval]
                 c = (c_rod[0] * sc, c_rod[1] * sc, c_rod[2] * sc)
                 c_inv = (c_inv_rod[0] * isc, c_inv_rod[1] * isc, c_inv_rod[2] * isc)
