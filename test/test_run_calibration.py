@@ -22,7 +22,7 @@ from continuum_statics.calibration.replay import replay, rms
 from continuum_statics.calibration.robot_writer import write_robot_file
 from continuum_statics.calibration.run_model import RunModel
 from continuum_statics.calibration.runs import calibrate_run
-from continuum_statics.calibration.selection import select
+from continuum_statics.calibration.selection import moves_the_tips, select
 from continuum_statics.core.tendons import Tendons
 from continuum_statics.tools import calibrate
 
@@ -350,6 +350,24 @@ def test_a_fit_of_more_names_starts_where_its_default_names_end(tmp_path):
     assert any(line.startswith('calibrate: first registration section_rotation stiffness')
                for line in lines)
     assert staged['rms_after'] <= plain['rms_after'] * (1.0 + 1e-6)
+
+
+def test_selection_does_not_score_a_name_that_changes_nothing_on_the_run():
+    """Disk masses weigh nothing without gravity: not a candidate.
+
+    Its score would differ from the base's only by the fit's path. With gravity across the rod
+    they move the tips.
+    """
+    weightless = stretchy_v6()
+    run = run_of(weightless)
+    assert not moves_the_tips(weightless, run, 'disk_mass')
+    assert moves_the_tips(stretchy_v6(gravity=np.array([0.0, -9.81, 0.0])), run, 'disk_mass')
+    assert moves_the_tips(weightless, run, 'section_bending')
+    lines = []
+    result = select(weightless, run, ['registration'], ['disk_mass'], log=lines.append,
+                    workers=2)
+    assert result['candidates'] == {} and result['kept'] == []
+    assert any('disk_mass changes no tip of this run' in line for line in lines)
 
 
 def test_selection_refuses_a_run_of_one_motion_pattern():

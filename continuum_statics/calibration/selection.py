@@ -16,6 +16,12 @@ from continuum_statics.calibration.run_model import RunModel
 SELECTION_FOLDS = 3
 #: Relative drop of the cross-validated RMS a candidate must bring to be kept.
 MIN_GAIN = 0.01
+#: A candidate whose every variable, moved by its finite-difference step, moves no model tip by
+#: more than this (m) changes nothing on the run (disk masses without gravity): not scored,
+#: because its score would differ from the base's only by the fit's path.
+INERT_MOTION = 1e-12
+#: Rows of the run that test a candidate's effect (evenly spread).
+INERT_ROWS = 100
 
 
 def cross_validated_rms(robot, run, fit_names, count=SELECTION_FOLDS, log=print, workers=None,
@@ -41,6 +47,21 @@ def cross_validated_rms(robot, run, fit_names, count=SELECTION_FOLDS, log=print,
     return score
 
 
+def moves_the_tips(robot, run, name, shear_fixed=False):
+    """Whether fit name ``name`` changes any model tip of ``run`` (m, :data:`INERT_MOTION`)."""
+    sample = run.subset(np.unique(np.linspace(0, len(run) - 1, INERT_ROWS).astype(int)))
+    model = RunModel(robot, [name], sample, shear_fixed)
+    x0, steps = model.start(), model.vector.steps()
+    base, _ = model.points(x0, sample)
+    for i in range(model.size):
+        trial = x0.copy()
+        trial[i] += steps[i]
+        moved, _ = model.points(trial, sample)
+        if np.nanmax(np.abs(moved - base)) > INERT_MOTION:
+            return True
+    return False
+
+
 def select(robot, run, base, candidates, log=print, workers=None, max_evaluations=40,
            shear_fixed=False):
     """Keep the candidate names that lower the cross-validated RMS of ``base``.
@@ -52,8 +73,15 @@ def select(robot, run, base, candidates, log=print, workers=None, max_evaluation
                   shear_fixed=shear_fixed)
     base = list(base)
     base_rms = cross_validated_rms(robot, run, base, **kwargs)
-    scores = {name: cross_validated_rms(robot, run, base + [name], **kwargs)
-              for name in candidates if name not in base}
+    scores = {}
+    for name in candidates:
+        if name in base:
+            continue
+        if not moves_the_tips(robot, run, name, shear_fixed):
+            log('  %s changes no tip of this run (disk_mass needs gravity): not a candidate'
+                % name)
+            continue
+        scores[name] = cross_validated_rms(robot, run, base + [name], **kwargs)
     kept = sorted((name for name, score in scores.items()
                    if score < (1.0 - MIN_GAIN) * base_rms), key=scores.get)
     selected = scores[kept[0]] if kept else base_rms
