@@ -156,10 +156,11 @@ def test_straight_routing_three_ways_is_one_robot():
     offset = _hole(angle)
     plain = make(robot_file(helix_entry={'name': 'helix', 'offset': offset}))
     per_disk = make(robot_file(helix_entry={'name': 'helix', 'offsets': [offset] * 11}))
+    per_guide = make(robot_file(helix_entry={'name': 'helix', 'offsets': [offset[:2]] * 10}))
     no_turns = make(robot_file(helix_entry={'name': 'helix', 'helix': {
         'radius': RADIUS, 'start_angle': angle, 'turns_per_metre': 0.0}}))
     tensions = [0.4, 0.0, 0.1, 1.5]
-    robots = (plain, per_disk, no_turns)
+    robots = (plain, per_disk, per_guide, no_turns)
     shapes = [robot.solve_tensions(tensions, tip_force=[0.0, 0.01, 0.0]) for robot in robots]
     lengths = [robot.cable_lengths(shape) for robot, shape in zip(robots, shapes)]
     for other, other_lengths in zip(shapes[1:], lengths[1:]):
@@ -198,12 +199,12 @@ def test_lengths_of_a_helical_robot_give_its_shape_back():
 
 
 @pytest.mark.parametrize('change, message', [
-    (lambda d: d.update(cable_model='point_moment'), "cable 'helix'.*cable_model: distributed"),
     (lambda d: d['cables'][3].update(offsets=[[0.01, 0.0]] * 3), r'cables\[3\]: give one of'),
     (lambda d: d['cables'][3].update(helix={'radius': 0.01}), r'cables\[3\]\.helix\.turns_per'),
     (lambda d: d['cables'][3]['helix'].update(pitch=1.0), r'cables\[3\]\.helix has unknown'),
     (lambda d: d['cables'][3].update(helix=None, offsets=[[0.01, 0.0]] * 3) or
-     d['cables'][3].pop('helix'), r'cables\[3\]\.offsets must list one \[x, y\].* 11 in all'),
+     d['cables'][3].pop('helix'), r'cables\[3\]\.offsets must list one \[x, y\] \(m\) per guide '
+                                  r'disk of the cable, 10 up to its end disk'),
 ])
 def test_routing_mistakes_name_the_field(change, message):
     data = robot_file()
@@ -289,3 +290,30 @@ def test_two_sections_with_helices_match_the_reference():
     for s, expected in zip((split, LENGTH), reference['positions']):
         ours = shape.positions[np.argmin(np.abs(shape.s - s))]
         assert np.linalg.norm(ours - expected) <= 1e-6, (s, np.linalg.norm(ours - expected))
+
+
+def test_the_point_moment_model_takes_a_routed_cable_at_its_end_disk():
+    """The paper's model takes a routed cable at its end disk; its length spans hole to hole.
+
+    A cable acts only at its end disk, t R (e3 x l_end), and its length runs straight hole to
+    hole through its routed holes (the discrete-guide model). So the shape equals that of a
+    straight cable at the end-disk hole, and the straight rod's length is the sum of the chords
+    between the helix's holes, by hand here.
+    """
+    helical = make(robot_file() | {'cable_model': 'point_moment'})
+    end = helical.cable_offsets[3]
+    straight = make(robot_file(helix_entry={'name': 'helix', 'offset': end.tolist()})
+                    | {'cable_model': 'point_moment'})
+    tensions = [0.2, 0.0, 0.0, 1.5]
+    np.testing.assert_allclose(helical.solve_tensions(tensions).positions,
+                               straight.solve_tensions(tensions).positions, atol=1e-12)
+    disks = np.array([0.0] + GUIDES)
+    phi = 0.5 + 2.0 * math.pi * 2.0 * disks
+    holes = np.column_stack([RADIUS * np.cos(phi), RADIUS * np.sin(phi), disks])
+    chords = np.sum(np.linalg.norm(np.diff(holes, axis=0), axis=1))
+    assert helical.straight_cable_lengths[3] == pytest.approx(chords, rel=1e-12)
+    assert chords > LENGTH + 1e-3  # the helix is longer than the rod
+    # its lengths give its shape back (least squares on the section moments)
+    shape = helical.solve_tensions(tensions)
+    estimate = helical.estimate_shape(helical.cable_lengths(shape))
+    assert np.linalg.norm(estimate.shape.positions[-1] - shape.positions[-1]) < 1e-6

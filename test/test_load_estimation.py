@@ -69,8 +69,6 @@ def applied_case(robot, rng):
 @pytest.mark.parametrize('model', ['point_moment', 'distributed'])
 @pytest.mark.parametrize('name', EXAMPLES)
 def test_estimates_fall_inside_their_covariance(name, model):
-    if model == 'point_moment' and load_robot(REPO / 'config' / name).description.cable_routes:
-        pytest.skip('routed cables (offsets, helix) need the distributed model')
     robot = robot_with_model(name, model)
     rng = np.random.default_rng(2024)
     inside, converged, whitened = 0, 0, []

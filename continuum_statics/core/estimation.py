@@ -152,10 +152,12 @@ def estimate_shape(robot, cable_lengths, tip_force=(0.0, 0.0, 0.0), tip_moment=(
         tensions = as_vector(tensions, n_cables, 'tensions')
         if np.any(tensions < 0.0):
             raise ValueError('tensions must be >= 0 N, got %s' % np.round(tensions, 6).tolist())
-    if not robot.tendons.is_ideal or not robot.routing.straight:
+    if not robot.tendons.is_ideal or (not robot.routing.straight
+                                      and robot.cable_model == 'distributed'):
         # the motor-held lengths decide the shape (stretch, slack, friction); measured
-        # tensions are compared with the model's. A cable that turns round the rod has no
-        # section moment coordinates (the least-squares path's unknowns): its tension is one
+        # tensions are compared with the model's. A cable that turns round the rod (the
+        # distributed model) has no section moment coordinates (the least-squares path's
+        # unknowns): its tension is one
         estimate = _tendon_estimate(robot, measured, tip_force, tip_moment, previous,
                                     observable, notes, tracking)
         if tensions is not None:

@@ -147,10 +147,6 @@ class Robot:
         self.sections = description.sections
         self.cable_model = description.cable_model
         self.model_code = DISTRIBUTED if self.cable_model == 'distributed' else POINT_MOMENT
-        if self.model_code == POINT_MOMENT and any(
-                route is not None for route in description.cable_routes):
-            raise ValueError('offsets and helix routes need cable_model: distributed (the '
-                             "point_moment model loads the rod only at a cable's end disk)")
         self.solver = description.solver
         self.tendons = description.tendons or Tendons.default(len(self.cable_names))
         # the point a tip tracker follows, in the tip frame (m): calibration and tip_pose_measured

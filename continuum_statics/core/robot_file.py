@@ -318,11 +318,14 @@ def _parse_route(cable, field, path_guides):
         return route, route.at([end])[0][0]
     holes = cable['offsets']
     disks = np.concatenate([[0.0], path_guides])
-    if not isinstance(holes, (list, tuple)) or len(holes) != len(disks):
-        raise ValueError('%s.offsets must list one [x, y] (m) per disk of the cable: the base '
-                         'disk (s = 0) then its %d guides up to its end disk, %d in all; got %r'
+    if not isinstance(holes, (list, tuple)) or len(holes) not in (len(path_guides), len(disks)):
+        raise ValueError('%s.offsets must list one [x, y] (m) per guide disk of the cable, %d up '
+                         "to its end disk (its hole in the base disk is then the first one's), "
+                         "or %d with the base disk's (s = 0) first; got %r"
                          % (field, len(path_guides), len(disks), holes))
     holes = np.array([_hole(h, '%s.offsets[%d]' % (field, i)) for i, h in enumerate(holes)])
+    if len(holes) == len(path_guides):  # straight from the base disk to the first guide
+        holes = np.concatenate([holes[:1], holes])
     return GuideOffsets(_frozen(disks), _frozen(holes)), holes[-1]
 
 
@@ -575,11 +578,6 @@ def parse_robot_description(data, source='robot file'):
     if model not in CABLE_MODELS:
         raise ValueError('cable_model must be one of %s, got %r'
                          % (', '.join(CABLE_MODELS), model))
-    if model != 'distributed' and any(route is not None for route in routes):
-        routed = names[next(j for j, route in enumerate(routes) if route is not None)]
-        raise ValueError('cable %r: offsets and helix routes need cable_model: distributed (the '
-                         "point_moment model loads the rod only at a cable's end disk, which "
-                         'a cable that turns round the rod does not do)' % routed)
     guides = np.concatenate([section.guides for section in sections]) if sections else []
     return RobotDescription(
         name=str(data.get('name', 'continuum_robot')), rod=rod, base_frame_id=frame_id,

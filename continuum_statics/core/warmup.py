@@ -149,9 +149,7 @@ def _exercise_tendons(robot, lengths, goal):
         Tendons.default(n), stiffness=np.full(n, 1e3), friction=np.full(n, 0.05))))
     other = 'point_moment' if robot.cable_model == 'distributed' else 'distributed'
     # Newton's tension columns are a compiled batch in the distributed model, from Python
-    # (the other model with straight cables: routed ones need the distributed model)
-    Robot(dataclasses.replace(robot.description, cable_model=other,
-                              cable_routes=())).solve_lengths(lengths)
+    Robot(dataclasses.replace(robot.description, cable_model=other)).solve_lengths(lengths)
     for each in (robot, real):
         first = each.solve_lengths(lengths - 1e-4)
         second = each.solve_lengths(lengths - 2e-4, warm_start=first)  # compiled chord steps

@@ -118,8 +118,6 @@ def timing(cold_cases, warm_calls, seed=0):
                                              'SciPy least_squares cold'))
     for name, base in example_robots():
         for model in ('point_moment', 'distributed'):
-            if model == 'point_moment' and base.description.cable_routes:
-                continue  # routed cables (offsets, helix) need the distributed model
             robot = with_model(base, model)
             rng = np.random.default_rng(seed)
             cold, baseline = [], []
