@@ -14,6 +14,7 @@ from nav_msgs.msg import Path  # noqa: E402
 from rclpy.serialization import deserialize_message, serialize_message  # noqa: E402
 from sensor_msgs.msg import JointState  # noqa: E402
 from std_msgs.msg import Header  # noqa: E402
+from visualization_msgs.msg import MarkerArray  # noqa: E402
 
 from continuum_statics import load_robot  # noqa: E402
 from continuum_statics.core.backbone_sampling import BackboneSampler  # noqa: E402
@@ -24,7 +25,11 @@ from continuum_statics.core.rotations import (  # noqa: E402
 from continuum_statics.nodes.bringup import parse_args  # noqa: E402
 from continuum_statics.nodes.dedicated_intake import IntakeEntry  # noqa: E402
 from continuum_statics.nodes.joint_state_parser import parse_joint_state  # noqa: E402
-from continuum_statics.nodes.marker_geometry import guide_and_cable_points  # noqa: E402
+from continuum_statics.nodes.marker_geometry import (  # noqa: E402
+    guide_and_cable_points,
+    section_layout,
+    section_of,
+)
 from continuum_statics.nodes.markers import BackboneMarkers  # noqa: E402
 from continuum_statics.nodes.node_params import ParamSpec, resolve_config_path  # noqa: E402
 from continuum_statics.nodes.pose_encoder import PoseSequenceEncoder  # noqa: E402
@@ -215,6 +220,34 @@ def test_markers_are_reused_and_refuse_nan():
         markers.update(args[0], bad, *args[2:])
 
 
+def test_serialized_markers_are_rclpys_serialization_of_the_same_markers():
+    robot = load_robot(REPO / 'config' / 'two_section_robot.yaml')
+    cable_ends, section_ends = section_layout(robot)
+    encoder, reference = BackboneMarkers('robot'), BackboneMarkers('robot')
+    for k, (tensions, samples) in enumerate([([0.0, 0.6, 0.0, 0.0, 0.0, 0.4], 9),
+                                             ([0.5, 0.0, 0.1, 0.3, 0.0, 0.0], 9),
+                                             ([0.2, 0.2, 0.0, 0.0, 0.7, 0.0], 14)]):
+        shape = robot.solve_tensions(tensions)
+        guides, rotations, cables = guide_and_cable_points(
+            shape.s, shape.positions, shape.rotations, robot.guides, robot.hole_offsets,
+            cable_ends)
+        s, positions, quaternions = shape.sample(samples)
+        args = (positions, quaternions, guides, rotation_to_quaternion(rotations), cables,
+                section_of(s, section_ends), section_of(cable_ends, section_ends))
+        stamp = (1700000000 + k, 123456789 * k)
+        encoded = encoder.encode('base_link', *stamp, *args)
+        expected = serialize_message(reference.update(
+            Header(frame_id='base_link', stamp=Time(sec=stamp[0], nanosec=stamp[1])), *args))
+        # rclpy leaves CDR padding bytes unset: the messages are compared, not the bytes
+        decoded = deserialize_message(encoded, MarkerArray)
+        assert decoded == deserialize_message(expected, MarkerArray)  # 9 -> 14: a new layout
+        assert decoded.markers[-1].header.stamp == Time(sec=stamp[0], nanosec=stamp[1])
+    bad = [np.array(c) for c in cables]
+    bad[2][1, 0] = math.inf
+    with pytest.raises(ValueError, match='non-finite'):
+        encoder.encode('base_link', 1, 2, *args[:4], bad, *args[5:])
+
+
 def test_bringup_splits_its_options_from_the_ros_arguments():
     options, ros_args = parse_args(['--namespace', 'arm', '--ros-args', '-p', 'x:=1'])
     assert options.namespace == 'arm' and options.robot is None and options.driver is None
@@ -267,7 +300,6 @@ def test_intake_counts_lost_and_stale_messages():
 
 
 def test_each_cable_is_drawn_to_its_end_disk_and_the_tube_coloured_by_section():
-    from continuum_statics.nodes.marker_geometry import section_layout, section_of
     from continuum_statics.nodes.markers import SECTION_COLORS
 
     robot = load_robot(REPO / 'config' / 'two_section_robot.yaml')

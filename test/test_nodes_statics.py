@@ -89,6 +89,24 @@ def test_backbone_tip_pose_and_markers_from_cable_states(harness):
     wait_until(lambda: rig.values().get('converged') == 'True', 5.0, 'a converged status')
 
 
+def test_markers_follow_at_marker_rate_and_the_last_shape_is_drawn_when_input_stops(harness):
+    rig = Rig(harness, marker_rate=1.0)
+    first = rig.feed(ROBOT.cable_lengths(BENT))
+    wait_until(lambda: rig.markers.last is not None
+               and rig.markers.last.markers[0].header.stamp == first.header.stamp, 5.0,
+               'the first shape drawn at once')
+    drawn = len(rig.markers)
+    second = rig.feed(ROBOT.cable_lengths(ROBOT.solve_ivp([-1.0, 2.0, 0.0])))
+    tip = rig.markers.last.markers[-1]
+    assert len(rig.markers) == drawn  # within 1 s of the first: not due yet
+    # no more input: the timer draws the last shape within two periods
+    wait_until(lambda: rig.markers.last.markers[0].header.stamp == second.header.stamp, 5.0,
+               'the last shape drawn after the input stopped')
+    np.testing.assert_allclose(pose_xyz(rig.markers.last.markers[-1].pose),
+                               pose_xyz(second.poses[-1].pose), atol=1e-12)
+    assert np.linalg.norm(pose_xyz(tip.pose) - pose_xyz(second.poses[-1].pose)) > 1e-3
+
+
 def test_late_joiner_gets_the_latched_backbone(harness):
     rig = Rig(harness)
     first = rig.feed(ROBOT.cable_lengths(BENT))

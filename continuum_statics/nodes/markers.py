@@ -6,6 +6,13 @@ from visualization_msgs.msg import Marker, MarkerArray
 
 from continuum_statics.nodes.ros_conversions import set_pose
 
+#: Sentinels of :meth:`BackboneMarkers.encode`'s template: the k-th double is the bit pattern
+#: ``_DOUBLE_MARK + k`` (finite, about 2**422), every stamp's sec ``_SEC_MARK``. A 4-aligned
+#: ``_SEC_MARK`` cannot lie inside a double sentinel (its halves are k < 2**24 and 0x5A5A5A00).
+_DOUBLE_MARK = 0x5A5A5A0000000000
+_MARK_MASK = 0xFFFFFFFFFF000000
+_SEC_MARK = 0x5A5A5A5A
+
 
 def _color(rgba):
     return ColorRGBA(r=float(rgba[0]), g=float(rgba[1]), b=float(rgba[2]), a=float(rgba[3]))
@@ -115,6 +122,72 @@ class BackboneMarkers:
             marker.header = header
         self.array.markers = markers
         return self.array
+
+    def encode(self, frame_id, sec, nanosec, positions, quaternions, guide_positions,
+               guide_quaternions, cable_points, point_sections=None, cable_sections=None):
+        """Return the MarkerArray of :meth:`update` serialized (CDR bytes for ``publish``).
+
+        rclpy takes ~0.3 ms to convert this many Marker objects to C and the objects ~0.15 ms to
+        fill: at a 30 Hz marker rate that delays a 1 kHz estimate in the same process. The
+        layout only changes with the counts, sections and diameters, so rclpy serializes it once
+        with sentinel values, the sentinels' byte offsets are located, and each call writes the
+        new doubles and stamps there with numpy (tens of us). The bytes deserialize to the
+        message of :meth:`update`; a test checks that.
+
+        :raises ValueError: on a non-finite input
+        """
+        cable_points = [np.asarray(points, dtype=float).reshape(-1, 3)
+                        for points in cable_points]
+        positions = np.asarray(positions, dtype=float).reshape(-1, 3)
+        quaternions = np.asarray(quaternions, dtype=float).reshape(-1, 4)
+        guide_positions = np.asarray(guide_positions, dtype=float).reshape(-1, 3)
+        guide_quaternions = np.asarray(guide_quaternions, dtype=float).reshape(-1, 4)
+        values = np.concatenate([positions.ravel(), quaternions[-1], guide_positions.ravel(),
+                                 guide_quaternions.ravel()] + [c.ravel() for c in cable_points])
+        if not np.all(np.isfinite(values)):
+            raise ValueError('refusing to publish markers with non-finite points')
+        key = (frame_id, len(positions), len(guide_positions),
+               tuple(len(c) for c in cable_points), self.tube_diameter,
+               None if point_sections is None else tuple(int(k) for k in point_sections),
+               None if cable_sections is None else tuple(int(k) for k in cable_sections))
+        if key != getattr(self, '_template_key', None):
+            self._make_template(frame_id, positions, guide_positions, cable_points,
+                                point_sections, cable_sections)
+            self._template_key = key
+        self._doubles[self._slots] = values[self._sources]
+        self._int32[self._sec] = sec
+        self._uint32[self._sec + 1] = nanosec
+        return bytes(self._buffer)
+
+    def _make_template(self, frame_id, positions, guide_positions, cable_points, point_sections,
+                       cable_sections):
+        """Serialize :meth:`update` of sentinel values and locate every sentinel."""
+        from builtin_interfaces.msg import Time
+        from rclpy.serialization import serialize_message
+        from std_msgs.msg import Header
+
+        sizes = [positions.size, 4, guide_positions.size, 4 * len(guide_positions)] + [
+            c.size for c in cable_points]
+        marks = (np.uint64(_DOUBLE_MARK) + np.arange(sum(sizes), dtype=np.uint64)).view('<f8')
+        parts = np.split(marks, np.cumsum(sizes)[:-1])
+        tip_quaternion = np.tile(parts[1], (len(positions), 1))  # only the last one is drawn
+        self.update(Header(frame_id=frame_id, stamp=Time(sec=_SEC_MARK, nanosec=0)),
+                    parts[0].reshape(-1, 3), tip_quaternion, parts[2].reshape(-1, 3),
+                    parts[3].reshape(-1, 4), [p.reshape(-1, 3) for p in parts[4:]],
+                    point_sections, cable_sections)
+        self._buffer = bytearray(serialize_message(self.array))
+        body = memoryview(self._buffer)[4:]  # after the encapsulation header: CDR alignment
+        words = np.frombuffer(body[:len(body) // 8 * 8], dtype='<u8')
+        self._slots = np.flatnonzero(words & np.uint64(_MARK_MASK) == np.uint64(_DOUBLE_MARK))
+        self._sources = (words[self._slots] - np.uint64(_DOUBLE_MARK)).astype(np.intp)
+        self._doubles = np.frombuffer(body[:len(body) // 8 * 8], dtype='<f8')
+        self._int32 = np.frombuffer(body[:len(body) // 4 * 4], dtype='<i4')
+        self._uint32 = np.frombuffer(body[:len(body) // 4 * 4], dtype='<u4')
+        self._sec = np.flatnonzero(self._int32 == _SEC_MARK)
+        # the tip's position is the tube's last point: one value, two places
+        if len(np.unique(self._sources)) != len(marks) or len(self._sec) != len(
+                self.array.markers):
+            raise RuntimeError('marker template: sentinels not found where expected')
 
 
 def workspace_markers(frame_id, tips, diameter=0.004):
