@@ -23,20 +23,21 @@ class Thresholds:
     ``warn``: RMS length residual (m) above which a fit is a best fit; ``drop``: above which no
     shape is near; ``margin``: how far (m) lengths may be outside the robot file's limits;
     ``motion``: how far (m) a cable must move before its friction direction follows (the
-    margin becomes 5 σ of the noise).
+    margin becomes 5 σ of the noise); ``noise``: the encoders' σ (m).
     """
 
     warn: float
     drop: float
     margin: float
     motion: float = MOTION_THRESHOLD
+    noise: float = 0.0
 
     @classmethod
     def with_noise(cls, warn, drop, margin, noise):
         """Thresholds raised to the encoders' noise σ (m): 3 σ warn and motion, 10 σ drop."""
         warn = max(warn, 3.0 * noise)
         return cls(warn, max(drop, warn, 10.0 * noise), max(margin, 5.0 * noise),
-                   max(MOTION_THRESHOLD, 3.0 * noise))
+                   max(MOTION_THRESHOLD, 3.0 * noise), noise)
 
 
 @dataclass(frozen=True, eq=False)
@@ -122,7 +123,7 @@ class ShapeTracker:
         try:
             # the first measurement (nothing to track from yet) is solved to the end, once
             tracking = None if self.warm is None else Tracking(
-                self.max_model_runs, thresholds.warn, thresholds.motion)
+                self.max_model_runs, thresholds.warn, thresholds.motion, thresholds.noise)
             estimate = self._estimate(self._tracking, lengths, load, tensions, self.warm, notes,
                                       tracking)
             if tensions is not None and not estimate.residual <= thresholds.warn:

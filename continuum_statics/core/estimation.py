@@ -20,6 +20,7 @@ its shape is taken when it explains the lengths with some cables slack.
 import dataclasses
 from dataclasses import dataclass
 import functools
+import math
 
 import numpy as np
 
@@ -45,6 +46,10 @@ TENDON_NEWTON = 1
 #: The same for trying ideal cables as slack (a rare event: a paid-out cable, not noise, since
 #: the misfit is above the warn threshold), started from a least-squares fit: a few more.
 SLACK_NEWTON = 3
+#: Fraction of the encoders' noise to which a node's per-cycle tendon-model solve matches the
+#: lengths: what is left moves the shape a tenth as far as the noise of that very measurement
+#: does (solving it to the 1 nm estimate_tolerance took 3-5 chord steps instead of 1-2).
+NOISE_FRACTION = 0.1
 #: RMS length residual (m) above which an estimate says in its message that it is a best fit.
 BEST_FIT_NOTE = 1e-6
 #: RMS length residual (m) of the least-squares fit above which ideal cables are tried as slack
@@ -66,11 +71,18 @@ class Tracking:
         warn threshold: at least 3 sigma of its encoders)
     :ivar motion_threshold: free-length change (m) that counts as a cable's motion, which sets
         its friction direction (3 sigma of its encoders: noise is not motion)
+    :ivar length_noise: the encoders' sigma (m): the tendon model solves each measurement's
+        cable lengths to :data:`NOISE_FRACTION` of it (or ``solver.estimate_tolerance``)
     """
 
     max_model_runs: int = TRACK_RUNS
     slack_residual: float = SLACK_RESIDUAL
     motion_threshold: float = MOTION_THRESHOLD
+    length_noise: float = 0.0
+
+    def length_tolerance(self, robot):
+        """Cable-length tolerance (m) of one measurement's tendon-model solve."""
+        return max(robot.solver.estimate_tolerance, NOISE_FRACTION * self.length_noise)
 
 
 @dataclass(frozen=True, eq=False)
@@ -227,18 +239,17 @@ def estimate_shape(robot, cable_lengths, tip_force=(0.0, 0.0, 0.0), tip_moment=(
             slack, attempt = _slack_estimate(robot, measured, tip_force, tip_moment, previous,
                                              observable, notes, _rms(res), tracking,
                                              slack_residual)
-            return slack or dataclasses.replace(
-                _finish(robot, x, tip_force, states, res, True, iterations, observable, notes,
-                        _carry(jac, con_jac, DAMPING, res, measured, con, states, load, age),
-                        used), slack_attempt=attempt)
+            return slack or _finish(
+                robot, x, tip_force, states, res, True, iterations, observable, notes,
+                _carry(jac, con_jac, DAMPING, res, measured, con, states, load, age), used,
+                slack_attempt=attempt)
         if bounded:
             # bounded work per measurement: the best state reached; the next call goes on
             notes.insert(0, 'unfinished after %d model runs (max_model_runs %d): refined with '
                             'the next measurement' % (used, tracking.max_model_runs))
-            estimate = _finish(robot, x, tip_force, states, res, True, iterations, observable,
-                               notes, _carry(jac, con_jac, damping, res, measured, con, states,
-                                             load, age), used)
-            return dataclasses.replace(estimate, converged=False, capped=True)
+            return _finish(robot, x, tip_force, states, res, False, iterations, observable,
+                           notes, _carry(jac, con_jac, damping, res, measured, con, states, load,
+                                         age), used, capped=True)
         start = x  # keep the progress; go on as from a cold start
     # the fallback: the same compiled loop with finite-difference Jacobians at every evaluation
     x, res, con, states, jac, con_jac, iterations, used, ok, _, _ = track(
@@ -272,15 +283,16 @@ def estimate_shape(robot, cable_lengths, tip_force=(0.0, 0.0, 0.0), tip_moment=(
 
 
 def _finish(robot, x, tip_force, states, length_residual, stationary, iterations, observable,
-            notes, jacobians, runs):
+            notes, jacobians, runs, capped=False, slack_attempt=None):
     """Build the estimate record, with notes on convergence and on the fit."""
     residual = _rms(length_residual)
-    if not stationary:
+    if not stationary and not capped:  # a capped estimate's note says why already
         notes.insert(0, 'not converged in %d iterations' % iterations)
     if residual > BEST_FIT_NOTE:
         notes.insert(0, 'best fit: the lengths fit no shape to RMS %.3g m' % residual)
     shape = robot.make_shape(x, tip_force, states)
-    return _result(shape, stationary, residual, iterations, observable, notes, jacobians, runs)
+    return _result(shape, stationary, residual, iterations, observable, notes, jacobians, runs,
+                   capped=capped, slack_attempt=slack_attempt)
 
 
 def _slack_estimate(robot, measured, tip_force, tip_moment, previous, observable, notes,
@@ -328,7 +340,8 @@ def _tendon_estimate(robot, measured, tip_force, tip_moment, previous, observabl
         robot, measured, tip_force, tip_moment, warm, continuation=not robot.tendons.is_ideal,
         max_newton=((TENDON_NEWTON if not robot.tendons.is_ideal else SLACK_NEWTON)
                     if tracking and tracking.max_model_runs else None),
-        motion_threshold=tracking.motion_threshold if tracking else MOTION_THRESHOLD)
+        motion_threshold=tracking.motion_threshold if tracking else MOTION_THRESHOLD,
+        tolerance=tracking.length_tolerance(robot) if tracking else None)
     if solution.message:
         notes.insert(0, solution.message)
     if np.any(solution.slack):
@@ -361,12 +374,12 @@ def _carry(jac, con_jac, damping, res, measured, con, states, load, age):
 
 
 def _rms(values):
-    return float(np.sqrt(np.mean(values ** 2))) if len(values) else 0.0
+    return math.sqrt(float(values @ values) / len(values)) if len(values) else 0.0
 
 
 def _result(shape, converged, residual, iterations, observable, notes, jacobians=None, runs=0,
-            tendons=None):
+            tendons=None, capped=False, slack_attempt=None):
     return ShapeEstimate(shape=shape, u0=shape.u0, converged=bool(converged), residual=residual,
                          iterations=iterations, observable_bending=observable,
                          message='; '.join(notes), jacobians=jacobians, model_runs=runs,
-                         tendons=tendons)
+                         tendons=tendons, capped=capped, slack_attempt=slack_attempt)

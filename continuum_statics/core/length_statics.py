@@ -97,14 +97,15 @@ class _Problem:
         self.robot = robot
         self.motion_reference = motion_reference  # where each cable last moved (m)
         self.balance_tolerance = BALANCE_TOLERANCE  # of a converged solve, relative
+        self.tolerance = robot.solver.estimate_tolerance  # cable rows, m
         self.n = len(robot.cable_names)
         self.free = free_lengths
         self.motion = motion
         self.tip_force, self.tip_moment = tip_force, tip_moment
         (self.rows, self.compliance, self.base_axis, self.radius, self.t_ref, self.kappa,
          self.scale, self.moment_map, self.kernel_moment_map, friction) = _constants(robot)
-        self.friction = friction * motion
-        self.with_friction = bool(np.any(self.friction != 0.0))
+        self.friction = friction * motion + 0.0  # no -0.0: ModelAt compares the bytes
+        self.with_friction = bool(self.friction.any())
 
     def state_of(self, z):
         """Solver state x and fixed tensions of z (the robot's solver-state convention)."""
@@ -220,7 +221,7 @@ def motion_since(robot, free_lengths, warm_start, threshold=MOTION_THRESHOLD):
 
 def solve_lengths(robot, lengths, tip_force=(0.0, 0.0, 0.0), tip_moment=(0.0, 0.0, 0.0),
                   warm_start=None, continuation=True, max_newton=None,
-                  motion_threshold=MOTION_THRESHOLD):
+                  motion_threshold=MOTION_THRESHOLD, tolerance=None):
     """Equilibrium when the motors hold cable ``lengths`` (m, motor side, cable_names order).
 
     ``tip_force`` (N) and ``tip_moment`` (N m) in the base frame; ``warm_start`` the previous
@@ -234,22 +235,25 @@ def solve_lengths(robot, lengths, tip_force=(0.0, 0.0, 0.0), tip_moment=(0.0, 0.
     next call goes on from the result, and the balance is solved to the lengths' tolerance
     (``solver.estimate_tolerance`` over the holes' radius). ``motion_threshold``: free-length
     change (m) that counts as a cable's motion for its friction direction (:func:`motion_since`).
+    ``tolerance``: on the cable rows (m; default ``solver.estimate_tolerance``), e.g. a fraction
+    of the encoders' noise for a node's per-cycle call.
     """
     n = len(robot.cable_names)
     lengths = as_vector(lengths, n, 'lengths')
     tip_force = as_vector(tip_force, 3, 'tip_force')
     tip_moment = as_vector(tip_moment, 3, 'tip_moment')
     free = robot.tendons.free_lengths(lengths, robot.straight_cable_lengths)
-    if np.any(free <= 0.0):
+    if n and free.min() <= 0.0:
         raise ValueError('lengths give non-positive free lengths for cables %s'
                          % [name for name, f in zip(robot.cable_names, free) if f <= 0.0])
     motion, reference = motion_since(robot, free, warm_start, motion_threshold)
     problem = _Problem(robot, free, motion, tip_force, tip_moment, reference)
+    if tolerance is not None:
+        problem.tolerance = max(float(tolerance), robot.solver.estimate_tolerance)
     if max_newton is not None:
         # a per-cycle call solves the balance to the lengths' tolerance: a balance error b
         # (an angle over the rod) moves a cable at radius r by about r b
-        problem.balance_tolerance = max(BALANCE_TOLERANCE,
-                                        robot.solver.estimate_tolerance / problem.radius)
+        problem.balance_tolerance = max(BALANCE_TOLERANCE, problem.tolerance / problem.radius)
     warm = _warm_z(robot, warm_start)
     total = 0
     parts = getattr(warm_start, 'jacobian_parts', None)
@@ -324,7 +328,7 @@ def _chord(problem, z0, parts, warm_start):
      values) = chord(*args[:6], *args[7:], np.asarray(z0, dtype=float),
                      problem.kernel_moment_map, problem.free, problem.friction,
                      problem.compliance, problem.base_axis, problem.kappa, problem.radius,
-                     problem.scale, parts[0], parts[1], robot.solver.estimate_tolerance,
+                     problem.scale, parts[0], parts[1], problem.tolerance,
                      problem.balance_tolerance, CHORD_ITERATIONS, CHORD_REFRESHES,
                      _NO_VALUES if known is None else known.values,
                      _NO_STATES if known is None else known.states)
@@ -346,10 +350,11 @@ class ModelAt(NamedTuple):
 
     def holds_for(self, problem):
         """Whether a problem has this model's robot, load and friction directions."""
+        # bytes compared: exact equality, a tenth of np.array_equal's cost per cycle
         return (problem.robot is self.robot
-                and np.array_equal(self.friction, problem.friction)
-                and np.array_equal(self.load[:3], problem.tip_force)
-                and np.array_equal(self.load[3:], problem.tip_moment))
+                and self.friction.tobytes() == problem.friction.tobytes()
+                and self.load[:3].tobytes() == problem.tip_force.tobytes()
+                and self.load[3:].tobytes() == problem.tip_moment.tobytes())
 
 
 def _newton(problem, z0, max_iterations=None, backtracks=16):
@@ -411,7 +416,7 @@ def _continuation(robot, problem, z0):
 def _done(problem, res):
     return (np.max(np.abs(res[:3]), initial=0.0) <= problem.balance_tolerance
             and np.max(np.abs(res[3:]), initial=0.0) * problem.radius
-            <= problem.robot.solver.estimate_tolerance)
+            <= problem.tolerance)
 
 
 def _cable_residual(info):
@@ -425,10 +430,10 @@ def _solution(robot, problem, z, info, converged, iterations, message, parts=Non
     tensions = np.where(slack, 0.0, z[3:])  # a slack cable carries exactly nothing
     shape = robot.make_shape(x, problem.tip_force, states, fixed)
     notes = [message] if message else []
-    limits = robot.tendons.tension_limits
-    over = [name for name, t, high in zip(robot.cable_names, motor, limits[:, 1]) if t > high]
-    if over:
-        notes.append('tension above tension_limits for cables %s' % ', '.join(over))
+    over = np.flatnonzero(motor > robot.tendons.tension_limits[:, 1])
+    if over.size:
+        notes.append('tension above tension_limits for cables %s' % ', '.join(
+            robot.cable_names[i] for i in over))
     return LengthSolution(shape=shape, tensions=np.where(slack, 0.0, motor),
                           end_tensions=tensions, slack=slack,
                           converged=bool(converged), message='; '.join(notes),

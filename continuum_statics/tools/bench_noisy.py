@@ -86,7 +86,7 @@ def bench_robot(robot, label, samples):
         times, runs, capped, previous = [], [], 0, None
         # as statics with length_noise_std = sigma: its budget and its thresholds
         thresholds = Thresholds.with_noise(1e-4, 2e-3, 1e-3, sigma)
-        tracking = Tracking(TRACK_RUNS, thresholds.warn, thresholds.motion)
+        tracking = Tracking(TRACK_RUNS, thresholds.warn, thresholds.motion, thresholds.noise)
         for k, lengths in enumerate(measured):
             start = time.perf_counter()
             previous = robot.estimate_shape(lengths, warm_start=previous, tracking=tracking)
