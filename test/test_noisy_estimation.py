@@ -86,3 +86,29 @@ def test_the_estimate_on_noisy_lengths_is_the_least_squares_fit(name, model):
     arm = np.max(np.linalg.norm(robot.cable_offsets, axis=1))
     error = np.linalg.norm(estimate.shape.tip_position - truth.shape.tip_position)
     assert error < 5.0 * sigma * robot.length / arm
+
+
+@pytest.mark.parametrize('model', ['point_moment', 'distributed'])
+def test_the_tendon_model_solves_each_measurement_to_a_tenth_of_the_noise(model):
+    robot = robot_with('three_section_robot_real_tendons.yaml', model)
+    sigma = 50e-6
+    exact = motion(robot, 40, seed=6)
+    measured = exact + np.random.default_rng(7).normal(0.0, sigma, exact.shape)
+    arm = np.max(np.linalg.norm(robot.cable_offsets, axis=1))
+    noisy = Tracking(length_noise=sigma)
+    previous = robot.estimate_shape(measured[0])
+    steps = {'noise': [], 'exact': []}
+    for lengths in measured[1:]:
+        estimate = robot.estimate_shape(lengths, warm_start=previous, tracking=noisy)
+        steps['noise'].append(estimate.iterations)
+        steps['exact'].append(robot.estimate_shape(lengths, warm_start=previous,
+                                                   tracking=Tracking()).iterations)
+        full = robot.estimate_shape(lengths, warm_start=previous)  # to solver tolerance
+        assert full.converged and full.residual < 1e-8
+        if estimate.converged:
+            assert estimate.residual <= 0.1 * sigma
+            # a length error e moves the tip about e L / r: a tenth of what the noise does
+            error = np.linalg.norm(estimate.shape.tip_position - full.shape.tip_position)
+            assert error <= 0.1 * sigma * robot.length / arm
+        previous = estimate
+    assert sum(steps['noise']) < sum(steps['exact'])  # what the noise tolerance is for
