@@ -33,6 +33,7 @@ from continuum_statics.core.shape import Shape
 from continuum_statics.core.tendons import full_circle_tension
 from continuum_statics.core.tracking import (
     DAMPING,
+    SECANT_AGE,
     SECANT_FRACTION,
     TRACK_ITERATIONS,
     TRACK_RUNS,
@@ -227,9 +228,11 @@ def estimate_shape(robot, cable_lengths, tip_force=(0.0, 0.0, 0.0), tip_moment=(
             robot.solver.estimate_tolerance, robot.length, TRACK_ITERATIONS, robot.probe_runs,
             budget, SECANT_FRACTION if bounded else 0.0)
         runs[0] += used
-        # a cold estimate hands on its secant Jacobians as they are: the model's own here
-        # (probe_runs IVPs, 40 of 170 us on a single section) are made by a warm call only
-        # when its first step fails on them, and a one-off estimate never needs them
+        if cold and age:
+            # secant updates of the straight rod's Jacobians: the next (warm) call makes the
+            # model's own first (probe_runs IVPs, 40 of 170 us on a single section, which a
+            # one-off estimate never needs)
+            age = SECANT_AGE + 1
         used = runs[0]
         if ok:
             slack, attempt = _slack_estimate(robot, measured, tip_force, tip_moment, previous,

@@ -111,27 +111,32 @@ def track(s_grid, params, model, tip_force, tip_moment, step, fixed, section_sta
                   cable_offsets, guide_nodes, cable_last_guide, cable_end_node, section_end_node,
                   hole_offsets, stage_routes, route_kinks)
     fresh = jac0.shape[0] == 0 and con_jac0.shape[0] == 0  # the model's own Jacobians
+    # secant Jacobians no longer trusted (a cold estimate's, or too many updates): the
+    # model's own first; a try on them costs more than it saves
+    stale = not fresh and age0 > SECANT_AGE
     n_all = x0.shape[0]
     x = x0.copy()
-    if values0.shape[0] > 0 and not fresh:
+    if values0.shape[0] > 0 and not fresh and not stale:
         n = measured.shape[0]
         res = values0[:n] - measured
         con = values0[n:].copy()
         states = states0.copy()  # the caller's stays writable (a Shape of it would not be)
-        jac, con_jac = jac0, con_jac0
+        jac, con_jac = jac0.copy(), con_jac0.copy()
         runs = 0
+    elif stale:
+        res, con, states, jac, con_jac = _evaluate(model_args, x, measured, n_all)
+        runs = probe_runs
     else:
         res, con, states, jac, con_jac = _evaluate(model_args, x, measured,
                                                    n_all if fresh else 0)
         runs = probe_runs if fresh else 1
-    if not fresh:
-        jac = jac0.copy()
-        con_jac = con_jac0.copy()
+        if not fresh:
+            jac, con_jac = jac0.copy(), con_jac0.copy()
     # jac, con_jac are the model's own at x (not Broyden-updated): made here, or handed on by
     # a call that made them at x0 (age 0)
-    exact = fresh or age0 == 0
-    refreshed = False  # the model's own Jacobians were made once in this call
-    age = 0 if fresh else age0
+    exact = fresh or stale or age0 == 0
+    refreshed = stale  # the model's own Jacobians were made once in this call
+    age = 0 if fresh or stale else age0
     penalty = (1e3 * weight) ** 2
     current = res @ res + penalty * (con @ con)
     damping = damping0
