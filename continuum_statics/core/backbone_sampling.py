@@ -10,7 +10,7 @@ import numpy as np
 from continuum_statics.core.rotations import quaternion_into
 
 
-@numba.njit(cache=True)
+@numba.njit(cache=True, nogil=True)
 def _sample(positions, rotations, lower, upper, weight, nearest, points, quaternions):
     for k in range(lower.shape[0]):
         a, b, f = lower[k], upper[k], weight[k]

@@ -90,7 +90,7 @@ _B = tuple((-1.0) ** k / math.factorial(2 * k + 2) for k in range(9))
 _CC = tuple((-1.0) ** k / math.factorial(2 * k + 3) for k in range(9))
 
 
-@numba.njit(cache=True, inline='always')
+@numba.njit(cache=True, nogil=True, inline='always')
 def _exp_coefficients(t2):
     """(sin t / t, (1 - cos t) / t^2, (t - sin t) / t^3) of t = sqrt(t2).
 
@@ -114,7 +114,7 @@ def _exp_coefficients(t2):
     return sin_t / t, 2.0 * half * half, (t - sin_t) / (t2 * t)
 
 
-@numba.njit(cache=True, inline='always')
+@numba.njit(cache=True, nogil=True, inline='always')
 def _rotation(a, b, w0, w1, w2):
     """Rodrigues: I + a hat(w) + b hat(w)^2 as a row-major 9-tuple.
 
@@ -125,7 +125,7 @@ def _rotation(a, b, w0, w1, w2):
             -a * w1 + b * w0 * w2, a * w0 + b * w1 * w2, 1.0 - b * (w0 * w0 + w1 * w1))
 
 
-@numba.njit(cache=True, inline='always')
+@numba.njit(cache=True, nogil=True, inline='always')
 def _mul9(a, b):
     """Product of two row-major 3x3 matrices given as 9-tuples."""
     return (a[0] * b[0] + a[1] * b[3] + a[2] * b[6], a[0] * b[1] + a[1] * b[4] + a[2] * b[7],
@@ -135,7 +135,7 @@ def _mul9(a, b):
             a[6] * b[2] + a[7] * b[5] + a[8] * b[8])
 
 
-@numba.njit(cache=True, inline='always')
+@numba.njit(cache=True, nogil=True, inline='always')
 def _se3_exp(theta):
     """exp(theta), theta = (rho, w), on SE(3): (exp(hat(w)) as a 9-tuple, V(w) rho).
 
@@ -152,14 +152,14 @@ def _se3_exp(theta):
                                          r2 + b * x2 + c * (w0 * x1 - w1 * x0))
 
 
-@numba.njit(cache=True, inline='always')
+@numba.njit(cache=True, nogil=True, inline='always')
 def _to_local(rot, m0, m1, m2):
     """R^T m for a row-major 9-tuple R."""
     return (rot[0] * m0 + rot[3] * m1 + rot[6] * m2, rot[1] * m0 + rot[4] * m1 + rot[7] * m2,
             rot[2] * m0 + rot[5] * m1 + rot[8] * m2)
 
 
-@numba.njit(cache=True)
+@numba.njit(cache=True, nogil=True)
 def _strain_newton(ml, nl, u, w, c, p, tensions, routes, point, active):
     """Strains (u, v - e3) of the distributed model (eqs. 6, 7 with the cables' pressure).
 
@@ -245,7 +245,7 @@ def _strain_newton(ml, nl, u, w, c, p, tensions, routes, point, active):
     return (u0, u1, u2), (w0, w1, w2)
 
 
-@numba.njit(cache=True, inline='always')
+@numba.njit(cache=True, nogil=True, inline='always')
 def _dexpinv(theta, xi):
     """dexp^-1_(-theta)(xi) on se(3), series truncated after the double commutator.
 
@@ -275,7 +275,7 @@ def _dexpinv(theta, xi):
             y2 + 0.5 * c5 + d5 * _TWELFTH)
 
 
-@numba.njit(cache=True, inline='always')
+@numba.njit(cache=True, nogil=True, inline='always')
 def _cable_sums(u, w, tensions, routes, active, out):
     """Sum t l x tau (out[0:3]) and t tau (out[3:6]) over active cables at the base (s = 0).
 
@@ -301,7 +301,7 @@ def _cable_sums(u, w, tensions, routes, active, out):
         out[5] += inv * q2
 
 
-@numba.njit(cache=True)
+@numba.njit(cache=True, nogil=True)
 def _base_stretch(rot, force, p, model, tensions, routes, active, u, w):
     """v(0) - e3 for a given u(0): D (v - e3) = R^T N - sum t tau(u, v), by fixed-point steps."""
     nl0 = rot[0] * force[0] + rot[3] * force[1] + rot[6] * force[2]
@@ -318,7 +318,7 @@ def _base_stretch(rot, force, p, model, tensions, routes, active, u, w):
         w[2] = (nl2 - sums[5]) * p[D_INV_AT + 2]
 
 
-@numba.njit(cache=True)
+@numba.njit(cache=True, nogil=True)
 def integrate_batch(s_grid, params, model, tip_forces, base_bendings, disk_moments, tensions,
                     stage_routes, route_kinks, cable_end_node, section_end_node):
     """Integrate a batch of initial-value problems from base to tip.
@@ -532,7 +532,7 @@ def integrate_batch(s_grid, params, model, tip_forces, base_bendings, disk_momen
     return states
 
 
-@numba.njit(cache=True)
+@numba.njit(cache=True, nogil=True)
 def cable_lengths_batch(states, guide_nodes, hole_offsets, cable_last_guide):
     """Cable lengths (B, n_cables) of a batch of shapes (paper eq. 11, errata applied).
 
@@ -554,7 +554,7 @@ def cable_lengths_batch(states, guide_nodes, hole_offsets, cable_last_guide):
     return lengths
 
 
-@numba.njit(cache=True)
+@numba.njit(cache=True, nogil=True)
 def section_tensions(moment, cables, offsets, out):
     """Least-norm tensions t >= 0 of one section's cables whose moments sum to ``moment``.
 
@@ -616,7 +616,7 @@ def section_tensions(moment, cables, offsets, out):
             out[cables[j]] = max(0.0, a0 * best_l0 + a1 * best_l1)
 
 
-@numba.njit(cache=True)
+@numba.njit(cache=True, nogil=True)
 def loads_from_state(x, fixed_tensions, model, bases, ranks, bending_stiffness, section_cables,
                      section_cable_count, offsets, disk_moments, tensions):
     """Section point moments and cable tensions of one solver state (in place).
@@ -654,7 +654,7 @@ def loads_from_state(x, fixed_tensions, model, bases, ranks, bending_stiffness, 
         tensions[j] += fixed_tensions[j]
 
 
-@numba.njit(cache=True)
+@numba.njit(cache=True, nogil=True)
 def probe(s_grid, params, model, tip_force, tip_moment, x, n_free, step, fixed_tensions,
           section_state_index, section_bases, section_ranks, section_cables, section_cable_count,
           cable_offsets, guide_nodes, cable_last_guide, cable_end_node, section_end_node,
@@ -743,7 +743,7 @@ def probe(s_grid, params, model, tip_force, tip_moment, x, n_free, step, fixed_t
     return values, jacobian, states[0].copy()
 
 
-@numba.njit(cache=True)
+@numba.njit(cache=True, nogil=True)
 def tip_jacobian(s_grid, params, model, tip_force, base_bending, disk_moments, tensions,
                  stage_routes, route_kinks, cable_end_node, section_end_node, force_step,
                  bending_step):

@@ -24,7 +24,7 @@ class LeastSquaresResult:
     jacobians: tuple = None
 
 
-@numba.njit(cache=True)
+@numba.njit(cache=True, nogil=True)
 def constrained_step(res, jac, con, con_jac, damping):
     """Constrained damped Gauss-Newton step and its predicted change of the residual.
 

@@ -30,7 +30,7 @@ CHORD_RESULT = ('z', 'ok', 'iterations', 'residual', 'x', 'fixed', 'states', 'mo
 MODEL_VALUES = ('balance', 'consumed', 'motor', 'mean')
 
 
-@numba.njit(cache=True)
+@numba.njit(cache=True, nogil=True)
 def _solve_linear(matrix, rhs):
     """Solve matrix x = rhs: LU with partial pivoting, least norm when (nearly) singular."""
     n = rhs.shape[0]
@@ -60,7 +60,7 @@ def _solve_linear(matrix, rhs):
     return x
 
 
-@numba.njit(cache=True)
+@numba.njit(cache=True, nogil=True)
 def _evaluate(s_grid, params, model, tip_force, tip_moment, step, section_state_index,
               section_bases, section_ranks, section_cables, section_cable_count, cable_offsets,
               guide_nodes, cable_last_guide, cable_end_node, section_end_node, hole_offsets,
@@ -106,7 +106,7 @@ def _evaluate(s_grid, params, model, tip_force, tip_moment, step, section_state_
     return residual, x, fixed, states, motor, gap, taut, mean, model_values
 
 
-@numba.njit(cache=True)
+@numba.njit(cache=True, nogil=True)
 def _residual(z, model_values, free, kappa, radius):
     """Residual, gap (m) and taut of z from the model there (:data:`MODEL_VALUES` layout)."""
     n = free.shape[0]
@@ -123,7 +123,7 @@ def _residual(z, model_values, free, kappa, radius):
     return residual, gap, taut
 
 
-@numba.njit(cache=True)
+@numba.njit(cache=True, nogil=True)
 def _state_of(z, model, moment_map, x, fixed):
     """Fill the solver state x and fixed tensions of z (``_Problem.state_of``)."""
     n = fixed.shape[0]
@@ -142,7 +142,7 @@ def _state_of(z, model, moment_map, x, fixed):
             fixed[j] = z[3 + j]
 
 
-@numba.njit(cache=True)
+@numba.njit(cache=True, nogil=True)
 def jacobian_pieces(s_grid, params, model, tip_force, tip_moment, step, section_state_index,
                     section_bases, section_ranks, section_cables, section_cable_count,
                     cable_offsets, guide_nodes, cable_last_guide, cable_end_node,
@@ -197,7 +197,7 @@ def jacobian_pieces(s_grid, params, model, tip_force, tip_moment, step, section_
     return balance, d_consumed
 
 
-@numba.njit(cache=True)
+@numba.njit(cache=True, nogil=True)
 def _jacobian(balance, d_consumed, taut, kappa, radius, scale):
     """Jacobian in scaled z for the cables' branches ``taut`` (``_Problem.jacobian``)."""
     n = taut.shape[0]
@@ -215,7 +215,7 @@ def _jacobian(balance, d_consumed, taut, kappa, radius, scale):
     return jacobian
 
 
-@numba.njit(cache=True)
+@numba.njit(cache=True, nogil=True)
 def _done(residual, radius, tolerance, balance_tolerance):
     n = residual.shape[0]
     for i in range(3):
@@ -227,7 +227,7 @@ def _done(residual, radius, tolerance, balance_tolerance):
     return True
 
 
-@numba.njit(cache=True)
+@numba.njit(cache=True, nogil=True)
 def chord(s_grid, params, model, tip_force, tip_moment, step, section_state_index,
           section_bases, section_ranks, section_cables, section_cable_count, cable_offsets,
           guide_nodes, cable_last_guide, cable_end_node, section_end_node, hole_offsets,

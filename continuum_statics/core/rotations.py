@@ -22,7 +22,7 @@ def quaternion_direction(q):
     return quaternion_to_rotation(q / np.linalg.norm(q))[:, 2]
 
 
-@numba.njit(cache=True)
+@numba.njit(cache=True, nogil=True)
 def quaternion_into(r, out):
     """Write the unit quaternion [x, y, z, w], w >= 0, of rotation ``r`` into ``out``.
 
@@ -49,7 +49,7 @@ def quaternion_into(r, out):
     out[0], out[1], out[2], out[3] = x * scale, y * scale, z * scale, w * scale
 
 
-@numba.njit(cache=True)
+@numba.njit(cache=True, nogil=True)
 def _quaternions(rotations, out):
     for k in range(rotations.shape[0]):
         quaternion_into(rotations[k], out[k])

@@ -142,7 +142,7 @@ class Routing:
                    np.ascontiguousarray(ends), straight)
 
 
-@numba.njit(cache=True, inline='always')
+@numba.njit(cache=True, nogil=True, inline='always')
 def hole_in(y, offset):
     """Eq. 11 (with the errata): the hole r + R l of local ``offset`` l (3,) at node state ``y``.
 

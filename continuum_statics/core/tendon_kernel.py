@@ -14,7 +14,7 @@ import numpy as np
 from continuum_statics.core.routing import hole_in
 
 
-@numba.njit(cache=True)
+@numba.njit(cache=True, nogil=True)
 def path_stretch(states, guide_nodes, cable_last_guide, hole_offsets, base_axis, tensions,
                  friction, compliance, consumed, motor, mean):
     """Fill, per cable: free length its path takes (m), motor-side and mean tension (N).

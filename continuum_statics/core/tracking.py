@@ -57,7 +57,7 @@ SECANT_FRACTION = 1e-2
 SECANT_AGE = 200
 
 
-@numba.njit(cache=True)
+@numba.njit(cache=True, nogil=True)
 def _evaluate(model_args, x, measured, n_free):
     """Length residual (m), tip balance, states and their Jacobians (``n_free`` columns)."""
     (s_grid, params, model, tip_force, tip_moment, step, fixed, section_state_index,
@@ -76,7 +76,7 @@ def _evaluate(model_args, x, measured, n_free):
             np.ascontiguousarray(jacobian[6:6 + n]), np.ascontiguousarray(jacobian[6 + n:9 + n]))
 
 
-@numba.njit(cache=True)
+@numba.njit(cache=True, nogil=True)
 def track(s_grid, params, model, tip_force, tip_moment, step, fixed, section_state_index,
           section_bases, section_ranks, section_cables, section_cable_count, cable_offsets,
           guide_nodes, cable_last_guide, cable_end_node, section_end_node, hole_offsets,

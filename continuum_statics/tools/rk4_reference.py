@@ -22,7 +22,7 @@ from continuum_statics.core.shape import Shape
 STATE_SIZE = 18
 
 
-@numba.njit(cache=True, inline='always')
+@numba.njit(cache=True, nogil=True, inline='always')
 def _derivative(y, p, out):
     """Right-hand side of eqs. 1, 2, 8, 9 for the state ``y``; writes ``out``."""
     c0, c1, c2 = p[C_AT], p[C_AT + 1], p[C_AT + 2]
@@ -69,7 +69,7 @@ def _derivative(y, p, out):
     out[17] = (-(u0 * m1 - u1 * m0) - (v0 * n1 - v1 * n0)) * p[C_INV_AT + 2]
 
 
-@numba.njit(cache=True, inline='always')
+@numba.njit(cache=True, nogil=True, inline='always')
 def _orthonormalise(y):
     """One Newton step of the polar decomposition on the rotation block of ``y`` (in place).
 
@@ -95,7 +95,7 @@ def _orthonormalise(y):
     y[11] = 1.5 * a22 - 0.5 * (a20 * g02 + a21 * g12 + a22 * g22)
 
 
-@numba.njit(cache=True)
+@numba.njit(cache=True, nogil=True)
 def integrate_batch(s_grid, params, tip_forces, base_bendings):
     """Integrate a batch of initial-value problems from base to tip.
 
