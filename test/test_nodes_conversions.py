@@ -236,6 +236,7 @@ def test_serialized_markers_are_rclpys_serialization_of_the_same_markers():
                 section_of(s, section_ends), section_of(cable_ends, section_ends))
         stamp = (1700000000 + k, 123456789 * k)
         encoded = encoder.encode('base_link', *stamp, *args)
+        assert encoder._template is not None  # filled in place, not rclpy's serialization
         expected = serialize_message(reference.update(
             Header(frame_id='base_link', stamp=Time(sec=stamp[0], nanosec=stamp[1])), *args))
         # rclpy leaves CDR padding bytes unset: the messages are compared, not the bytes

@@ -1,5 +1,6 @@
 """statics over DDS in one process (private context): outputs, bad input, tip load, parameters."""
 import math
+import time
 
 from conftest import REPO
 from nodes_helpers import (
@@ -95,10 +96,11 @@ def test_markers_follow_at_marker_rate_and_the_last_shape_is_drawn_when_input_st
     wait_until(lambda: rig.markers.last is not None
                and rig.markers.last.markers[0].header.stamp == first.header.stamp, 5.0,
                'the first shape drawn at once')
-    drawn = len(rig.markers)
+    drawn, first_seen = len(rig.markers), time.monotonic()
     second = rig.feed(ROBOT.cable_lengths(ROBOT.solve_ivp([-1.0, 2.0, 0.0])))
     tip = rig.markers.last.markers[-1]
-    assert len(rig.markers) == drawn  # within 1 s of the first: not due yet
+    if time.monotonic() - first_seen < 0.9:  # (a loaded machine may have taken longer)
+        assert len(rig.markers) == drawn  # within 1 s of the first: not due yet
     # no more input: the timer draws the last shape within two periods
     wait_until(lambda: rig.markers.last.markers[0].header.stamp == second.header.stamp, 5.0,
                'the last shape drawn after the input stopped')

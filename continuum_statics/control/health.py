@@ -176,7 +176,7 @@ class StaticsHealth:
         self.input_rate = RateMeter(clock)
         self.output_rate = RateMeter(clock)
         self.best_fits = 0  # published with a residual above the warn threshold
-        self.capped = 0  # estimates that hit max_iterations/max_model_runs (refined next)
+        self.capped = 0  # estimates left unfinished by max_iterations/max_model_runs
         self.empty_payloads = 0
         self.limit_rejections = 0
         self.not_converged = 0

@@ -81,9 +81,12 @@ class Tracking:
     motion_threshold: float = MOTION_THRESHOLD
     length_noise: float = 0.0
 
-    def length_tolerance(self, robot):
-        """Cable-length tolerance (m) of one measurement's tendon-model solve."""
-        return max(robot.solver.estimate_tolerance, NOISE_FRACTION * self.length_noise)
+    def length_tolerance(self):
+        """Cable-length tolerance (m) of one measurement's tendon-model solve.
+
+        ``solve_lengths`` raises it to the robot's ``solver.estimate_tolerance``.
+        """
+        return NOISE_FRACTION * self.length_noise
 
 
 @dataclass(frozen=True, eq=False)
@@ -103,8 +106,9 @@ class ShapeEstimate:
     :ivar tendons: the :class:`length_statics.LengthSolution` when the tendon model gave the shape
     :ivar slack_attempt: an unfinished try of ideal cables as slack (a
         :class:`length_statics.LengthSolution`), which the next measurement's try goes on from
-    :ivar capped: an estimate that spent its per-call budget (:class:`Tracking`) before
-        converging: the best state reached; the next call, warm-started from it, goes on
+    :ivar capped: an estimate left unfinished by its per-call bound (:class:`Tracking`): it
+        spent its budget, or it made the model's own Jacobians after a failed secant step; the
+        best state reached, and the next call, warm-started from it, goes on
     """
 
     shape: Shape
@@ -221,10 +225,13 @@ def estimate_shape(robot, cable_lengths, tip_force=(0.0, 0.0, 0.0), tip_moment=(
     if jacobians is not None:  # tracking: the previous Jacobians, Broyden-updated, compiled
         budget = tracking.max_model_runs if bounded else _UNBOUNDED
         carry = WarmStart(*jacobians)
-        known = carry.values.shape[0] and np.array_equal(carry.load, load)
+        same_load = np.array_equal(carry.load, load)
+        known = carry.values.shape[0] and same_load
         x, res, con, states, jac, con_jac, iterations, used, ok, damping, age = track(
             *args, measured, start, carry.jac, carry.con_jac, carry.damping,
-            carry.values if known else _NO_VALUES, carry.states, carry.age,
+            carry.values if known else _NO_VALUES, carry.states,
+            # under another tip load they are not the model's own here (age 0 says they are)
+            carry.age if same_load else max(carry.age, 1),
             robot.solver.estimate_tolerance, robot.length, TRACK_ITERATIONS, robot.probe_runs,
             budget, SECANT_FRACTION if bounded else 0.0)
         runs[0] += used
@@ -244,8 +251,9 @@ def estimate_shape(robot, cable_lengths, tip_force=(0.0, 0.0, 0.0), tip_moment=(
                 slack_attempt=attempt)
         if bounded:
             # bounded work per measurement: the best state reached; the next call goes on
-            notes.insert(0, 'unfinished after %d model runs (max_model_runs %d): refined with '
-                            'the next measurement' % (used, tracking.max_model_runs))
+            notes.insert(0, 'unfinished after %d model runs%s: refined with the next '
+                            'measurement' % (used, ' (max_model_runs %d)' % tracking.max_model_runs
+                                             if used >= tracking.max_model_runs else ''))
             return _finish(robot, x, tip_force, states, res, False, iterations, observable,
                            notes, _carry(jac, con_jac, damping, res, measured, con, states, load,
                                          age), used, capped=True)
@@ -340,7 +348,7 @@ def _tendon_estimate(robot, measured, tip_force, tip_moment, previous, observabl
         max_newton=((TENDON_NEWTON if not robot.tendons.is_ideal else SLACK_NEWTON)
                     if tracking and tracking.max_model_runs else None),
         motion_threshold=tracking.motion_threshold if tracking else MOTION_THRESHOLD,
-        tolerance=tracking.length_tolerance(robot) if tracking else None)
+        tolerance=tracking.length_tolerance() if tracking else None)
     if solution.message:
         notes.insert(0, solution.message)
     if np.any(solution.slack):

@@ -233,7 +233,7 @@ def solve_lengths(robot, lengths, tip_force=(0.0, 0.0, 0.0), tip_moment=(0.0, 0.
     steps (with one Jacobian refresh) when the warm start has a Jacobian, else at most that many
     Newton iterations from it, and nothing else; the
     next call goes on from the result, and the balance is solved to the lengths' tolerance
-    (``solver.estimate_tolerance`` over the holes' radius). ``motion_threshold``: free-length
+    (``tolerance`` over the holes' radius). ``motion_threshold``: free-length
     change (m) that counts as a cable's motion for its friction direction (:func:`motion_since`).
     ``tolerance``: on the cable rows (m; default ``solver.estimate_tolerance``), e.g. a fraction
     of the encoders' noise for a node's per-cycle call.

@@ -6,12 +6,15 @@ Jacobians of the previous estimate, corrected by Broyden updates instead of reco
 run per iteration, and no Python between them. When a step fails on those Jacobians they are
 refreshed once by finite differences at the current state: on lengths no shape fits exactly (real
 encoders) the minimum has a nonzero residual, where a secant Jacobian's step points nowhere
-useful, and only the model's own Jacobian tells that the fit is stationary. The work of one call
-is bounded (``max_runs`` IVPs): a call that would need more returns its best state (``ok``
-False), and the next measurement continues from it. A cold estimate starts on the passive rod's
-Jacobians (``estimation``); the fallback of an estimate solved to the end runs the same loop with
-finite-difference Jacobians at every evaluation (one compiled call instead of a Python loop over
-the kernels), then :func:`least_squares.constrained_gauss_newton` from where it stopped.
+useful, and only the model's own Jacobian tells that the fit is stationary. Secant Jacobians not
+trusted any more (over :data:`SECANT_AGE` updates, or a cold estimate's) are refreshed at the
+start of the call instead. The work of one call is bounded (``max_runs`` IVPs): a call that would
+need more returns its best state (``ok`` False), and so does a budgeted call that refreshed its
+Jacobians after a failed step (the next measurement steps on them). A cold estimate starts on
+the passive rod's Jacobians (``estimation``); the fallback of an estimate solved to the end runs
+the same loop with finite-difference Jacobians at every evaluation (one compiled call instead of
+a Python loop over the kernels), then :func:`least_squares.constrained_gauss_newton` from where
+it stopped.
 """
 from typing import NamedTuple
 
@@ -136,6 +139,7 @@ def track(s_grid, params, model, tip_force, tip_moment, step, fixed, section_sta
     # a call that made them at x0 (age 0)
     exact = fresh or stale or age0 == 0
     refreshed = stale  # the model's own Jacobians were made once in this call
+    failed_secant = False  # ... because a step failed on secant ones
     age = 0 if fresh or stale else age0
     penalty = (1e3 * weight) ** 2
     current = res @ res + penalty * (con @ con)
@@ -158,7 +162,7 @@ def track(s_grid, params, model, tip_force, tip_moment, step, fixed, section_sta
                    or STATIONARY_FRACTION ** 2 * (res @ res) <= tolerance ** 2)
         if done and trusted:
             return x, res, con, states, jac, con_jac, max(iteration, 1), runs, True, damping, age
-        if refreshed and secant_fraction > 0.0:
+        if failed_secant and secant_fraction > 0.0:
             # a budgeted call that needed the model's own Jacobians ends with them: the next
             # measurement steps on them (their damped tries here doubled the slowest 1 % of
             # calls: 20-21 IVPs instead of 13 on the 3-section distributed robot)
@@ -213,9 +217,9 @@ def track(s_grid, params, model, tip_force, tip_moment, step, fixed, section_sta
             # (the refresh may overrun the budget: the next call must start on good Jacobians)
             res, con, states, jac, con_jac = _evaluate(model_args, x, measured, n_all)
             runs += probe_runs
-            # from here damped tries and secant updates of them (the caller of a call solved to
-            # the end falls back on the model's own Jacobians at every step if this gives up)
-            exact = refreshed = True
+            # a call solved to the end goes on with damped tries and secant updates of them (its
+            # caller falls back on the model's own Jacobians at every step if this gives up)
+            exact = refreshed = failed_secant = True
             age = 0
             limit = iteration + max_iterations
             continue

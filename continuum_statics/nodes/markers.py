@@ -7,11 +7,13 @@ from visualization_msgs.msg import Marker, MarkerArray
 from continuum_statics.nodes.ros_conversions import set_pose
 
 #: Sentinels of :meth:`BackboneMarkers.encode`'s template: the k-th double is the bit pattern
-#: ``_DOUBLE_MARK + k`` (finite, about 2**422), every stamp's sec ``_SEC_MARK``. A 4-aligned
-#: ``_SEC_MARK`` cannot lie inside a double sentinel (its halves are k < 2**24 and 0x5A5A5A00).
-_DOUBLE_MARK = 0x5A5A5A0000000000
+#: ``base + k`` (finite, about 2**422 or 2**438) and every stamp's sec is the base's own mark. A
+#: 4-aligned sec mark cannot lie inside a double sentinel (its halves are k < 2**24 and
+#: 0x5A5A5A00 or 0x5B5B5B00). The template is made twice, with each base: rclpy leaves CDR
+#: padding unset, so a byte pattern met in one serialization alone is leftover memory.
+_DOUBLE_MARKS = (0x5A5A5A0000000000, 0x5B5B5B0000000000)
+_SEC_MARKS = (0x5A5A5A5A, 0x5B5B5B5B)
 _MARK_MASK = 0xFFFFFFFFFF000000
-_SEC_MARK = 0x5A5A5A5A
 
 
 def _color(rgba):
@@ -151,44 +153,64 @@ class BackboneMarkers:
                None if point_sections is None else tuple(int(k) for k in point_sections),
                None if cable_sections is None else tuple(int(k) for k in cable_sections))
         if key != getattr(self, '_template_key', None):
-            self._make_template(frame_id, positions, guide_positions, cable_points,
-                                point_sections, cable_sections)
+            self._template = self._make_template(frame_id, positions, guide_positions,
+                                                 cable_points, point_sections, cable_sections)
             self._template_key = key
-        self._doubles[self._slots] = values[self._sources]
-        self._int32[self._sec] = sec
-        self._uint32[self._sec + 1] = nanosec
-        return bytes(self._buffer)
+        if self._template is None:  # no clean template (never seen): rclpy serializes it
+            from builtin_interfaces.msg import Time
+            from rclpy.serialization import serialize_message
+            from std_msgs.msg import Header
+
+            return serialize_message(self.update(
+                Header(frame_id=frame_id, stamp=Time(sec=int(sec), nanosec=int(nanosec))),
+                positions, quaternions, guide_positions, guide_quaternions, cable_points,
+                point_sections, cable_sections))
+        buffer, doubles, int32, uint32, slots, sources, stamps = self._template
+        doubles[slots] = values[sources]
+        int32[stamps] = sec
+        uint32[stamps + 1] = nanosec
+        return bytes(buffer)
 
     def _make_template(self, frame_id, positions, guide_positions, cable_points, point_sections,
                        cable_sections):
-        """Serialize :meth:`update` of sentinel values and locate every sentinel."""
+        """Serialize :meth:`update` of sentinel values; return where every value goes.
+
+        Returns (buffer, its float64, int32 and uint32 views, the double slots, the value each
+        takes, the stamps' int32 slots), or None when the sentinels are not found exactly once
+        per value (twice for the tip position, which is the tube's last point too) in both
+        serializations.
+        """
         from builtin_interfaces.msg import Time
         from rclpy.serialization import serialize_message
         from std_msgs.msg import Header
 
         sizes = [positions.size, 4, guide_positions.size, 4 * len(guide_positions)] + [
             c.size for c in cable_points]
-        marks = (np.uint64(_DOUBLE_MARK) + np.arange(sum(sizes), dtype=np.uint64)).view('<f8')
-        parts = np.split(marks, np.cumsum(sizes)[:-1])
-        tip_quaternion = np.tile(parts[1], (len(positions), 1))  # only the last one is drawn
-        self.update(Header(frame_id=frame_id, stamp=Time(sec=_SEC_MARK, nanosec=0)),
-                    parts[0].reshape(-1, 3), tip_quaternion, parts[2].reshape(-1, 3),
-                    parts[3].reshape(-1, 4), [p.reshape(-1, 3) for p in parts[4:]],
-                    point_sections, cable_sections)
-        self._buffer = bytearray(serialize_message(self.array))
-        body = memoryview(self._buffer)[4:]  # after the encapsulation header: CDR alignment
-        words = np.frombuffer(body[:len(body) // 8 * 8], dtype='<u8')
-        self._slots = np.flatnonzero(words & np.uint64(_MARK_MASK) == np.uint64(_DOUBLE_MARK))
-        self._sources = (words[self._slots] - np.uint64(_DOUBLE_MARK)).astype(np.intp)
-        self._doubles = np.frombuffer(body[:len(body) // 8 * 8], dtype='<f8')
-        self._int32 = np.frombuffer(body[:len(body) // 4 * 4], dtype='<i4')
-        self._uint32 = np.frombuffer(body[:len(body) // 4 * 4], dtype='<u4')
-        self._sec = np.flatnonzero(self._int32 == _SEC_MARK)
-        # the tip's position is the tube's last point: one value, two places
-        if len(np.unique(self._sources)) != len(marks) or len(self._sec) != len(
-                self.array.markers):
-            raise RuntimeError('marker template: sentinels not found where expected')
-
+        count = sum(sizes)
+        found = []
+        for base, sec_mark in zip(_DOUBLE_MARKS, _SEC_MARKS):
+            marks = (np.uint64(base) + np.arange(count, dtype=np.uint64)).view('<f8')
+            parts = np.split(marks, np.cumsum(sizes)[:-1])
+            tip_quaternion = np.tile(parts[1], (len(positions), 1))  # only the last is drawn
+            self.update(Header(frame_id=frame_id, stamp=Time(sec=sec_mark, nanosec=0)),
+                        parts[0].reshape(-1, 3), tip_quaternion, parts[2].reshape(-1, 3),
+                        parts[3].reshape(-1, 4), [p.reshape(-1, 3) for p in parts[4:]],
+                        point_sections, cable_sections)
+            buffer = bytearray(serialize_message(self.array))
+            body = memoryview(buffer)[4:]  # after the encapsulation header: CDR alignment
+            words = np.frombuffer(body[:len(body) // 8 * 8], dtype='<u8')
+            slots = np.flatnonzero(words & np.uint64(_MARK_MASK) == np.uint64(base))
+            int32 = np.frombuffer(body[:len(body) // 4 * 4], dtype='<i4')
+            found.append((buffer, body, slots, (words[slots] - np.uint64(base)).astype(np.intp),
+                          np.flatnonzero(int32 == sec_mark)))
+        (buffer, body, slots, sources, stamps), other = found
+        if not (np.array_equal(slots, other[2]) and np.array_equal(sources, other[3])
+                and np.array_equal(stamps, other[4]) and len(slots) == count + 3
+                and len(np.unique(sources)) == count and len(stamps) == len(self.array.markers)):
+            return None
+        return (buffer, np.frombuffer(body[:len(body) // 8 * 8], dtype='<f8'),
+                np.frombuffer(body[:len(body) // 4 * 4], dtype='<i4'),
+                np.frombuffer(body[:len(body) // 4 * 4], dtype='<u4'), slots, sources, stamps)
 
 def workspace_markers(frame_id, tips, diameter=0.004):
     """Return a translucent SPHERE_LIST of reachable tip positions (m): RViz click targets."""

@@ -70,8 +70,9 @@ def statics_parameters():
                   'finished at once', 0, 1000),
         ParamSpec('max_model_runs', 24, 'rod integrations (IVPs) a warm-started estimate may '
                   'spend per measurement, ~10-25 us each (0: until it converges): an estimate '
-                  'that needs more is published as the best state reached (capped, counted on '
-                  'diagnostics) and goes on with the next measurement', 0, 100000),
+                  'that needs more (or had to make its Jacobians anew) is published as the best '
+                  'state reached (capped, counted on diagnostics) and goes on with the next '
+                  'measurement', 0, 100000),
         ParamSpec('use_measured_tensions', True, 'estimate with cable_states.effort as cable '
                   'tensions (N) when every one is present, finite, >= 0 and <= max_tension, '
                   'and the shape they give agrees with the lengths within warn_residual '

@@ -114,8 +114,12 @@ class StaticsNode(Node):
         self._cable_states = CableStatesReader(self.cable_names)
         self._lengths = np.empty(len(self.cable_names))
         self._tensions = np.empty(len(self.cable_names))
-        self._shape = None
-        self._shape_is_new = False
+        # (shape, sampler, (sec, nanosec)) of the newest publication, set in one assignment:
+        # the marker timer reads it from another thread; the last one drawn is kept by identity
+        self._latest = self._drawn = None
+        self._marker_timer = None
+        self._marker_period = self._markers_due = math.inf  # s; time.monotonic(), s
+        self._marker_lock = threading.Lock()  # the shape's thread or the timer, never both
         self._load = None  # the newest TipLoad
         self._wrench_expired = False
         self._stamp = None
@@ -151,9 +155,6 @@ class StaticsNode(Node):
             self._intake.start()
         self.create_subscription(WrenchStamped, tip_wrench_topic(self._params),
                                  self._on_tip_wrench, LATEST_SENSOR_QOS)
-        self._marker_timer = None
-        self._marker_period = self._markers_due = math.inf  # s; time.monotonic(), s
-        self._marker_lock = threading.Lock()  # the shape's thread or the timer, never both
         self._set_marker_timer(self._params['marker_rate'])
         self._passive_load = None
         if self._passive:
@@ -178,8 +179,9 @@ class StaticsNode(Node):
         if self._marker_timer is not None:
             self.destroy_timer(self._marker_timer)
             self._marker_timer = None
-        self._marker_period = 1.0 / rate if rate > 0.0 else math.inf
-        self._markers_due = 0.0 if rate > 0.0 else math.inf  # the next shape's are due
+        with self._marker_lock:  # not while a draw is setting the next due time
+            self._marker_period = 1.0 / rate if rate > 0.0 else math.inf
+            self._markers_due = 0.0 if rate > 0.0 else math.inf  # the next shape's are due
         if rate > 0.0:
             self._marker_timer = steady_timer(self, self._marker_period, self._flush_markers)
 
@@ -287,7 +289,7 @@ class StaticsNode(Node):
             publisher.publish(transforms)
         self._stamp = (sec, nanosec)
         self._tip_position = points[-1]
-        self._shape, self._shape_is_new = shape, True
+        self._latest = (shape, sampler, self._stamp)
         if time.monotonic() >= self._markers_due:
             self._publish_markers()
         return True
@@ -307,11 +309,12 @@ class StaticsNode(Node):
             self._marker_lock.release()
 
     def _draw_markers(self):
-        if not self._shape_is_new:
+        latest = self._latest
+        if latest is None or latest is self._drawn:
             return
-        self._shape_is_new = False
+        self._drawn = latest
         self._markers_due = time.monotonic() + self._marker_period
-        shape, sampler = self._shape, self._sampler
+        shape, sampler, stamp = latest
         try:
             guide_points, guide_rotations, cable_points = guide_and_cable_points(
                 shape.s, shape.positions, shape.rotations, self.robot.guides,
@@ -319,7 +322,7 @@ class StaticsNode(Node):
             positions, quaternions = sampler.sample(shape.positions, shape.rotations)
             self._markers.tube_diameter = self._params['tube_diameter']
             markers = self._markers.encode(
-                self.base_frame_id, *self._stamp, positions, quaternions,
+                self.base_frame_id, *stamp, positions, quaternions,
                 guide_points, rotation_to_quaternion(guide_rotations), cable_points,
                 section_of(sampler.s, self._section_ends), self._cable_sections)
         except ValueError as error:
