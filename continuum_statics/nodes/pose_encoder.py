@@ -1,4 +1,6 @@
 """Backbone, tip pose and /tf serialized straight to CDR from a template (no message objects)."""
+import math
+
 import numpy as np
 
 
@@ -14,12 +16,16 @@ class _StampedPoses:
         self._sec = np.array(stamps, dtype=np.intp) // 4
         self._nanosec = self._sec + 1
         self._poses = np.array(doubles, dtype=np.intp).reshape(-1, 1) // 8 + np.arange(7)
+        self._values = np.empty((len(doubles), 7))  # filled per message, checked, then copied
 
     def _fill(self, sec, nanosec, positions, quaternions):
-        values = np.hstack([np.reshape(positions, (-1, 3)), np.reshape(quaternions, (-1, 4))])
-        if values.shape[0] != self._poses.shape[0]:
-            raise ValueError('expected %d poses, got %d' % (self._poses.shape[0], values.shape[0]))
-        if not np.all(np.isfinite(values)):
+        positions, quaternions = np.reshape(positions, (-1, 3)), np.reshape(quaternions, (-1, 4))
+        values = self._values
+        if positions.shape[0] != values.shape[0] or quaternions.shape[0] != values.shape[0]:
+            raise ValueError('expected %d poses, got %d' % (values.shape[0], positions.shape[0]))
+        values[:, :3] = positions
+        values[:, 3:] = quaternions
+        if not math.isfinite(values.sum()):  # NaN and inf both propagate into the sum
             raise ValueError('refusing to publish non-finite poses')
         self._int32[self._sec] = sec
         self._uint32[self._nanosec] = nanosec
