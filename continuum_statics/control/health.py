@@ -73,25 +73,6 @@ class Problems:
         return values
 
 
-class TimingWindow:
-    """Durations (s) collected since the last report: median and max in ms."""
-
-    def __init__(self, capacity=5000):
-        self._samples = deque(maxlen=capacity)
-
-    def add(self, seconds):
-        """Record one duration in seconds."""
-        self._samples.append(seconds)
-
-    def report(self):
-        """Return (count, median ms, max ms) and start a new window; NaN-free (0 when empty)."""
-        samples = np.fromiter(self._samples, dtype=float)
-        self._samples.clear()
-        if samples.size == 0:
-            return 0, 0.0, 0.0
-        return samples.size, float(np.median(samples)) * 1e3, float(samples.max()) * 1e3
-
-
 class RateMeter:
     """Events per second over the interval between two reports."""
 
@@ -132,6 +113,15 @@ class ValueWindow:
         if samples.size == 0:
             return 0, math.nan, math.nan
         return samples.size, float(np.median(samples)), float(samples.max())
+
+
+class TimingWindow(ValueWindow):
+    """Durations (s) collected since the last report: median and max in ms."""
+
+    def report(self):
+        """Return (count, median ms, max ms) and start a new window; NaN-free (0 when empty)."""
+        count, median, largest = super().report()
+        return (count, median * 1e3, largest * 1e3) if count else (0, 0.0, 0.0)
 
 
 def tendon_values(names, tensions, slack):
