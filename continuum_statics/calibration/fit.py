@@ -1,7 +1,8 @@
 """The least-squares fit of a run model: a pattern-rotation scan, then trust-region steps.
 
 ``scipy.optimize.least_squares`` (trust region, bounds) minimises the model's residuals; its
-finite-difference Jacobian columns are replays run on every core (:mod:`.pool`).
+Jacobian comes from the implicit-function theorem on every row's equilibrium
+(:mod:`.sensitivities`), or from one replay per variable run on every core (:mod:`.pool`).
 """
 import math
 import time
@@ -13,10 +14,13 @@ from scipy.optimize import least_squares
 from continuum_statics.calibration.pool import default_workers, fork_pool
 from continuum_statics.calibration.replay import rms
 from continuum_statics.calibration.run_model import RunModel
+from continuum_statics.calibration.sensitivities import point_sensitivities
 
 #: Angles per section and rows of the pattern-rotation scan that starts a fit.
 SCAN_STEPS = 24
 SCAN_ROWS = 250
+#: How a fit's Jacobian is made (:func:`fit`).
+JACOBIANS = ('implicit', 'differences')
 
 _WORKER_MODEL = None  # the model a forked worker evaluates
 
@@ -80,12 +84,16 @@ def scan_rotations(model, x0, log=print, steps=SCAN_STEPS, rows=SCAN_ROWS, worke
     return x
 
 
-def fit(model, log=print, workers=None, max_evaluations=40, x0=None):
+def fit(model, log=print, workers=None, max_evaluations=40, x0=None, jacobian='implicit'):
     """Fit the model's search vector; returns a :class:`FitResult`.
 
     ``x0``: the start (e.g. an earlier fit's values, :meth:`RunModel.start_from`); by default
-    the robot file's values with the pattern rotations scanned.
+    the robot file's values with the pattern rotations scanned. ``jacobian``: ``'implicit'``
+    (:mod:`.sensitivities`, every variable from one pass over the rows) or ``'differences'``
+    (one re-solved replay per variable, each row started from the current replay's).
     """
+    if jacobian not in JACOBIANS:
+        raise ValueError('jacobian %r: one of %s' % (jacobian, ', '.join(JACOBIANS)))
     workers = workers or default_workers()
     low, high = model.bounds()
     if x0 is None:
@@ -98,7 +106,7 @@ def fit(model, log=print, workers=None, max_evaluations=40, x0=None):
 
     def fun(x):
         res = model.residuals(x, update=True)
-        cache.update(x=np.array(x), res=res, starts=model.solutions)
+        cache.update(x=np.array(x), res=res, starts=model.solutions, points=model.replayed)
         count[0] += 1
         n = len(model.run.tips)
         log('  evaluation %d: RMS %.3f mm (%.0f s)' % (
@@ -107,7 +115,11 @@ def fit(model, log=print, workers=None, max_evaluations=40, x0=None):
 
     def jac(x):
         if not np.array_equal(cache.get('x'), x):
-            cache.update(x=np.array(x), res=model.residuals(x), starts=model.solutions)
+            cache.update(x=np.array(x), res=model.residuals(x), starts=model.solutions,
+                         points=model.replayed)
+        if jacobian == 'implicit':
+            return model.jacobian(x, cache['points'], point_sensitivities(
+                model, x, cache['starts'], workers))
         base = cache['res']
         steps = model.vector.steps()
         steps = np.where(x + steps > high, -steps, steps)

@@ -20,6 +20,8 @@ GAUGE_WEIGHT = 1.0
 #: m of cable: a replay's rows converge to this (a node's 1e-9 m would leave a bias of that
 #: size in every Jacobian column started from the base rows: 2 % at a 1e-4 step).
 REPLAY_TOLERANCE = 1e-12
+#: m: the largest point move of a registration column (:meth:`RunModel.jacobian`).
+REGISTRATION_STEP = 1e-6
 
 
 class RunModel:
@@ -38,7 +40,7 @@ class RunModel:
         self.registered = self.vector.registered
         self.blocks = self.vector.blocks
         self.size = self.vector.size
-        self.solutions = None  # of the last replay
+        self.solutions = self.replayed = None  # of the last replay: solutions, points
         self.starts = None  # per-row warm starts of a Jacobian's columns (set by the fit)
         self.rotation = robot.base_rotation.copy()  # tracker <- base, updated by the fit
         self.position = np.array(robot.base_position, dtype=float)
@@ -102,6 +104,7 @@ class RunModel:
         """
         points, failed, self.solutions = replay_solutions(
             self.robot_for(x), self.run if run is None else run, starts)
+        self.replayed = points
         return points, failed
 
     def register(self, points, tips):
@@ -118,6 +121,11 @@ class RunModel:
         """Return registered model minus measured tips (flattened, m) and the gauge rows."""
         run = self.run if run is None else run
         points, _ = self.points(x, run, starts)
+        return self.residuals_of(points, x, update, run)
+
+    def residuals_of(self, points, x, update=False, run=None):
+        """:meth:`residuals` of model points (n, 3; base frame) already replayed at ``x``."""
+        run = self.run if run is None else run
         rotation, position = self.register(points, run.tips)
         if update:
             self.rotation, self.position = rotation, position
@@ -125,6 +133,26 @@ class RunModel:
         errors = np.nan_to_num(errors, nan=FAILED_ROW_ERROR, posinf=FAILED_ROW_ERROR,
                                neginf=-FAILED_ROW_ERROR)
         return np.concatenate([errors.ravel(), self.gauge(x)])
+
+    def jacobian(self, x, points, sensitivities):
+        """Jacobian of :meth:`residuals` from the points' sensitivities (rows, 3, variables).
+
+        The registration (closed form) follows the points: each column is a central difference
+        of :meth:`residuals_of` along the sensitivity, moving no point by more than
+        :data:`REGISTRATION_STEP`.
+        """
+        points = np.array(points, dtype=float)
+        columns = []
+        for j in range(self.size):
+            direction = np.nan_to_num(sensitivities[:, :, j])
+            largest = float(np.max(np.abs(direction), initial=0.0))
+            step = REGISTRATION_STEP / largest if largest > 0.0 else 1e-6
+            unit = np.zeros(self.size)
+            unit[j] = step
+            columns.append((self.residuals_of(points + step * direction, x + unit)
+                            - self.residuals_of(points - step * direction, x - unit))
+                           / (2.0 * step))
+        return np.stack(columns, axis=1) if columns else np.zeros((3 * len(points), 0))
 
     def errors(self, x, run):
         """Return registered model minus measured tips (n, 3) of ``run`` and its failed rows.

@@ -30,13 +30,14 @@ def read_run(path, robot, column_map, tip_topic='tip_pose_measured'):
 
 def calibrate_run(robot_file, data_file, fit_names, column_map, output=None, validate=None,
                   tip_topic='tip_pose_measured', log=print, max_evaluations=40, report=False,
-                  workers=None, candidates=()):
+                  workers=None, candidates=(), jacobian='implicit'):
     """Fit a robot file to a recorded run; write ``output``; return the summary (SI units).
 
     :param validate: a held-out run: its errors are reported, never fitted
     :param report: add the error budget (:mod:`.error_budget`) as ``error_budget``
     :param candidates: fit names to try on top of ``fit_names``: each is kept when it lowers the
         error cross-validated inside the run (:mod:`.selection`, summary ``selection``)
+    :param jacobian: how the fit's Jacobian is made (:data:`fit.JACOBIANS`)
 
     A fit of more names than the default ones starts where a fit of its default names ends.
     :raises ValueError: unreadable files, unknown parameters, missing columns
@@ -64,8 +65,8 @@ def calibrate_run(robot_file, data_file, fit_names, column_map, output=None, val
         log('calibrate: first %s, then all %d names from there' % (' '.join(staged),
                                                                    len(fit_names)))
         base = RunModel(robot, staged, run, shear_fixed)
-        start = (base, fit_model(base, log, workers=workers,
-                                 max_evaluations=max_evaluations).x)
+        start = (base, fit_model(base, log, workers=workers, max_evaluations=max_evaluations,
+                                 jacobian=jacobian).x)
     model = RunModel(robot, fit_names, run, shear_fixed)
     if 3 * len(run.tips) < model.size:
         raise ValueError('%d rows cannot determine %d parameters' % (len(run.tips), model.size))
@@ -74,7 +75,8 @@ def calibrate_run(robot_file, data_file, fit_names, column_map, output=None, val
         % (len(run.tips), data_file, model.size, ', '.join(model.fit),
            error_statistics(before)['rms'] * 1e3))
     result = fit_model(model, log, workers=workers, max_evaluations=max_evaluations,
-                       x0=None if start is None else model.start_from(*start))
+                       x0=None if start is None else model.start_from(*start),
+                       jacobian=jacobian)
     x = result.x
     errors, failed = model.errors(x, run)
     fitted = summaries.fitted_values(model.vector, x, result.jacobian, result.residuals,

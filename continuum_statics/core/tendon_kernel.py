@@ -40,11 +40,13 @@ def path_stretch(states, guide_nodes, cable_last_guide, hole_offsets, base_axis,
             if g > 0:
                 d0, d1, d2 = hole[0] - previous[0], hole[1] - previous[1], hole[2] - previous[2]
                 span = math.sqrt(d0 * d0 + d1 * d1 + d2 * d2)
-                d0, d1, d2 = d0 / span, d1 / span, d2 / span
-                cosine = direction[0] * d0 + direction[1] * d1 + direction[2] * d2
-                wraps[g - 1] = math.acos(min(1.0, max(-1.0, cosine)))  # at hole g - 1
                 spans[g - 1] = span
-                direction[0], direction[1], direction[2] = d0, d1, d2
+                wraps[g - 1] = 0.0
+                if span > 0.0:  # holes that meet (a shape folded onto itself) turn nothing
+                    d0, d1, d2 = d0 / span, d1 / span, d2 / span
+                    cosine = direction[0] * d0 + direction[1] * d1 + direction[2] * d2
+                    wraps[g - 1] = math.acos(min(1.0, max(-1.0, cosine)))  # at hole g - 1
+                    direction[0], direction[1], direction[2] = d0, d1, d2
             for i in range(3):
                 previous[i] = hole[i]
         # span i runs from hole i to hole i + 1; the wraps beyond it are at holes i + 1 .. last-1

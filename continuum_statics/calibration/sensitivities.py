@@ -1,0 +1,176 @@
+"""Exact tip sensitivities of a replay: the implicit-function theorem on each row's equilibrium.
+
+A converged row of :func:`replay.replay_solutions` solves ``solve_lengths``' equations
+E(z, p) = 0 (:mod:`continuum_statics.core.length_statics`): the tip moment balance (3 rows) and,
+per taut cable, its gap Lf - consumed = 0; a slack cable's end tension is 0 whatever p. The
+unknowns z are u(0) and the taut cables' end tensions, p the fit's variables. With E_z
+invertible (the Jacobian every Newton step of the row already uses),
+
+    dz/dp = -E_z^-1 E_p,        dP/dp = P_p + P_z dz/dp,
+
+where P is the row's marker point (tip position + tip rotation times ``tip_marker``). The partial
+derivatives are taken at the row's solution by central differences of the model with z held
+(one IVP each, no re-solve): they carry no solver tolerance, so the result agrees with whole
+re-solved replays to their own convergence floor, and a column costs two IVPs per row where a
+finite-difference replay costs a chord solve per row.
+
+Memory: friction follows each cable's direction of motion, a sign carried from row to row. The
+sign is discrete, so the chain of warm starts carries no derivative: each row's is taken with
+its signs held (a parameter step that flips a sign is a kink no derivative describes).
+"""
+import numpy as np
+
+from continuum_statics.calibration.pool import fork_pool
+from continuum_statics.core.layout import POSITION, ROTATION
+from continuum_statics.core.length_statics import _constants, _warm_z
+from continuum_statics.core.length_tracking import _evaluate
+from continuum_statics.core.tendon_kernel import path_stretch
+
+#: Central-difference step of u(0) (times 1/L) and of an end tension (times E I / (L r)).
+STATE_STEP = 1e-5
+#: Step of each variable relative to its finite-difference replay step
+#: (:data:`parameters.DIFFERENCE_STEPS`): z is held, so no solver tolerance limits it.
+PARAMETER_STEP_FRACTION = 0.1
+_NO_LOAD = np.zeros(3)
+
+_JOB = None  # what a forked worker differentiates: (base, variants, stencils, lengths, rows)
+
+
+class RowModel:
+    """One robot's model of a row at fixed z (compiled: one IVP and the cables' stretch).
+
+    :param robot: a candidate robot
+    :param rod: a robot whose rod and holes are the same (its IVP may be reused), or None
+    """
+
+    def __init__(self, robot, rod=None):
+        self.robot = robot
+        self.args = robot.kernel_args(_NO_LOAD, _NO_LOAD)
+        (_, self.compliance, self.base_axis, self.radius, self.t_ref, self.kappa, _, _,
+         self.moment_map, self.friction) = _constants(robot)
+        self.marker = np.asarray(robot.tip_marker, dtype=float)
+        self.same_rod = rod is not None and _same_rod(robot, rod)
+
+    def free(self, lengths):
+        """Free lengths (m) of motor-side ``lengths``."""
+        return self.robot.tendons.free_lengths(lengths, self.robot.straight_cable_lengths)
+
+    def at(self, z, lengths, motion):
+        """Return (balance (3,), gap (n,) m, marker point (3,) m, node states) at z."""
+        args = self.args
+        residual, _, _, states, _, gap, _, _, _ = _evaluate(
+            *args[:6], *args[7:], z, self.moment_map, self.free(lengths),
+            self.friction * motion, self.compliance, self.base_axis, self.kappa, self.radius)
+        return residual[:3], gap, self._point(states), states
+
+    def on(self, states, balance, z, lengths, motion):
+        """:meth:`at` on another robot's IVP at z (``same_rod``): only the cables' stretch."""
+        n = z.size - 3
+        consumed, motor, mean = np.empty(n), np.empty(n), np.empty(n)
+        path_stretch(states, self.robot.guide_nodes, self.robot.cable_last_guide,
+                     self.robot.hole_offsets, self.base_axis, np.ascontiguousarray(z[3:]),
+                     self.friction * motion, self.compliance, consumed, motor, mean)
+        return balance, self.free(lengths) - consumed, self._point(states), states
+
+    def _point(self, states):
+        return states[-1, POSITION] + states[-1, ROTATION].reshape(3, 3) @ self.marker
+
+
+def _same_rod(a, b):
+    """Whether robots a and b integrate the same IVP at every z (only tendons or marker differ)."""
+    return (a.model_code == b.model_code and a.bending_step() == b.bending_step()
+            and np.array_equal(a.s_grid, b.s_grid) and np.array_equal(a.params, b.params)
+            and all(np.array_equal(p, q) for p, q in zip(a.arrays, b.arrays)))
+
+
+def stencil(x, step, low, high):
+    """Points and weights of a second-order first derivative of variable x within its bounds.
+
+    Central where x +- step stays inside [low, high], else one-sided (three points).
+    :returns: (offsets, weights): d f / dx ~ sum(w f(x + o)) / step
+    """
+    if x - step >= low and x + step <= high:
+        return (-step, step), (-0.5, 0.5)
+    sign = 1.0 if x + 2.0 * step <= high else -1.0
+    return (0.0, sign * step, 2.0 * sign * step), (-1.5 * sign, 2.0 * sign, -0.5 * sign)
+
+
+def row_sensitivities(base, variants, stencils, lengths, solution):
+    """Return d marker point / d variable (3, m) of one row at its solution (no tip load).
+
+    :param base: the :class:`RowModel` of the robot the row was solved with
+    :param variants: per variable, the :class:`RowModel` of each of its stencil's offsets
+    :param stencils: per variable, (offsets, weights, step) of :func:`stencil`
+    """
+    robot = base.robot
+    z = _warm_z(robot, solution)
+    if solution.model_at is not None and solution.model_at.z.shape == z.shape:
+        z = solution.model_at.z.copy()  # the z the model was integrated at
+    motion = solution.motion
+    taut = np.flatnonzero(~solution.slack)
+    free_z = np.concatenate([np.arange(3), 3 + taut])
+    n_eq = free_z.size
+    balance, _, _, states = base.at(z, lengths, motion)
+    e_z, p_z = np.empty((n_eq, n_eq)), np.empty((3, n_eq))
+    for k, index in enumerate(free_z):
+        step = STATE_STEP * (1.0 / robot.length if index < 3 else base.t_ref)
+        sides = []
+        for sign in (1.0, -1.0):
+            trial = z.copy()
+            trial[index] += sign * step
+            b, gap, point, _ = base.at(trial, lengths, motion)
+            sides.append((np.concatenate([b, gap[taut]]), point))
+        e_z[:, k] = (sides[0][0] - sides[1][0]) / (2.0 * step)
+        p_z[:, k] = (sides[0][1] - sides[1][1]) / (2.0 * step)
+    m = len(variants)
+    e_p, p_p = np.zeros((n_eq, m)), np.zeros((3, m))
+    for j, (models, (_, weights, step)) in enumerate(zip(variants, stencils)):
+        for model, weight in zip(models, weights):
+            b, gap, point, _ = (model.on(states, balance, z, lengths, motion) if model.same_rod
+                                else model.at(z, lengths, motion))
+            e_p[:, j] += weight / step * np.concatenate([b, gap[taut]])
+            p_p[:, j] += weight / step * point
+    dz = -np.linalg.lstsq(e_z, e_p, rcond=1e-12)[0]
+    return p_p + p_z @ dz
+
+
+def point_sensitivities(model, x, solutions, workers=1):
+    """Return d marker point / d variable (rows, 3, m), base frame, of ``model`` at ``x``.
+
+    :param model: a :class:`run_model.RunModel`
+    :param solutions: its replay's row solutions at ``x`` (:attr:`RunModel.solutions`); rows
+        without one (the solve raised) get zeros
+    :param workers: forked processes sharing the rows
+    """
+    global _JOB
+    low, high = model.bounds()
+    steps = model.vector.steps() * PARAMETER_STEP_FRACTION
+    robot = model.robot_for(x)
+    base = RowModel(robot)
+    stencils, variants = [], []
+    for j in range(model.size):
+        offsets, weights = stencil(x[j], steps[j], low[j], high[j])
+        stencils.append((offsets, weights, steps[j]))
+        models = []
+        for offset in offsets:
+            trial = np.array(x, dtype=float)
+            trial[j] += offset
+            models.append(RowModel(model.robot_for(trial), robot))
+        variants.append(models)
+    rows = [i for i, solution in enumerate(solutions) if solution is not None]
+    _JOB = (base, variants, stencils, model.run.lengths, solutions)
+    try:
+        with fork_pool(workers) as pool:
+            parts = list(pool.map(_rows, np.array_split(rows, max(1, min(workers, len(rows))))))
+    finally:
+        _JOB = None
+    out = np.zeros((len(solutions), 3, model.size))
+    if rows:
+        out[rows] = np.concatenate(parts)
+    return out
+
+
+def _rows(indices):
+    base, variants, stencils, lengths, solutions = _JOB
+    return np.array([row_sensitivities(base, variants, stencils, lengths[i], solutions[i])
+                     for i in indices]).reshape(len(indices), 3, len(variants))

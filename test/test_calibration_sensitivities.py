@@ -1,0 +1,125 @@
+"""Exact tip sensitivities (implicit-function theorem) against re-solved replays.
+
+The reference re-solves every row of the run at parameters moved both ways (each row started
+from the base replay's solution of it, friction directions held, converged to 1e-12 m of
+cable), Richardson-extrapolated central differences of two steps: no part of it uses the
+sensitivities' linearisation. Both cable models, every physical fit name, friction inside its
+range (0.08) so the central differences do not meet its bound.
+"""
+import dataclasses
+
+import numpy as np
+import pytest
+from test_run_calibration import V6, pulls, truth_robot
+
+from continuum_statics import load_robot
+from continuum_statics.calibration.fit import fit
+from continuum_statics.calibration.recorded_run import RecordedRun
+from continuum_statics.calibration.replay import replay
+from continuum_statics.calibration.run_model import RunModel
+from continuum_statics.calibration.sensitivities import point_sensitivities, stencil
+
+#: Every physical fit name (cable_stiffness replaces stiffness: a case of its own).
+NAMES = ['section_rotation', 'cable_angle', 'cable_zero', 'stiffness', 'pretension', 'friction',
+         'youngs_modulus', 'density', 'gravity', 'tip_marker', 'section_length',
+         'section_bending', 'disk_mass']
+#: Reference steps, in finite-difference replay steps (DIFFERENCE_STEPS): large where the model
+#: is smooth, so the replays' convergence floor adds little; small for the names that move the
+#: point where a cable goes slack or taut (a kink within +-10 steps on some rows: cable_zero
+#: at 30 steps reads 1e-2 wrong, section_length and disk_mass at 10 steps 0.2 and 1e-2).
+#: Friction: 0.08 +- 0.01 stays inside [0, 1].
+REFERENCE_STEP_FACTOR = 30.0
+KINKED = {'cable_zero': 10.0, 'pretension': 10.0, 'section_length': 0.1, 'disk_mass': 0.1}
+
+
+def robot_with(cable_model):
+    """Return the truth robot of test_run_calibration with weak gravity and disk masses."""
+    robot = truth_robot(load_robot(V6))
+    sections = tuple(dataclasses.replace(s, disk_mass=5e-4) for s in robot.description.sections)
+    return robot.__class__(dataclasses.replace(
+        robot.description, cable_model=cable_model, gravity=np.array([0.0, -1.0, 0.0]),
+        sections=sections))
+
+
+def run_for(robot):
+    lengths = pulls(robot, steps=2)
+    run = RecordedRun(times=np.arange(len(lengths), dtype=float), labels=('',) * len(lengths),
+                      lengths=lengths, tips=np.zeros((len(lengths), 3)), source='synthetic')
+    points, failed = replay(robot, run)
+    assert not failed.any()
+    return dataclasses.replace(run, tips=points + 1e-3)
+
+
+def reference(model, x, solutions):
+    """D point / d variable (rows, 3, m) from re-solved replays (Richardson, central)."""
+    steps = model.vector.steps() * REFERENCE_STEP_FACTOR
+    names = np.concatenate([[b.name] * b.start.size for b in model.blocks])
+    steps[names == 'friction'] = 1e-2
+    for name, factor in KINKED.items():
+        steps[names == name] *= factor / REFERENCE_STEP_FACTOR
+    out = np.empty((len(model.run.tips), 3, model.size))
+    for j in range(model.size):
+        central = []
+        for h in (steps[j], steps[j] / 2.0):
+            sides = []
+            for sign in (1.0, -1.0):
+                trial = x.copy()
+                trial[j] += sign * h
+                sides.append(model.points(trial, starts=solutions)[0])
+            central.append((sides[0] - sides[1]) / (2.0 * h))
+        out[:, :, j] = (4.0 * central[1] - central[0]) / 3.0
+    return out, names
+
+
+@pytest.mark.parametrize('cable_model, names', [
+    ('point_moment', NAMES), ('distributed', NAMES), ('distributed', ['cable_stiffness'])])
+def test_sensitivities_equal_re_solved_replays(cable_model, names):
+    robot = robot_with(cable_model)
+    model = RunModel(robot, names, run_for(robot))
+    x = model.start()
+    model.points(x)
+    solutions = model.solutions
+    exact = point_sensitivities(model, x, solutions, workers=2)
+    expected, names = reference(model, x, solutions)
+    for j in range(model.size):
+        size = np.linalg.norm(expected[:, :, j])
+        assert size > 0.0, names[j]
+        assert np.linalg.norm(exact[:, :, j] - expected[:, :, j]) <= 1e-5 * size, names[j]
+
+
+def test_a_row_without_a_solution_has_no_sensitivity():
+    robot = robot_with('point_moment')
+    model = RunModel(robot, ['cable_zero'], run_for(robot))
+    x = model.start()
+    model.points(x)
+    full = point_sensitivities(model, x, model.solutions)
+    solutions = list(model.solutions)
+    solutions[3] = None  # its solve raised
+    exact = point_sensitivities(model, x, solutions, workers=2)
+    assert np.any(full[3] != 0.0) and np.all(exact[3] == 0.0)
+    assert np.array_equal(np.delete(exact, 3, axis=0), np.delete(full, 3, axis=0))
+
+
+def test_stencils_stay_inside_the_bounds():
+    assert stencil(0.5, 0.1, 0.0, 1.0) == ((-0.1, 0.1), (-0.5, 0.5))
+    offsets, weights = stencil(0.0, 0.1, 0.0, 1.0)  # friction found to be none
+    assert min(offsets) == 0.0 and sum(weights) == 0.0
+    assert sum(w * o for w, o in zip(weights, offsets)) == pytest.approx(0.1)  # d x / d x = 1
+    offsets, weights = stencil(1.0, 0.1, 0.0, 1.0)
+    assert max(offsets) == 0.0 and sum(w * o for w, o in zip(weights, offsets)) == \
+        pytest.approx(0.1)
+
+
+def test_a_fit_on_exact_jacobians_ends_where_the_finite_difference_fit_does():
+    """The synthetic run's zero offsets and stiffness (test_run_calibration's truth)."""
+    truth = robot_with('point_moment')
+    run = run_for(truth)
+    run = dataclasses.replace(run, tips=run.tips - 1e-3)
+    nominal = load_robot(V6)
+    ends = {}
+    for jacobian in ('implicit', 'differences'):
+        model = RunModel(nominal, ['cable_zero', 'stiffness', 'friction'], run)
+        result = fit(model, log=lambda line: None, workers=2, jacobian=jacobian)
+        ends[jacobian] = model.errors(result.x, run)[0]
+    assert np.sqrt(np.mean(np.sum(ends['implicit'] ** 2, axis=1))) == pytest.approx(
+        np.sqrt(np.mean(np.sum(ends['differences'] ** 2, axis=1))), abs=1e-4)
