@@ -2,9 +2,13 @@
 
 The reference re-solves every row of the run at parameters moved both ways (each row started
 from the base replay's solution of it, friction directions held, converged to 1e-12 m of
-cable), Richardson-extrapolated central differences of two steps: no part of it uses the
-sensitivities' linearisation. Both cable models, every physical fit name, friction inside its
-range (0.08) so the central differences do not meet its bound.
+cable and a tip balance of 1e-12), Richardson-extrapolated central differences of two steps:
+no part of it uses the sensitivities' linearisation. Both cable models, every physical fit
+name, friction inside its range (0.08) so the central differences do not meet its bound.
+
+Agreement: 1e-5 of each column, plus what the reference cannot resolve: re-solved points
+carry up to :data:`REPLAY_FLOOR` of solver noise, which a step h turns into FLOOR / h per row
+(the columns a run barely sees: extension and shear without a tip load).
 """
 import dataclasses
 
@@ -18,17 +22,21 @@ from continuum_statics.calibration.recorded_run import RecordedRun
 from continuum_statics.calibration.replay import replay
 from continuum_statics.calibration.run_model import RunModel
 from continuum_statics.calibration.sensitivities import point_sensitivities, stencil
+from continuum_statics.core import length_statics
 
 #: Every physical fit name (cable_stiffness replaces stiffness: a case of its own).
 NAMES = ['section_rotation', 'cable_angle', 'cable_zero', 'stiffness', 'pretension', 'friction',
          'youngs_modulus', 'density', 'gravity', 'tip_marker', 'section_length',
-         'section_bending', 'disk_mass']
+         'section_bending', 'disk_mass', 'extension_shear']
 #: Reference steps, in finite-difference replay steps (DIFFERENCE_STEPS): large where the model
 #: is smooth, so the replays' convergence floor adds little; small for the names that move the
 #: point where a cable goes slack or taut (a kink within +-10 steps on some rows: cable_zero
 #: at 30 steps reads 1e-2 wrong, section_length and disk_mass at 10 steps 0.2 and 1e-2).
 #: Friction: 0.08 +- 0.01 stays inside [0, 1].
 REFERENCE_STEP_FACTOR = 30.0
+#: m: largest difference of a replay's points started from two different warm starts (measured
+#: 2.2e-11 and 1.8e-11 on the two robots here).
+REPLAY_FLOOR = 3e-11
 KINKED = {'cable_zero': 10.0, 'pretension': 10.0, 'section_length': 0.1, 'disk_mass': 0.1}
 
 
@@ -68,23 +76,30 @@ def reference(model, x, solutions):
                 sides.append(model.points(trial, starts=solutions)[0])
             central.append((sides[0] - sides[1]) / (2.0 * h))
         out[:, :, j] = (4.0 * central[1] - central[0]) / 3.0
-    return out, names
+    return out, names, steps
 
 
 @pytest.mark.parametrize('cable_model, names', [
     ('point_moment', NAMES), ('distributed', NAMES), ('distributed', ['cable_stiffness'])])
-def test_sensitivities_equal_re_solved_replays(cable_model, names):
+def test_sensitivities_equal_re_solved_replays(cable_model, names, monkeypatch):
+    monkeypatch.setattr(length_statics, 'BALANCE_TOLERANCE', 1e-12)
     robot = robot_with(cable_model)
     model = RunModel(robot, names, run_for(robot))
     x = model.start()
     model.points(x)
     solutions = model.solutions
     exact = point_sensitivities(model, x, solutions, workers=2)
-    expected, names = reference(model, x, solutions)
+    expected, names, steps = reference(model, x, solutions)
+    rows = len(solutions)
     for j in range(model.size):
         size = np.linalg.norm(expected[:, :, j])
         assert size > 0.0, names[j]
-        assert np.linalg.norm(exact[:, :, j] - expected[:, :, j]) <= 1e-5 * size, names[j]
+        floor = 2.0 * np.sqrt(3 * rows) * REPLAY_FLOOR / steps[j]
+        assert np.linalg.norm(exact[:, :, j] - expected[:, :, j]) <= 1e-5 * size + floor, \
+            names[j]
+        # where the reference resolves a column, the bound alone
+        if size > 1e3 * floor:
+            assert np.linalg.norm(exact[:, :, j] - expected[:, :, j]) <= 1e-5 * size
 
 
 def test_a_row_without_a_solution_has_no_sensitivity():

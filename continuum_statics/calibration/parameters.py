@@ -22,6 +22,7 @@ name                   kinds       variables
 ``section_length``     run         log factor per section on its length (guides scale with it)
 ``section_bending``    run         log of each section's ``bending_scale`` (factor on E I, G J)
 ``disk_mass``          run         kg per section: the mass of each of its guide disks
+``extension_shear``    run         log factors on the backbone's E A and G A (axial, shear)
 ``youngs_modulus``     both        log factor on E (G follows, see :func:`scaled_rod`)
 ``density``            both        log factor on the density
 ``gravity``            run         m/s^2 in the tracker frame (|g| goes into the density)
@@ -42,7 +43,7 @@ from continuum_statics.core.tendons import Tendons
 RUN_PARAMETERS = ('registration', 'base_position', 'section_rotation', 'cable_angle',
                   'cable_zero', 'stiffness', 'pretension', 'friction', 'youngs_modulus',
                   'density', 'gravity', 'tip_marker', 'cable_stiffness', 'section_length',
-                  'section_bending', 'disk_mass')
+                  'section_bending', 'disk_mass', 'extension_shear')
 TIP_LOAD_PARAMETERS = ('youngs_modulus', 'density', 'base_roll', 'base_pitch', 'base_yaw',
                        'cable_offset_scale')
 DEFAULT_FIT = ('registration', 'section_rotation', 'cable_angle', 'cable_zero', 'stiffness',
@@ -60,6 +61,9 @@ DISK_MASS_BOUND = 0.05
 #: Start of a disk mass the file does not give (kg): least_squares scales its first trust
 #: region by the start (x_scale='jac'), and a start on the bound (0) would make it vanish.
 DISK_MASS_START = 1e-4
+#: Bounds of the log factors on E A and G A (a spring or slotted-tube backbone is 1000 times
+#: softer in extension and shear than the solid rod of its diameter).
+RIGIDITY_BOUND = 7.0
 #: Bounds of a section length's log factor (+-20 %: a wrong section length is a few mm).
 SECTION_LENGTH_BOUND = 0.2
 #: Finite-difference step of each name's variables (optimiser units): large enough that the
@@ -69,17 +73,17 @@ SECTION_LENGTH_BOUND = 0.2
 DIFFERENCE_STEPS = {'section_rotation': 1e-4, 'cable_angle': 1e-4, 'cable_zero': 1e-6,
                     'stiffness': 1e-4, 'cable_stiffness': 1e-4, 'pretension': 1e-3,
                     'friction': 1e-2, 'section_length': 1e-4, 'section_bending': 1e-4,
-                    'disk_mass': 1e-5,
+                    'disk_mass': 1e-5, 'extension_shear': 1e-4,
                     'youngs_modulus': 1e-4,
                     'density': 1e-4, 'gravity': 1e-3, 'tip_marker': 1e-6, 'base_roll': 1e-3,
                     'base_pitch': 1e-3, 'base_yaw': 1e-3, 'cable_offset_scale': 1e-4}
 #: Blocks whose variables are logarithms of their values.
 LOG_VARIABLES = ('stiffness', 'cable_stiffness', 'youngs_modulus', 'density', 'section_length',
-                 'section_bending')
+                 'section_bending', 'extension_shear')
 #: Units of each name's values (after :meth:`SearchVector.values`).
 UNITS = {'section_rotation': 'rad', 'cable_angle': 'rad', 'cable_zero': 'm', 'stiffness': 'N',
          'cable_stiffness': 'N', 'pretension': 'N', 'friction': '1', 'section_length': 'm',
-         'section_bending': '1', 'disk_mass': 'kg',
+         'section_bending': '1', 'disk_mass': 'kg', 'extension_shear': 'N',
          'youngs_modulus': 'Pa', 'density': 'kg/m^3', 'gravity': 'm/s^2', 'tip_marker': 'm',
          'base_roll': 'deg', 'base_pitch': 'deg', 'base_yaw': 'deg', 'cable_offset_scale': '1'}
 
@@ -152,6 +156,7 @@ class SearchVector:
                                 np.log(BENDING_SCALE_RANGE[0]), np.log(BENDING_SCALE_RANGE[1])),
             'disk_mass': (np.maximum([s.disk_mass for s in robot.sections], DISK_MASS_START),
                           0.0, DISK_MASS_BOUND),
+            'extension_shear': (np.zeros(2), -RIGIDITY_BOUND, RIGIDITY_BOUND),
             'youngs_modulus': log,
             'density': log,
             'gravity': (np.array(robot.gravity, dtype=float), -100.0, 100.0),
@@ -208,6 +213,8 @@ class SearchVector:
                 v = rod.density * np.exp(v)
             elif block.name == 'section_length':
                 v = section_lengths(self.robot) * np.exp(v)
+            elif block.name == 'extension_shear':  # [E A, G A] (N)
+                v = self.robot.rod.shear_stiffness[[2, 0]] * np.exp(v)
             out[block.name] = v
         return out
 
@@ -272,6 +279,9 @@ def candidate_robot(robot, values, registered=False, shear_fixed=False):
     if 'youngs_modulus' in values or 'density' in values:
         rod = scaled_rod(rod, _scalar(values.get('youngs_modulus'), rod.youngs_modulus),
                          _scalar(values.get('density'), rod.density), shear_fixed)
+    if 'extension_shear' in values:  # after E: fitted rigidities stay what the run shows
+        rod = dataclasses.replace(rod, axial_rigidity=float(values['extension_shear'][0]),
+                                  shear_rigidity=float(values['extension_shear'][1]))
     if 'section_length' in values:
         if description.cable_routes:
             raise ValueError('section_length is not fitted on a robot with offsets or helix '
@@ -307,7 +317,8 @@ def scaled_rod(rod, youngs_modulus, density, shear_fixed=False):
     """Return the rod with a new E and density: the one rule for G when E is fitted.
 
     G follows E (Poisson's ratio kept) unless the robot file gives ``shear_modulus``
-    (``shear_fixed``), which then stays as measured.
+    (``shear_fixed``), which then stays as measured; so do given ``axial_rigidity`` and
+    ``shear_rigidity``.
     """
     shear = rod.shear_modulus if shear_fixed else (
         rod.shear_modulus * youngs_modulus / rod.youngs_modulus)

@@ -34,6 +34,9 @@ def write_robot_file(output, robot_file, robot, fit, header):
                            density=_number(rod.density))
     if 'shear_modulus' in document['rod']:
         document['rod']['shear_modulus'] = _number(rod.shear_modulus)
+    if 'extension_shear' in fit:
+        document['rod']['axial_rigidity'] = _number(rod.axial_rigidity)
+        document['rod']['shear_rigidity'] = _number(rod.shear_rigidity)
     holders = document.get('sections') or [document]
     if 'section_length' in fit:
         document['rod']['length'] = _number(rod.length, 9)

@@ -22,6 +22,8 @@ GAUGE_WEIGHT = 1.0
 REPLAY_TOLERANCE = 1e-12
 #: m: the largest point move of a registration column (:meth:`RunModel.jacobian`).
 REGISTRATION_STEP = 1e-6
+#: Variable step of a gauge row's derivative (the rows are linear in the angles and offsets).
+GAUGE_STEP = 1e-6
 
 
 class RunModel:
@@ -138,21 +140,23 @@ class RunModel:
         """Jacobian of :meth:`residuals` from the points' sensitivities (rows, 3, variables).
 
         The registration (closed form) follows the points: each column is a central difference
-        of :meth:`residuals_of` along the sensitivity, moving no point by more than
-        :data:`REGISTRATION_STEP`.
+        of the registered errors along the sensitivity, moving no point by more than
+        :data:`REGISTRATION_STEP`; the gauge rows are linear in the variables they hold.
         """
         points = np.array(points, dtype=float)
+        n = 3 * len(points)
         columns = []
         for j in range(self.size):
             direction = np.nan_to_num(sensitivities[:, :, j])
             largest = float(np.max(np.abs(direction), initial=0.0))
-            step = REGISTRATION_STEP / largest if largest > 0.0 else 1e-6
+            step = REGISTRATION_STEP / largest if largest > 0.0 else 1.0
+            column = (self.residuals_of(points + step * direction, x)
+                      - self.residuals_of(points - step * direction, x))[:n] / (2.0 * step)
             unit = np.zeros(self.size)
-            unit[j] = step
-            columns.append((self.residuals_of(points + step * direction, x + unit)
-                            - self.residuals_of(points - step * direction, x - unit))
-                           / (2.0 * step))
-        return np.stack(columns, axis=1) if columns else np.zeros((3 * len(points), 0))
+            unit[j] = GAUGE_STEP
+            gauge = (self.gauge(x + unit) - self.gauge(x - unit)) / (2.0 * GAUGE_STEP)
+            columns.append(np.concatenate([column, gauge]))
+        return np.stack(columns, axis=1) if columns else np.zeros((n, 0))
 
     def errors(self, x, run):
         """Return registered model minus measured tips (n, 3) of ``run`` and its failed rows.

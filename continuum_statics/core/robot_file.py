@@ -29,6 +29,9 @@ class Rod:
     :ivar shear_modulus: G (Pa); G = E / (2 (1 + nu)) when given as Poisson's ratio (the paper's
         text writes E / (1 + nu), an erratum: its number, 20.8 GPa, is E / (2 (1 + nu)))
     :ivar density: rho (kg/m^3)
+    :ivar axial_rigidity: EA (N) when measured or fitted (a backbone that is not a solid rod:
+        a spring, a tube with slots, disks that slide); None: E A of the solid section
+    :ivar shear_rigidity: G A (N) likewise; None: G A of the solid section
     """
 
     length: float
@@ -36,6 +39,8 @@ class Rod:
     youngs_modulus: float
     shear_modulus: float
     density: float
+    axial_rigidity: float = None
+    shear_rigidity: float = None
 
     @property
     def area(self):
@@ -60,9 +65,11 @@ class Rod:
 
     @property
     def shear_stiffness(self):
-        """Diagonal of D = diag(G A, G A, E A) (N), eq. 6."""
-        ga = self.shear_modulus * self.area
-        return np.array([ga, ga, self.youngs_modulus * self.area])
+        """Diagonal of D = diag(G A, G A, E A) (N), eq. 6 (the rigidities where given)."""
+        ga = self.shear_modulus * self.area if self.shear_rigidity is None else self.shear_rigidity
+        ea = (self.youngs_modulus * self.area if self.axial_rigidity is None
+              else self.axial_rigidity)
+        return np.array([ga, ga, ea])
 
     @property
     def mass_per_length(self):
@@ -149,7 +156,8 @@ class RobotDescription:
                      for route, offset in zip(routes, self.cable_offsets))
 
 
-_ROD_KEYS = {'length', 'diameter', 'youngs_modulus', 'poisson_ratio', 'shear_modulus', 'density'}
+_ROD_KEYS = {'length', 'diameter', 'youngs_modulus', 'poisson_ratio', 'shear_modulus', 'density',
+             'axial_rigidity', 'shear_rigidity'}
 _BASE_KEYS = {'frame_id', 'position', 'orientation'}
 _ROUTE_KEYS = ('offset', 'offsets', 'helix')
 _CABLE_KEYS = {'name', *_ROUTE_KEYS, 'length_limits', 'zero_offset', *TENDON_KEYS}
@@ -241,7 +249,9 @@ def _parse_rod(data):
         shear = youngs / (2.0 * (1.0 + nu))
     else:
         raise ValueError('missing key rod.poisson_ratio (or rod.shear_modulus)')
-    return Rod(length, diameter, youngs, shear, density)
+    rigidities = {key: _positive(rod[key], 'rod.' + key)
+                  for key in ('axial_rigidity', 'shear_rigidity') if key in rod}
+    return Rod(length, diameter, youngs, shear, density, **rigidities)
 
 
 def _parse_base(data):
