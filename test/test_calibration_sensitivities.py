@@ -31,22 +31,26 @@ NAMES = ['section_rotation', 'cable_angle', 'cable_zero', 'stiffness', 'pretensi
 #: Reference steps, in finite-difference replay steps (DIFFERENCE_STEPS): large where the model
 #: is smooth, so the replays' convergence floor adds little; small for the names that move the
 #: point where a cable goes slack or taut (a kink within +-10 steps on some rows: cable_zero
-#: at 30 steps reads 1e-2 wrong, section_length and disk_mass at 10 steps 0.2 and 1e-2).
+#: at 30 steps reads 1e-2 wrong, section_length and disk_mass at 10 steps 0.2 and 1e-2), and
+#: the stick length, where a friction state reaches +-1 (the stick length 1.7 mm is not a
+#: multiple of the run's 1 mm steps, which would put a kink at the base itself).
 #: Friction: 0.08 +- 0.01 stays inside [0, 1].
 REFERENCE_STEP_FACTOR = 30.0
 #: m: largest difference of a replay's points started from two different warm starts (measured
 #: 2.2e-11 and 1.8e-11 on the two robots here).
 REPLAY_FLOOR = 3e-11
-KINKED = {'cable_zero': 10.0, 'pretension': 10.0, 'section_length': 0.1, 'disk_mass': 0.1}
+KINKED = {'cable_zero': 10.0, 'pretension': 10.0, 'section_length': 0.1, 'disk_mass': 0.1,
+          'stick_length': 1.0}
 
 
-def robot_with(cable_model):
+def robot_with(cable_model, stick_length=0.0):
     """Return the truth robot of test_run_calibration with weak gravity and disk masses."""
     robot = truth_robot(load_robot(V6))
     sections = tuple(dataclasses.replace(s, disk_mass=5e-4) for s in robot.description.sections)
+    tendons = dataclasses.replace(robot.tendons, stick_length=np.full(9, stick_length))
     return robot.__class__(dataclasses.replace(
         robot.description, cable_model=cable_model, gravity=np.array([0.0, -1.0, 0.0]),
-        sections=sections))
+        sections=sections, tendons=tendons))
 
 
 def run_for(robot):
@@ -73,17 +77,21 @@ def reference(model, x, solutions):
             for sign in (1.0, -1.0):
                 trial = x.copy()
                 trial[j] += sign * h
-                sides.append(model.points(trial, starts=solutions)[0])
+                # the friction state's chain is the stick length's effect: whole replays
+                held = None if names[j] == 'stick_length' else solutions
+                sides.append(model.points(trial, starts=held)[0])
             central.append((sides[0] - sides[1]) / (2.0 * h))
         out[:, :, j] = (4.0 * central[1] - central[0]) / 3.0
     return out, names, steps
 
 
-@pytest.mark.parametrize('cable_model, names', [
-    ('point_moment', NAMES), ('distributed', NAMES), ('distributed', ['cable_stiffness'])])
-def test_sensitivities_equal_re_solved_replays(cable_model, names, monkeypatch):
+@pytest.mark.parametrize('cable_model, names, stick_length', [
+    ('point_moment', NAMES, 0.0), ('distributed', NAMES, 0.0),
+    ('distributed', ['cable_stiffness'], 0.0),
+    ('point_moment', ['friction', 'stick_length', 'cable_zero'], 1.7e-3)])
+def test_sensitivities_equal_re_solved_replays(cable_model, names, stick_length, monkeypatch):
     monkeypatch.setattr(length_statics, 'BALANCE_TOLERANCE', 1e-12)
-    robot = robot_with(cable_model)
+    robot = robot_with(cable_model, stick_length)
     model = RunModel(robot, names, run_for(robot))
     x = model.start()
     model.points(x)

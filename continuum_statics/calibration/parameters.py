@@ -19,6 +19,7 @@ name                   kinds       variables
 ``cable_stiffness``    run         log EA (N) per cable
 ``pretension``         run         N per section
 ``friction``           run         one capstan coefficient for every cable
+``stick_length``       run         m, one for every cable: travel over which friction turns over
 ``section_length``     run         log factor per section on its length (guides scale with it)
 ``section_bending``    run         log of each section's ``bending_scale`` (factor on E I, G J)
 ``disk_mass``          run         kg per section: the mass of each of its guide disks
@@ -43,7 +44,7 @@ from continuum_statics.core.tendons import Tendons
 RUN_PARAMETERS = ('registration', 'base_position', 'section_rotation', 'cable_angle',
                   'cable_zero', 'stiffness', 'pretension', 'friction', 'youngs_modulus',
                   'density', 'gravity', 'tip_marker', 'cable_stiffness', 'section_length',
-                  'section_bending', 'disk_mass', 'extension_shear')
+                  'section_bending', 'disk_mass', 'extension_shear', 'stick_length')
 TIP_LOAD_PARAMETERS = ('youngs_modulus', 'density', 'base_roll', 'base_pitch', 'base_yaw',
                        'cable_offset_scale')
 DEFAULT_FIT = ('registration', 'section_rotation', 'cable_angle', 'cable_zero', 'stiffness',
@@ -64,6 +65,10 @@ DISK_MASS_START = 1e-4
 #: Bounds of the log factors on E A and G A (a spring or slotted-tube backbone is 1000 times
 #: softer in extension and shear than the solid rod of its diameter).
 RIGIDITY_BOUND = 7.0
+#: Longest stick zone a fit may find (m of motor travel) and its start when the file has none
+#: (a start on the bound 0 would give least_squares no trust region, see DISK_MASS_START).
+STICK_LENGTH_BOUND = 0.02
+STICK_LENGTH_START = 1e-4
 #: Bounds of a section length's log factor (+-20 %: a wrong section length is a few mm).
 SECTION_LENGTH_BOUND = 0.2
 #: Finite-difference step of each name's variables (optimiser units): large enough that the
@@ -73,7 +78,7 @@ SECTION_LENGTH_BOUND = 0.2
 DIFFERENCE_STEPS = {'section_rotation': 1e-4, 'cable_angle': 1e-4, 'cable_zero': 1e-6,
                     'stiffness': 1e-4, 'cable_stiffness': 1e-4, 'pretension': 1e-3,
                     'friction': 1e-2, 'section_length': 1e-4, 'section_bending': 1e-4,
-                    'disk_mass': 1e-5, 'extension_shear': 1e-4,
+                    'disk_mass': 1e-5, 'extension_shear': 1e-4, 'stick_length': 1e-5,
                     'youngs_modulus': 1e-4,
                     'density': 1e-4, 'gravity': 1e-3, 'tip_marker': 1e-6, 'base_roll': 1e-3,
                     'base_pitch': 1e-3, 'base_yaw': 1e-3, 'cable_offset_scale': 1e-4}
@@ -83,7 +88,7 @@ LOG_VARIABLES = ('stiffness', 'cable_stiffness', 'youngs_modulus', 'density', 's
 #: Units of each name's values (after :meth:`SearchVector.values`).
 UNITS = {'section_rotation': 'rad', 'cable_angle': 'rad', 'cable_zero': 'm', 'stiffness': 'N',
          'cable_stiffness': 'N', 'pretension': 'N', 'friction': '1', 'section_length': 'm',
-         'section_bending': '1', 'disk_mass': 'kg', 'extension_shear': 'N',
+         'section_bending': '1', 'disk_mass': 'kg', 'extension_shear': 'N', 'stick_length': 'm',
          'youngs_modulus': 'Pa', 'density': 'kg/m^3', 'gravity': 'm/s^2', 'tip_marker': 'm',
          'base_roll': 'deg', 'base_pitch': 'deg', 'base_yaw': 'deg', 'cable_offset_scale': '1'}
 
@@ -150,6 +155,8 @@ class SearchVector:
                                      if s.cable_indices else 0.0 for s in robot.sections]),
                            0.0, 100.0 * t_ref),
             'friction': (np.array([float(np.mean(tendons.friction))]), 0.0, 1.0),
+            'stick_length': (np.array([max(float(np.mean(tendons.stick_length)),
+                                           STICK_LENGTH_START)]), 0.0, STICK_LENGTH_BOUND),
             'section_length': (np.zeros(n_sections), -SECTION_LENGTH_BOUND,
                                SECTION_LENGTH_BOUND),
             'section_bending': (np.log([s.bending_scale for s in robot.sections]),
@@ -274,6 +281,8 @@ def candidate_robot(robot, values, registered=False, shear_fixed=False):
         arrays['zero_offset'][:] = values['cable_zero']
     if 'friction' in values:
         arrays['friction'][:] = values['friction'][0]
+    if 'stick_length' in values:
+        arrays['stick_length'][:] = values['stick_length'][0]
     changes['tendons'] = Tendons(**arrays)
     rod = description.rod
     if 'youngs_modulus' in values or 'density' in values:

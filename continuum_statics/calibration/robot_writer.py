@@ -11,7 +11,8 @@ import yaml
 from continuum_statics.core.routing import GuideOffsets, Helix
 
 #: Fit names that change the ``tendons`` blocks.
-TENDON_NAMES = ('cable_zero', 'stiffness', 'cable_stiffness', 'pretension', 'friction')
+TENDON_NAMES = ('cable_zero', 'stiffness', 'cable_stiffness', 'pretension', 'friction',
+                'stick_length')
 
 
 def write_robot_file(output, robot_file, robot, fit, header):
@@ -71,6 +72,8 @@ def _write_tendons(document, holders, robot):
     top = dict(document.get('tendons') or {})
     if np.all(tendons.friction == tendons.friction[0]):
         top['friction'] = _number(tendons.friction[0])
+    if np.any(tendons.stick_length) and np.all(tendons.stick_length == tendons.stick_length[0]):
+        top['stick_length'] = _number(tendons.stick_length[0])
     document['tendons'] = top
     j = 0
     for holder, section in zip(holders, robot.sections):

@@ -14,15 +14,20 @@ derivatives are taken at the row's solution by central differences of the model 
 re-solved replays to their own convergence floor, and a column costs two IVPs per row where a
 finite-difference replay costs a chord solve per row.
 
-Memory: friction follows each cable's direction of motion, a sign carried from row to row. The
-sign is discrete, so the chain of warm starts carries no derivative: each row's is taken with
-its signs held (a parameter step that flips a sign is a kink no derivative describes).
+Memory: friction follows each cable's friction state, carried from row to row
+(:func:`length_statics.motion_since`). It moves with the motor travel, which no parameter
+changes, except through ``stick_length`` (the travel over which it turns): a variant robot
+with another stick length gets its own chain of states over the whole run, so that column
+carries the memory; every other column holds each row's states (a parameter step that flips a
+sign is a kink no derivative describes).
 """
+from types import SimpleNamespace
+
 import numpy as np
 
 from continuum_statics.calibration.pool import fork_pool
 from continuum_statics.core.layout import POSITION, ROTATION
-from continuum_statics.core.length_statics import _constants, _warm_z
+from continuum_statics.core.length_statics import _constants, _warm_z, motion_since
 from continuum_statics.core.length_tracking import _evaluate
 from continuum_statics.core.tendon_kernel import path_stretch
 
@@ -50,6 +55,7 @@ class RowModel:
          self.moment_map, self.friction) = _constants(robot)
         self.marker = np.asarray(robot.tip_marker, dtype=float)
         self.same_rod = rod is not None and _same_rod(robot, rod)
+        self.motions = None  # (rows, n) friction states of its own, else the row's
 
     def free(self, lengths):
         """Free lengths (m) of motor-side ``lengths``."""
@@ -95,12 +101,29 @@ def stencil(x, step, low, high):
     return (0.0, sign * step, 2.0 * sign * step), (-1.5 * sign, 2.0 * sign, -0.5 * sign)
 
 
-def row_sensitivities(base, variants, stencils, lengths, solution):
+def friction_states(robot, lengths, solved):
+    """Return the friction state of every row (rows, n) of a replay by ``robot``.
+
+    The chain of :func:`replay.replay_solutions`: each row's from the last solved row's
+    (``solved``: (rows,) bool, False where the solve raised).
+    """
+    states, warm = np.zeros((len(lengths), len(robot.cable_names))), None
+    for i, row in enumerate(lengths):
+        free = robot.tendons.free_lengths(row, robot.straight_cable_lengths)
+        motion, reference = motion_since(robot, free, warm)
+        states[i] = motion
+        if solved[i]:
+            warm = SimpleNamespace(motion=motion, motion_reference=reference, free_lengths=free)
+    return states
+
+
+def row_sensitivities(base, variants, stencils, lengths, solution, row=None):
     """Return d marker point / d variable (3, m) of one row at its solution (no tip load).
 
     :param base: the :class:`RowModel` of the robot the row was solved with
     :param variants: per variable, the :class:`RowModel` of each of its stencil's offsets
     :param stencils: per variable, (offsets, weights, step) of :func:`stencil`
+    :param row: the row's index (the variants' own friction states)
     """
     robot = base.robot
     z = _warm_z(robot, solution)
@@ -126,8 +149,9 @@ def row_sensitivities(base, variants, stencils, lengths, solution):
     e_p, p_p = np.zeros((n_eq, m)), np.zeros((3, m))
     for j, (models, (_, weights, step)) in enumerate(zip(variants, stencils)):
         for model, weight in zip(models, weights):
-            b, gap, point, _ = (model.on(states, balance, z, lengths, motion) if model.same_rod
-                                else model.at(z, lengths, motion))
+            own = motion if model.motions is None else model.motions[row]
+            b, gap, point, _ = (model.on(states, balance, z, lengths, own) if model.same_rod
+                                else model.at(z, lengths, own))
             e_p[:, j] += weight / step * np.concatenate([b, gap[taut]])
             p_p[:, j] += weight / step * point
     dz = -np.linalg.lstsq(e_z, e_p, rcond=1e-12)[0]
@@ -157,7 +181,13 @@ def point_sensitivities(model, x, solutions, workers=1):
             trial[j] += offset
             models.append(RowModel(model.robot_for(trial), robot))
         variants.append(models)
-    rows = [i for i, solution in enumerate(solutions) if solution is not None]
+    solved = np.array([solution is not None for solution in solutions])
+    for models in variants:
+        for variant in models:
+            if not np.array_equal(variant.robot.tendons.stick_length,
+                                  robot.tendons.stick_length):
+                variant.motions = friction_states(variant.robot, model.run.lengths, solved)
+    rows = list(np.flatnonzero(solved))
     _JOB = (base, variants, stencils, model.run.lengths, solutions)
     try:
         with fork_pool(workers) as pool:
@@ -172,5 +202,5 @@ def point_sensitivities(model, x, solutions, workers=1):
 
 def _rows(indices):
     base, variants, stencils, lengths, solutions = _JOB
-    return np.array([row_sensitivities(base, variants, stencils, lengths[i], solutions[i])
+    return np.array([row_sensitivities(base, variants, stencils, lengths[i], solutions[i], i)
                      for i in indices]).reshape(len(indices), 3, len(variants))

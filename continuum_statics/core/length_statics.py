@@ -16,12 +16,14 @@ wrap angle theta, the tension changes by the factor exp(mu theta), rising toward
 the motor pulls (the cable slides toward the motor) and falling while it pays out. A cable's last
 direction of motion comes from ``warm_start`` (its free length then and now); segment i then
 carries T_i = t exp(sigma mu sum of the wraps between it and the end disk), sigma = +1 pulled,
--1 released, 0 unknown (a cold start). Friction thus changes how much a cable stretches for the
-same end tension, so pulling and releasing to the same motor position give different shapes.
-Limits: the holes' friction forces load the rod only through that stretch (the point-moment model
-loads the end disk alone; the distributed model takes the end tension all along the cable), the
-run from the motor to the base disk is straight and folded into EA, and sticking (static friction
-holding any tension in the band) is represented by the last sliding direction.
+-1 released, 0 unknown (a cold start), and in between while the guides stick after a reversal
+(``tendons.stick_length``: the state turns over that much travel, :func:`motion_since`). Friction
+thus changes how much a cable stretches for the same end tension, so pulling and releasing to
+the same motor position give different shapes. Limits: the holes' friction forces load the rod
+only through that stretch (the point-moment model loads the end disk alone; the distributed
+model takes the end tension all along the cable), the run from the motor to the base disk is
+straight and folded into EA, and a stick zone is one state per cable (the same fraction of the
+capstan band at every hole), not a tension per hole.
 """
 from dataclasses import dataclass
 import functools
@@ -63,7 +65,8 @@ class LengthSolution:
     :ivar converged: balance and complementarity reached their tolerances
     :ivar message: what limited the solve, empty when nothing did
     :ivar free_lengths: (n,) m, unstretched lengths Lf (the next solve's motion reference)
-    :ivar motion: (n,) +1 last pulled, -1 last paid out, 0 unknown (friction sign)
+    :ivar motion: (n,) friction state: +1 last pulled, -1 last paid out, 0 unknown, between
+        while a cable's guides stick after a reversal (:func:`motion_since`)
     :ivar iterations: Newton iterations
     :ivar residual: largest complementarity residual (m)
     """
@@ -198,12 +201,18 @@ def _constants(robot):
 
 
 def motion_since(robot, free_lengths, warm_start, threshold=MOTION_THRESHOLD):
-    """Each cable's friction sign and motion reference (m) after ``warm_start``.
+    """Each cable's friction state and motion reference (m) after ``warm_start``.
 
-    A cable whose free length moved more than ``threshold`` (m) from its reference (where it
-    was when it last moved) was pulled (+1) or paid out (-1) and its reference moves along;
-    else it keeps its last sign and reference, so encoder noise under the threshold never flips
-    friction and slow motion still counts once it adds up.
+    The state sigma in [-1, 1] scales the capstan exponent (+1: sliding toward the motor, the
+    cable pulled; -1: paid out; 0: unknown, a cold start). A cable whose free length moved more
+    than ``threshold`` (m) from its reference (where it was when it last moved) moves its state
+    and its reference along; else both stay, so encoder noise under the threshold never
+    changes friction and slow motion still counts once it adds up. The state turns at once
+    (sigma = the sign of the motion) or, for a cable with ``tendons.stick_length`` s > 0,
+    linearly from one end to the other over s of travel: after a reversal its guides stick
+    first, the tension on either side of a hole differing by less than the capstan limit, and
+    the cable slides through the holes once the difference reaches it (a stick zone; Dahl's
+    friction model).
     """
     previous = getattr(warm_start, 'motion_reference', None)
     if previous is None:
@@ -214,9 +223,13 @@ def motion_since(robot, free_lengths, warm_start, threshold=MOTION_THRESHOLD):
     if previous is None or len(previous) != n:
         return motion, free_lengths.copy()
     change = free_lengths - previous
-    motion[change < -threshold] = 1.0
-    motion[change > threshold] = -1.0
-    return motion, np.where(np.abs(change) > threshold, free_lengths, previous)
+    moved = np.abs(change) > threshold
+    stick = robot.tendons.stick_length
+    # a full turn, +1 to -1, over the stick length
+    turned = np.where(stick > 0.0, np.clip(
+        motion - 2.0 * change / np.where(stick > 0.0, stick, 1.0), -1.0, 1.0), -np.sign(change))
+    motion[moved] = turned[moved] + 0.0  # no -0.0: ModelAt compares the bytes
+    return motion, np.where(moved, free_lengths, previous)
 
 
 def solve_lengths(robot, lengths, tip_force=(0.0, 0.0, 0.0), tip_moment=(0.0, 0.0, 0.0),

@@ -467,7 +467,7 @@ def _tendon_value(key, value, field):
     """Return one tendon parameter, checked.
 
     stiffness > 0 (N), pretension >= 0 (N), friction >= 0, tension_limits 0 <= min < max (N),
-    zero_offset (m).
+    stick_length >= 0 (m), zero_offset (m).
     """
     if key == 'stiffness':
         return _positive(value, field)
@@ -477,7 +477,7 @@ def _tendon_value(key, value, field):
             raise ValueError('%s must satisfy 0 <= min < max (N), got %s' % (field, lim.tolist()))
         return lim
     value = _number(value, field)
-    if key in ('pretension', 'friction') and value < 0.0:
+    if key in ('pretension', 'friction', 'stick_length') and value < 0.0:
         raise ValueError('%s must be >= 0, got %g' % (field, value))
     return value
 

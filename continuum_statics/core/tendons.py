@@ -18,7 +18,7 @@ import functools
 import numpy as np
 
 #: Keys of a ``tendons:`` block (top level, per section, or on a cable entry).
-TENDON_KEYS = ('stiffness', 'pretension', 'friction', 'tension_limits')
+TENDON_KEYS = ('stiffness', 'pretension', 'friction', 'tension_limits', 'stick_length')
 
 
 def full_circle_tension(robot):
@@ -40,6 +40,8 @@ class Tendons:
     :ivar friction: (n,) capstan coefficient mu at the guide holes (1)
     :ivar tension_limits: (n, 2) [min, max] tension the cable and its motor may take (N)
     :ivar zero_offset: (n,) m added to the free length (a cable homed too long: > 0)
+    :ivar stick_length: (n,) m of motor travel over which a reversed cable's friction turns
+        over (its guides stick first); 0: at once (:func:`length_statics.motion_since`)
     """
 
     stiffness: np.ndarray
@@ -47,13 +49,20 @@ class Tendons:
     friction: np.ndarray
     tension_limits: np.ndarray
     zero_offset: np.ndarray
+    stick_length: np.ndarray = None
+
+    def __post_init__(self):
+        if self.stick_length is None:  # files and callers from before stick zones
+            stick = np.zeros(len(self.stiffness))
+            stick.setflags(write=False)
+            object.__setattr__(self, 'stick_length', stick)
 
     @classmethod
     def default(cls, n_cables):
         """Inextensible, frictionless cables without pretension or a tension limit."""
         limits = np.tile([0.0, np.inf], (n_cables, 1))
         return cls(np.full(n_cables, np.inf), np.zeros(n_cables), np.zeros(n_cables), limits,
-                   np.zeros(n_cables))
+                   np.zeros(n_cables), np.zeros(n_cables))
 
     @functools.cached_property
     def compliance(self):
