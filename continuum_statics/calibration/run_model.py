@@ -3,7 +3,8 @@
 The registration of the tracker frame to the base (rotation + translation) is not a search
 variable: for every candidate robot it is the best rigid fit of the model points to the measured
 ones (Kabsch), so it cannot start in a wrong basin. Gravity, given in the tracker frame, enters
-the model through the registration of the previous evaluation.
+the model through the registration of the previous evaluation (:attr:`RunModel.gravity_frame`:
+the Jacobian at an evaluation is of the robot its replay solved).
 """
 import dataclasses
 
@@ -45,6 +46,9 @@ class RunModel:
         self.solutions = self.replayed = None  # of the last replay: solutions, points
         self.starts = None  # per-row warm starts of a Jacobian's columns (set by the fit)
         self.rotation = robot.base_rotation.copy()  # tracker <- base, updated by the fit
+        # the registration that turns gravity into the base frame: the one before the replay
+        # being fitted (its solutions and their Jacobian are of that robot)
+        self.gravity_frame = self.rotation.copy()
         self.position = np.array(robot.base_position, dtype=float)
 
     def start(self):
@@ -66,6 +70,7 @@ class RunModel:
             if match is not None:
                 start[block.index] = x[match.index]
         self.rotation, self.position = other.rotation.copy(), other.position.copy()
+        self.gravity_frame = self.rotation.copy()
         return start
 
     def values(self, x):
@@ -86,7 +91,7 @@ class RunModel:
         if frame == 'base':
             changes.update(base_position=np.zeros(3),
                            base_orientation=np.array([0.0, 0.0, 0.0, 1.0]),
-                           gravity=self.rotation.T @ gravity)
+                           gravity=self.gravity_frame.T @ gravity)
         else:
             changes.update(base_position=self.position.copy(),
                            base_orientation=quaternion(self.rotation))
@@ -122,6 +127,8 @@ class RunModel:
     def residuals(self, x, update=False, run=None, starts=None):
         """Return registered model minus measured tips (flattened, m) and the gauge rows."""
         run = self.run if run is None else run
+        if update:  # this replay's robot turns gravity by the registration of now
+            self.gravity_frame = self.rotation.copy()
         points, _ = self.points(x, run, starts)
         return self.residuals_of(points, x, update, run)
 

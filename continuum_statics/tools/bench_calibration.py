@@ -4,10 +4,11 @@ On the FTDCR v6 robot's recorded runs (``test/data/ftdcr_v6``): the cost of one 
 training run by the calibrated robot (the unit of every fit), one Jacobian both ways (exact,
 from the implicit-function theorem, against one replay per parameter) and the default fit
 both ways, the default fit from the nominal robot file (wall time on every core, train and
-held-out tip RMS), and the error budget on both files (repeatability floor, model-free baselines, the model). With
-``--select NAME ...``: the candidate physics cross-validated inside the training run (whole
-motion patterns per fold; the held-out file is only reported, never used to choose). With
-``--fit NAME ...``: a fit of other names instead of the default one. Figures, not assertions.
+held-out tip RMS), and the error budget on both files (repeatability floor, model-free
+baselines, the model). With ``--select NAME ...``: the candidate physics cross-validated
+inside the training run (whole motion patterns per fold; the held-out file is only reported,
+never used to choose). With ``--fit NAME ...``: a fit of other names instead of the default
+one. Figures, not assertions.
 """
 import argparse
 import time
