@@ -64,13 +64,19 @@ def run_for(robot, tracker=np.eye(3)):
     return dataclasses.replace(run, tips=points @ tracker.T + 1e-3)
 
 
-def reference(model, x, solutions):
-    """D point / d variable (rows, 3, m) from re-solved replays (Richardson, central)."""
+def reference_steps(model):
+    """Return the reference's step of every variable and the variables' fit names."""
     steps = model.vector.steps() * REFERENCE_STEP_FACTOR
     names = np.concatenate([[b.name] * b.start.size for b in model.blocks])
     steps[names == 'friction'] = 1e-2
     for name, factor in KINKED.items():
         steps[names == name] *= factor / REFERENCE_STEP_FACTOR
+    return steps, names
+
+
+def reference(model, x, solutions):
+    """Return d point / d variable (rows, 3, m) from re-solved replays (Richardson, central)."""
+    steps, names = reference_steps(model)
     out = np.empty((len(model.run.tips), 3, model.size))
     for j in range(model.size):
         central = []
@@ -153,3 +159,32 @@ def test_a_fit_on_exact_jacobians_ends_where_the_finite_difference_fit_does():
         ends[jacobian] = model.errors(result.x, run)[0]
     assert np.sqrt(np.mean(np.sum(ends['implicit'] ** 2, axis=1))) == pytest.approx(
         np.sqrt(np.mean(np.sum(ends['differences'] ** 2, axis=1))), abs=1e-4)
+
+
+def test_the_residual_jacobian_lets_the_registration_follow(monkeypatch):
+    """RunModel.jacobian against re-solved residuals: Kabsch registration and gauge rows."""
+    monkeypatch.setattr(length_statics, 'BALANCE_TOLERANCE', 1e-12)
+    robot = robot_with('point_moment')
+    tracker = Rotation.from_rotvec([0.3, -0.2, 0.5]).as_matrix()
+    model = RunModel(robot, ['registration', 'section_rotation', 'cable_angle', 'cable_zero',
+                             'tip_marker'], run_for(robot, tracker))
+    x = model.start()
+    model.residuals(x, update=True)
+    solutions, points = model.solutions, model.replayed
+    exact = model.jacobian(x, points, point_sensitivities(model, x, solutions, workers=2))
+    steps, _ = reference_steps(model)
+    for j in range(model.size):
+        central = []
+        for h in (steps[j], steps[j] / 2.0):
+            sides = []
+            for sign in (1.0, -1.0):
+                trial = x.copy()
+                trial[j] += sign * h
+                sides.append(model.residuals(trial, starts=solutions))
+            central.append((sides[0] - sides[1]) / (2.0 * h))
+        expected = (4.0 * central[1] - central[0]) / 3.0
+        size = np.linalg.norm(expected)
+        floor = 2.0 * np.sqrt(expected.size) * REPLAY_FLOOR / steps[j]
+        assert size > 0.0
+        assert np.linalg.norm(exact[:, j] - expected) <= 1e-5 * size + floor, j
+    assert exact.shape[0] > 3 * len(points)  # the gauge rows are there

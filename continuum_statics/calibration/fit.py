@@ -21,6 +21,8 @@ SCAN_STEPS = 24
 SCAN_ROWS = 250
 #: Stick lengths (m) tried before a fit of ``stick_length`` (:func:`scan_stick_length`).
 STICK_SCAN = (5e-4, 1e-3, 2e-3, 4e-3, 8e-3, 1.6e-2)
+#: Capstan coefficients tried with them when friction is fitted too.
+FRICTION_SCAN = (0.05, 0.1, 0.2)
 #: How a fit's Jacobian is made (:func:`fit`).
 JACOBIANS = ('implicit', 'differences')
 
@@ -32,7 +34,7 @@ class FitResult(NamedTuple):
 
     x: np.ndarray
     residuals: np.ndarray
-    jacobian: np.ndarray   # (residuals, variables), the last finite-difference Jacobian
+    jacobian: np.ndarray   # (residuals, variables), the last Jacobian
     evaluations: int
     success: bool
     message: str
@@ -87,22 +89,31 @@ def scan_rotations(model, x0, log=print, steps=SCAN_STEPS, rows=SCAN_ROWS, worke
 
 
 def scan_stick_length(model, x0, log=print, workers=1):
-    """Start ``stick_length`` at the best of :data:`STICK_SCAN` and its current value.
+    """Start ``stick_length`` (and ``friction`` when fitted) at the best of a grid.
 
     A stick length under the motor travel between rows turns each friction state within a
-    row, where the fit finds no gradient. Whole replays: a subset of rows would change the
-    travel between them.
+    row, where the fit finds no gradient; and without friction no stick length changes
+    anything, so a fitted friction is scanned with it (:data:`STICK_SCAN`,
+    :data:`FRICTION_SCAN`, and the current values). Whole replays: a subset of rows would change
+    the travel between them.
     """
-    block = next((b for b in model.blocks if b.name == 'stick_length'), None)
-    if block is None:
+    stick = next((b for b in model.blocks if b.name == 'stick_length'), None)
+    if stick is None:
         return x0
+    friction = next((b for b in model.blocks if b.name == 'friction'), None)
+    frictions = ((x0[friction.index.start],) + FRICTION_SCAN) if friction else (None,)
     trials = []
-    for value in (x0[block.index.start],) + STICK_SCAN:
-        trials.append(np.array(x0, dtype=float))
-        trials[-1][block.index] = min(value, block.high[0])
+    for mu in frictions:
+        for value in (x0[stick.index.start],) + STICK_SCAN:
+            trials.append(np.array(x0, dtype=float))
+            trials[-1][stick.index] = min(value, stick.high[0])
+            if friction is not None:
+                trials[-1][friction.index] = mu
     costs = [float(np.sum(r ** 2)) for r in evaluate_all(model, trials, workers)]
     x = trials[int(np.argmin(costs))]
-    log('  stick length scanned (%d values): start %.4g m' % (len(trials), x[block.index][0]))
+    log('  stick length scanned (%d trials): start %.4g m%s' % (
+        len(trials), x[stick.index][0],
+        ', friction %.3g' % x[friction.index][0] if friction else ''))
     return x
 
 

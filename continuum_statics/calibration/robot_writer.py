@@ -72,8 +72,13 @@ def _write_tendons(document, holders, robot):
     top = dict(document.get('tendons') or {})
     if np.all(tendons.friction == tendons.friction[0]):
         top['friction'] = _number(tendons.friction[0])
-    if np.any(tendons.stick_length) and np.all(tendons.stick_length == tendons.stick_length[0]):
-        top['stick_length'] = _number(tendons.stick_length[0])
+    stick = tendons.stick_length
+    if np.all(stick == stick[0]) and (stick[0] or 'stick_length' in top):
+        top['stick_length'] = _number(stick[0])  # one value: no section or cable keeps its own
+        for holder in holders:
+            for entry in [holder.get('tendons') or {}] + list(holder.get('cables') or []):
+                if entry is not top:
+                    entry.pop('stick_length', None)
     document['tendons'] = top
     j = 0
     for holder, section in zip(holders, robot.sections):

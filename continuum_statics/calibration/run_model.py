@@ -168,8 +168,9 @@ class RunModel:
     def errors(self, x, run):
         """Return registered model minus measured tips (n, 3) of ``run`` and its failed rows.
 
-        The registration is held at the fit's.
+        The registration is held at the fit's, and turns gravity as in the written robot.
         """
+        self.gravity_frame = self.rotation.copy()
         points, failed = self.points(x, run)
         return points @ self.rotation.T + self.position - run.tips, failed
 

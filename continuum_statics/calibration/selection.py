@@ -5,6 +5,8 @@ per fold): each fold is fitted on the other folds' rows and scored on its own, w
 registration of that fit. A candidate name is kept when adding it to the base fit lowers the
 cross-validated tip RMS by at least :data:`MIN_GAIN`; the held-out run never takes part.
 """
+import dataclasses
+
 import numpy as np
 
 from continuum_statics.calibration.error_budget import folds, pattern_groups
@@ -22,6 +24,8 @@ MIN_GAIN = 0.01
 INERT_MOTION = 1e-12
 #: Rows of the run that test a candidate's effect (evenly spread).
 INERT_ROWS = 100
+#: Capstan coefficient with which a stick length is tested on a frictionless file.
+STICK_FRICTION = 0.1
 
 
 def cross_validated_rms(robot, run, fit_names, count=SELECTION_FOLDS, log=print, workers=None,
@@ -48,8 +52,20 @@ def cross_validated_rms(robot, run, fit_names, count=SELECTION_FOLDS, log=print,
 
 
 def moves_the_tips(robot, run, name, shear_fixed=False):
-    """Whether fit name ``name`` changes any model tip of ``run`` (m, :data:`INERT_MOTION`)."""
-    sample = run.subset(np.unique(np.linspace(0, len(run) - 1, INERT_ROWS).astype(int)))
+    """Whether fit name ``name`` changes any model tip of ``run`` (m, :data:`INERT_MOTION`).
+
+    ``stick_length`` acts through friction, which its fit scans with it: it is tried with a
+    friction of :data:`STICK_FRICTION` where the file has none, on every row (a subset would
+    change the travel between rows, which the friction state follows).
+    """
+    if name == 'stick_length':
+        sample = run
+        if not robot.tendons.has_friction:
+            tendons = dataclasses.replace(robot.tendons, friction=np.full(
+                len(robot.cable_names), STICK_FRICTION))
+            robot = robot.__class__(dataclasses.replace(robot.description, tendons=tendons))
+    else:
+        sample = run.subset(np.unique(np.linspace(0, len(run) - 1, INERT_ROWS).astype(int)))
     model = RunModel(robot, [name], sample, shear_fixed)
     x0, steps = model.start(), model.vector.steps()
     base, _ = model.points(x0, sample)

@@ -1,16 +1,17 @@
 """Exact tip sensitivities of a replay: the implicit-function theorem on each row's equilibrium.
 
-A converged row of :func:`replay.replay_solutions` solves ``solve_lengths``' equations
-E(z, p) = 0 (:mod:`continuum_statics.core.length_statics`): the tip moment balance (3 rows) and,
-per taut cable, its gap Lf - consumed = 0; a slack cable's end tension is 0 whatever p. The
+A row of :func:`replay.replay_solutions` solves ``solve_lengths``' equations E(z, p) = 0
+(:mod:`continuum_statics.core.length_statics`): the tip moment balance (3 rows) and, per taut
+cable, its gap Lf - consumed = 0; a slack cable's end tension is 0 whatever p. The
 unknowns z are u(0) and the taut cables' end tensions, p the fit's variables. With E_z
 invertible (the Jacobian every Newton step of the row already uses),
 
     dz/dp = -E_z^-1 E_p,        dP/dp = P_p + P_z dz/dp,
 
-where P is the row's marker point (tip position + tip rotation times ``tip_marker``). The partial
-derivatives are taken at the row's solution by central differences of the model with z held
-(one IVP each, no re-solve): they carry no solver tolerance, so the result agrees with whole
+where P is the row's marker point (tip position + tip rotation times ``tip_marker``); a row that
+did not converge is differentiated at its best state. The partial derivatives are taken at
+the row's solution by central differences of the model with z held (one-sided at a bound; one
+IVP each, no re-solve): they carry no solver tolerance, so the result agrees with whole
 re-solved replays to their own convergence floor, and a column costs two IVPs per row where a
 finite-difference replay costs a chord solve per row.
 
@@ -38,7 +39,7 @@ STATE_STEP = 1e-5
 PARAMETER_STEP_FRACTION = 0.1
 _NO_LOAD = np.zeros(3)
 
-_JOB = None  # what a forked worker differentiates: (base, variants, stencils, lengths, rows)
+_JOB = None  # what a forked worker differentiates: (base, variants, stencils, lengths, solutions)
 
 
 class RowModel:
@@ -135,8 +136,9 @@ def row_sensitivities(base, variants, stencils, lengths, solution, row=None):
     n_eq = free_z.size
     balance, _, _, states = base.at(z, lengths, motion)
     e_z, p_z = np.empty((n_eq, n_eq)), np.empty((3, n_eq))
+    units = np.where(free_z < 3, 1.0 / robot.length, base.t_ref)  # z's scales (u(0) L, t)
     for k, index in enumerate(free_z):
-        step = STATE_STEP * (1.0 / robot.length if index < 3 else base.t_ref)
+        step = STATE_STEP * units[k]
         sides = []
         for sign in (1.0, -1.0):
             trial = z.copy()
@@ -154,7 +156,8 @@ def row_sensitivities(base, variants, stencils, lengths, solution, row=None):
                                 else model.at(z, lengths, own))
             e_p[:, j] += weight / step * np.concatenate([b, gap[taut]])
             p_p[:, j] += weight / step * point
-    dz = -np.linalg.lstsq(e_z, e_p, rcond=1e-12)[0]
+    # solved in scaled z, as Newton's steps are: the columns O(1)
+    dz = -np.linalg.lstsq(e_z * units, e_p, rcond=1e-12)[0] * units[:, None]
     return p_p + p_z @ dz
 
 
