@@ -28,8 +28,8 @@ import numpy as np
 
 from continuum_statics.calibration.pool import fork_pool
 from continuum_statics.core.layout import POSITION, ROTATION
-from continuum_statics.core.length_statics import _constants, _warm_z, motion_since
-from continuum_statics.core.length_tracking import _evaluate
+from continuum_statics.core.length_statics import motion_since, problem_constants, warm_unknowns
+from continuum_statics.core.length_tracking import evaluate_at
 from continuum_statics.core.tendon_kernel import path_stretch
 
 #: Central-difference step of u(0) (times 1/L) and of an end tension (times E I / (L r)).
@@ -53,7 +53,7 @@ class RowModel:
         self.robot = robot
         self.args = robot.kernel_args(_NO_LOAD, _NO_LOAD)
         (_, self.compliance, self.base_axis, self.radius, self.t_ref, self.kappa, _, _,
-         self.moment_map, self.friction) = _constants(robot)
+         self.moment_map, self.friction) = problem_constants(robot)
         self.marker = np.asarray(robot.tip_marker, dtype=float)
         self.same_rod = rod is not None and _same_rod(robot, rod)
         self.motions = None  # (rows, n) friction states of its own, else the row's
@@ -65,7 +65,7 @@ class RowModel:
     def at(self, z, lengths, motion):
         """Return (balance (3,), gap (n,) m, marker point (3,) m, node states) at z."""
         args = self.args
-        residual, _, _, states, _, gap, _, _, _ = _evaluate(
+        residual, _, _, states, _, gap, _, _, _ = evaluate_at(
             *args[:6], *args[7:], z, self.moment_map, self.free(lengths),
             self.friction * motion, self.compliance, self.base_axis, self.kappa, self.radius)
         return residual[:3], gap, self._point(states), states
@@ -127,7 +127,7 @@ def row_sensitivities(base, variants, stencils, lengths, solution, row=None):
     :param row: the row's index (the variants' own friction states)
     """
     robot = base.robot
-    z = _warm_z(robot, solution)
+    z = warm_unknowns(robot, solution)
     if solution.model_at is not None and solution.model_at.z.shape == z.shape:
         z = solution.model_at.z.copy()  # the z the model was integrated at
     motion = solution.motion

@@ -106,7 +106,7 @@ class _Problem:
         self.motion = motion
         self.tip_force, self.tip_moment = tip_force, tip_moment
         (self.rows, self.compliance, self.base_axis, self.radius, self.t_ref, self.kappa,
-         self.scale, self.moment_map, self.kernel_moment_map, friction) = _constants(robot)
+         self.scale, self.moment_map, self.kernel_moment_map, friction) = problem_constants(robot)
         self.friction = friction * motion + 0.0  # no -0.0: ModelAt compares the bytes
         self.with_friction = bool(self.friction.any())
 
@@ -179,7 +179,7 @@ class _Problem:
 
 
 @functools.lru_cache(maxsize=16)
-def _constants(robot):
+def problem_constants(robot):
     """Return a robot's fixed problem data (per call it cost more than the compiled solve)."""
     n = len(robot.cable_names)
     base_axis = np.ascontiguousarray(robot.base_rotation[:, 2])
@@ -267,7 +267,7 @@ def solve_lengths(robot, lengths, tip_force=(0.0, 0.0, 0.0), tip_moment=(0.0, 0.
         # a per-cycle call solves the balance to the lengths' tolerance: a balance error b
         # (an angle over the rod) moves a cable at radius r by about r b
         problem.balance_tolerance = max(BALANCE_TOLERANCE, problem.tolerance / problem.radius)
-    warm = _warm_z(robot, warm_start)
+    warm = warm_unknowns(robot, warm_start)
     total = 0
     parts = getattr(warm_start, 'jacobian_parts', None)
     chord_ran = False
@@ -309,7 +309,7 @@ def solve_lengths(robot, lengths, tip_force=(0.0, 0.0, 0.0), tip_moment=(0.0, 0.
     return _solution(robot, problem, z, info, ok, total, message, parts)
 
 
-def _warm_z(robot, warm_start):
+def warm_unknowns(robot, warm_start):
     """Unknowns z of a previous result (u(0) and end tensions), or None."""
     shape = getattr(warm_start, 'shape', warm_start)
     state = getattr(shape, 'state', None)

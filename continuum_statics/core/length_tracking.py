@@ -61,7 +61,7 @@ def _solve_linear(matrix, rhs):
 
 
 @numba.njit(cache=True, nogil=True)
-def _evaluate(s_grid, params, model, tip_force, tip_moment, step, section_state_index,
+def evaluate_at(s_grid, params, model, tip_force, tip_moment, step, section_state_index,
               section_bases, section_ranks, section_cables, section_cable_count, cable_offsets,
               guide_nodes, cable_last_guide, cable_end_node, section_end_node, hole_offsets,
               stage_routes, route_kinks, z, moment_map,
@@ -270,7 +270,7 @@ def chord(s_grid, params, model, tip_force, tip_moment, step, section_state_inde
         mean = model_values[3 + 2 * n:].copy()
         runs = 0
     else:
-        res, x, fixed, states, motor, gap, taut, mean, model_values = _evaluate(
+        res, x, fixed, states, motor, gap, taut, mean, model_values = evaluate_at(
             *args, z, moment_map, free, friction, compliance, base_axis, kappa, radius)
         runs = 1
     error = res @ res
@@ -284,7 +284,7 @@ def chord(s_grid, params, model, tip_force, tip_moment, step, section_state_inde
         jacobian = _jacobian(balance, d_consumed, taut, kappa, radius, scale)
         scaled = -_solve_linear(jacobian, res)
         trial = z + scaled * scale
-        t_res, t_x, t_fixed, t_states, t_motor, t_gap, t_taut, t_mean, t_values = _evaluate(
+        t_res, t_x, t_fixed, t_states, t_motor, t_gap, t_taut, t_mean, t_values = evaluate_at(
             *args, trial, moment_map, free, friction, compliance, base_axis, kappa, radius)
         runs += 1
         t_error = t_res @ t_res
