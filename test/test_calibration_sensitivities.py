@@ -74,22 +74,28 @@ def reference_steps(model):
     return steps, names
 
 
+def richardson(function, x, j, step):
+    """Return d function / d x_j: central differences of ``step`` and half of it, extrapolated."""
+    central = []
+    for h in (step, step / 2.0):
+        sides = []
+        for sign in (1.0, -1.0):
+            trial = x.copy()
+            trial[j] += sign * h
+            sides.append(function(trial))
+        central.append((sides[0] - sides[1]) / (2.0 * h))
+    return (4.0 * central[1] - central[0]) / 3.0
+
+
 def reference(model, x, solutions):
     """Return d point / d variable (rows, 3, m) from re-solved replays (Richardson, central)."""
     steps, names = reference_steps(model)
     out = np.empty((len(model.run.tips), 3, model.size))
     for j in range(model.size):
-        central = []
-        for h in (steps[j], steps[j] / 2.0):
-            sides = []
-            for sign in (1.0, -1.0):
-                trial = x.copy()
-                trial[j] += sign * h
-                # the friction state's chain is the stick length's effect: whole replays
-                held = None if names[j] == 'stick_length' else solutions
-                sides.append(model.points(trial, starts=held)[0])
-            central.append((sides[0] - sides[1]) / (2.0 * h))
-        out[:, :, j] = (4.0 * central[1] - central[0]) / 3.0
+        # the friction state's chain is the stick length's effect: whole replays
+        held = None if names[j] == 'stick_length' else solutions
+        out[:, :, j] = richardson(lambda trial: model.points(trial, starts=held)[0], x, j,
+                                  steps[j])
     return out, names, steps
 
 
@@ -174,15 +180,8 @@ def test_the_residual_jacobian_lets_the_registration_follow(monkeypatch):
     exact = model.jacobian(x, points, point_sensitivities(model, x, solutions, workers=2))
     steps, _ = reference_steps(model)
     for j in range(model.size):
-        central = []
-        for h in (steps[j], steps[j] / 2.0):
-            sides = []
-            for sign in (1.0, -1.0):
-                trial = x.copy()
-                trial[j] += sign * h
-                sides.append(model.residuals(trial, starts=solutions))
-            central.append((sides[0] - sides[1]) / (2.0 * h))
-        expected = (4.0 * central[1] - central[0]) / 3.0
+        expected = richardson(lambda trial: model.residuals(trial, starts=solutions), x, j,
+                              steps[j])
         size = np.linalg.norm(expected)
         floor = 2.0 * np.sqrt(expected.size) * REPLAY_FLOOR / steps[j]
         assert size > 0.0
