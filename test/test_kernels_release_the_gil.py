@@ -12,7 +12,6 @@ import time
 import numpy as np
 
 from continuum_statics import load_robot
-from continuum_statics.core.kernel import integrate_batch
 
 PACKAGE = Path(__file__).resolve().parents[1] / 'continuum_statics'
 
@@ -36,11 +35,9 @@ def test_a_python_thread_runs_while_a_long_kernel_call_runs():
     robot = load_robot(PACKAGE.parent / 'config' / 'two_section_robot.yaml')
     batch = 3000  # ~25 us each: tens of ms inside one compiled call
     n = len(robot.cable_names)
-    args = (robot.s_grid, robot.params, robot.model_code, np.zeros((batch, 3)),
-            np.tile([1.0, 0.5, 0.0], (batch, 1)), np.zeros((batch, len(robot.sections), 3)),
-            np.full((batch, n), 0.3), robot.stage_routes, robot.route_kinks,
-            robot.cable_end_node, robot.section_end_node)
-    integrate_batch(*args[:3], *(a[:1] for a in args[3:7]), *args[7:])  # compiled, warm
+    args = (np.zeros((batch, 3)), np.tile([1.0, 0.5, 0.0], (batch, 1)),
+            np.zeros((batch, len(robot.sections), 3)), np.full((batch, n), 0.3))
+    robot.model.integrate(*(a[:1] for a in args))  # compiled, warm
     stamps, stop = [], threading.Event()
 
     def count():
@@ -53,7 +50,7 @@ def test_a_python_thread_runs_while_a_long_kernel_call_runs():
         while len(stamps) < 1000:  # the counter is running
             pass
         begin = time.perf_counter()
-        integrate_batch(*args)
+        robot.model.integrate(*args)
         end = time.perf_counter()
     finally:
         stop.set()

@@ -15,7 +15,6 @@ import pytest
 from continuum_statics import load_robot
 from continuum_statics.core import length_statics
 from continuum_statics.core.layout import ProbeRows
-from continuum_statics.core.length_tracking import jacobian_pieces
 from continuum_statics.core.robot import Robot
 
 CONFIG = Path(__file__).resolve().parents[1] / 'config'
@@ -39,8 +38,9 @@ def test_jacobian_pieces_equal_column_by_column_differences(model):
 
     def outputs(zz):  # balance rows and free length consumed, one probe per call
         x, fixed = problem.state_of(zz)
-        values, _, states = robot.probe(x, 0, np.zeros(3), np.zeros(3), fixed)
-        consumed, _, _ = problem.consumed(states, values[rows.lengths], zz[3:])
+        probed = robot.probe(x, 0, np.zeros(3), np.zeros(3), fixed)
+        consumed, _, _ = problem.consumed(probed.states, probed.values[rows.lengths], zz[3:])
+        values = probed.values
         return values[rows.balance], consumed
 
     balance0, consumed0 = outputs(z)
@@ -53,10 +53,10 @@ def test_jacobian_pieces_equal_column_by_column_differences(model):
         balance, consumed = outputs(shifted)
         reference_balance[:, c] = (balance - balance0) / h
         reference_consumed[:, c] = (consumed - consumed0) / h
-    args = robot.kernel_args(np.zeros(3), np.zeros(3))
-    balance, d_consumed = jacobian_pieces(*args[:6], *args[7:], z, problem.kernel_moment_map,
-                                          problem.compliance, solution.end_tensions,
-                                          tension_step)
+    pieces = robot.model.jacobian_pieces(np.zeros(3), np.zeros(3), z, problem.kernel_moment_map,
+                                         problem.compliance, solution.end_tensions,
+                                         tension_step)
+    balance, d_consumed = pieces.balance, pieces.d_consumed
     # the pieces hold d(consumed)/dz with the stretch factor of the nominal tension: the
     # reference differentiates the stretch too, which differs by O(h) only
     scale = np.abs(reference_consumed).max()

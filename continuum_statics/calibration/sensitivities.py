@@ -29,8 +29,7 @@ import numpy as np
 from continuum_statics.calibration.pool import fork_pool
 from continuum_statics.core.layout import POSITION, ROTATION
 from continuum_statics.core.length_statics import motion_since, problem_constants, warm_unknowns
-from continuum_statics.core.length_tracking import evaluate_at
-from continuum_statics.core.tendon_kernel import path_stretch
+from continuum_statics.core.length_tracking import TendonArgs
 
 #: Central-difference step of u(0) (times 1/L) and of an end tension (times E I / (L r)).
 STATE_STEP = 1e-5
@@ -51,9 +50,10 @@ class RowModel:
 
     def __init__(self, robot, rod=None):
         self.robot = robot
-        self.args = robot.kernel_args(_NO_LOAD, _NO_LOAD)
-        (_, self.compliance, self.base_axis, self.radius, self.t_ref, self.kappa, _, _,
-         self.moment_map, self.friction) = problem_constants(robot)
+        constants = problem_constants(robot)
+        self.compliance, self.base_axis = constants.compliance, constants.base_axis
+        self.radius, self.t_ref, self.kappa = constants.radius, constants.t_ref, constants.kappa
+        self.moment_map, self.friction = constants.kernel_map, constants.friction
         self.marker = np.asarray(robot.tip_marker, dtype=float)
         self.same_rod = rod is not None and _same_rod(robot, rod)
         self.motions = None  # (rows, n) friction states of its own, else the row's
@@ -64,19 +64,17 @@ class RowModel:
 
     def at(self, z, lengths, motion):
         """Return (balance (3,), gap (n,) m, marker point (3,) m, node states) at z."""
-        args = self.args
-        residual, _, _, states, _, gap, _, _, _ = evaluate_at(
-            *args[:6], *args[7:], z, self.moment_map, self.free(lengths),
-            self.friction * motion, self.compliance, self.base_axis, self.kappa, self.radius)
-        return residual[:3], gap, self._point(states), states
+        at = self.robot.model.evaluate_at(
+            _NO_LOAD, _NO_LOAD, z, TendonArgs(self.moment_map, self.free(lengths),
+                                              self.friction * motion, self.compliance,
+                                              self.base_axis, self.kappa, self.radius))
+        return at.residual[:3], at.gap, self._point(at.states), at.states
 
     def on(self, states, balance, z, lengths, motion):
         """:meth:`at` on another robot's IVP at z (``same_rod``): only the cables' stretch."""
-        n = z.size - 3
-        consumed, motor, mean = np.empty(n), np.empty(n), np.empty(n)
-        path_stretch(states, self.robot.guide_nodes, self.robot.cable_last_guide,
-                     self.robot.hole_offsets, self.base_axis, np.ascontiguousarray(z[3:]),
-                     self.friction * motion, self.compliance, consumed, motor, mean)
+        consumed, _, _ = self.robot.model.path_stretch(
+            states, self.base_axis, np.ascontiguousarray(z[3:]), self.friction * motion,
+            self.compliance)
         return balance, self.free(lengths) - consumed, self._point(states), states
 
     def _point(self, states):
@@ -85,9 +83,7 @@ class RowModel:
 
 def _same_rod(a, b):
     """Whether robots a and b integrate the same IVP at every z (only tendons or marker differ)."""
-    return (a.model_code == b.model_code and a.bending_step() == b.bending_step()
-            and np.array_equal(a.s_grid, b.s_grid) and np.array_equal(a.params, b.params)
-            and all(np.array_equal(p, q) for p, q in zip(a.arrays, b.arrays)))
+    return all(np.array_equal(p, q) for p, q in zip(a.model.record, b.model.record))
 
 
 def stencil(x, step, low, high):

@@ -166,7 +166,8 @@ class TeleopRun:
         # copies: the node's zero load is read-only, and numba compiles another signature for
         # a read-only array (seconds on a cold cache, in the middle of a twist)
         force, moment = np.array(load[:3], dtype=float), np.array(load[3:], dtype=float)
-        values, jac, _ = robot.probe(self.x, robot.state_size, force, moment, self.fixed)
+        probed = robot.probe(self.x, robot.state_size, force, moment, self.fixed)
+        values, jac = probed.values, probed.jacobian
         probe = ProbeRows(n)
         rows = [jac[probe.tip], jac[probe.balance]]
         rhs = [self.target + move - values[probe.tip], -values[probe.balance]]
@@ -178,7 +179,7 @@ class TeleopRun:
             rhs.append((direction - values[probe.axis]) * robot.length)
         delta = np.linalg.lstsq(np.vstack(rows), np.concatenate(rhs), rcond=1e-10)[0]
         x = self.x + delta
-        values, _, _ = robot.probe(x, 0, force, moment, self.fixed)
+        values = robot.probe(x, 0, force, moment, self.fixed).values
         if not np.all(np.isfinite(values)):
             return None
         try:  # the motors' lengths: the stretch of the tensions this state needs

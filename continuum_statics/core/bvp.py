@@ -55,7 +55,8 @@ def _newton(robot, params, loads, fixed, tip_force, tip_moment):
     state = np.array(loads, dtype=float)
 
     def residual(x):
-        values, jac, _ = robot.probe(x, 3, tip_force, tip_moment, fixed, params)
+        probed = robot.probe(x, 3, tip_force, tip_moment, fixed, params)
+        values, jac = probed.values, probed.jacobian
         return values[balance], jac[balance]
 
     res, jac = residual(state)

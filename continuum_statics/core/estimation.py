@@ -37,8 +37,9 @@ from continuum_statics.core.tracking import (
     SECANT_FRACTION,
     TRACK_ITERATIONS,
     TRACK_RUNS,
+    TrackLimits,
+    TrackStart,
     WarmStart,
-    track,
 )
 
 #: Newton iterations a node's per-cycle tendon-model estimate may take when its warm start has
@@ -220,20 +221,26 @@ def estimate_shape(robot, cable_lengths, tip_force=(0.0, 0.0, 0.0), tip_moment=(
     rows = ProbeRows(n_cables)
     cables, balance = rows.lengths, rows.balance
     size = robot.state_size
-    args = robot.kernel_args(tip_force, tip_moment)
+    fixed = np.zeros(n_cables)
     load = np.concatenate([tip_force, tip_moment])
     if jacobians is not None:  # tracking: the previous Jacobians, Broyden-updated, compiled
         budget = tracking.max_model_runs if bounded else _UNBOUNDED
         carry = WarmStart(*jacobians)
         same_load = np.array_equal(carry.load, load)
         known = carry.values.shape[0] and same_load
-        x, res, con, states, jac, con_jac, iterations, used, ok, damping, age = track(
-            *args, measured, start, carry.jac, carry.con_jac, carry.damping,
-            carry.values if known else _NO_VALUES, carry.states,
-            # under another tip load they are not the model's own here (age 0 says they are)
-            carry.age if same_load else max(carry.age, 1),
-            robot.solver.estimate_tolerance, robot.length, TRACK_ITERATIONS, robot.probe_runs,
-            budget, SECANT_FRACTION if bounded else 0.0)
+        tracked = robot.model.track(
+            tip_force, tip_moment, fixed, measured,
+            TrackStart(start, carry.jac, carry.con_jac, carry.damping,
+                       carry.values if known else _NO_VALUES, carry.states,
+                       # under another tip load they are not the model's own here (age 0 says
+                       # they are)
+                       carry.age if same_load else max(carry.age, 1)),
+            TrackLimits(robot.solver.estimate_tolerance, robot.length, TRACK_ITERATIONS,
+                        robot.probe_runs, budget, SECANT_FRACTION if bounded else 0.0))
+        x, res, con, states = tracked.x, tracked.residual, tracked.balance, tracked.states
+        jac, con_jac, iterations, used = (tracked.jac, tracked.con_jac, tracked.iterations,
+                                          tracked.runs)
+        ok, damping, age = tracked.ok, tracked.damping, tracked.age
         runs[0] += used
         if cold and age:
             # secant updates of the straight rod's Jacobians: the next (warm) call makes the
@@ -259,10 +266,14 @@ def estimate_shape(robot, cable_lengths, tip_force=(0.0, 0.0, 0.0), tip_moment=(
                                          age), used, capped=True)
         start = x  # keep the progress; go on as from a cold start
     # the fallback: the same compiled loop with finite-difference Jacobians at every evaluation
-    x, res, con, states, jac, con_jac, iterations, used, ok, _, _ = track(
-        *args, measured, start, _NO_JACOBIAN, _NO_JACOBIAN, DAMPING, _NO_VALUES, _NO_STATES, 0,
-        robot.solver.estimate_tolerance, robot.length, robot.solver.max_iterations,
-        robot.probe_runs, _UNBOUNDED, 0.0)
+    tracked = robot.model.track(
+        tip_force, tip_moment, fixed, measured,
+        TrackStart(start, _NO_JACOBIAN, _NO_JACOBIAN, DAMPING, _NO_VALUES, _NO_STATES, 0),
+        TrackLimits(robot.solver.estimate_tolerance, robot.length, robot.solver.max_iterations,
+                    robot.probe_runs, _UNBOUNDED, 0.0))
+    x, res, con, states, jac, con_jac = (tracked.x, tracked.residual, tracked.balance,
+                                         tracked.states, tracked.jac, tracked.con_jac)
+    iterations, used, ok = tracked.iterations, tracked.runs, tracked.ok
     runs[0] += used
     if ok:
         slack, _ = _slack_estimate(robot, measured, tip_force, tip_moment, previous,
@@ -274,8 +285,10 @@ def estimate_shape(robot, cable_lengths, tip_force=(0.0, 0.0, 0.0), tip_moment=(
 
     def evaluate(x):
         runs[0] += robot.probe_runs
-        values, jac, states = robot.probe(x, size, tip_force, tip_moment)
-        return values[cables] - measured, jac[cables], values[balance], jac[balance], states
+        probed = robot.probe(x, size, tip_force, tip_moment)
+        values, jac = probed.values, probed.jacobian
+        return (values[cables] - measured, jac[cables], values[balance], jac[balance],
+                probed.states)
 
     result = constrained_gauss_newton(
         evaluate, start, robot.solver.max_iterations, robot.solver.estimate_tolerance,
@@ -367,11 +380,12 @@ def _passive_start(robot, tip_force, tip_moment):
     force, moment = np.array(tip_force), np.array(tip_moment)
     state = robot.passive_state(bvp.linear_guess(robot, force, moment))
     rows = ProbeRows(len(robot.cable_names))
-    values, jac, states = robot.probe(state, robot.state_size, force, moment)
+    probed = robot.probe(state, robot.state_size, force, moment)
+    values, jac = probed.values, probed.jacobian
     model = np.concatenate([values[rows.lengths], values[rows.balance]])
     return state, WarmStart(np.ascontiguousarray(jac[rows.lengths]),
                             np.ascontiguousarray(jac[rows.balance]), DAMPING, model,
-                            states.copy(), np.concatenate([force, moment]))
+                            probed.states.copy(), np.concatenate([force, moment]))
 
 
 def _carry(jac, con_jac, damping, res, measured, con, states, load, age):

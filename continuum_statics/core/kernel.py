@@ -34,7 +34,8 @@ import math
 import numba
 import numpy as np
 
-from continuum_statics.core.layout import (  # the node and parameter layouts, stated once
+from continuum_statics.core.layout import (  # the layouts and records, stated once
+    AXIS_ROWS_AT,
     BASE_POSITION_AT,
     BASE_ROTATION_AT,
     BENDING_AT,
@@ -42,12 +43,15 @@ from continuum_statics.core.layout import (  # the node and parameter layouts, s
     C_AT,
     C_INV_AT,
     D_INV_AT,
+    LENGTH_ROWS_AT,
     MOMENT_AT,
     PARAMS_SIZE,
     POSITION_AT,
     ROTATION_AT,
     STATE_SIZE,
     STRETCH_AT,
+    TIP_ROWS_AT,
+    Probe,
 )
 from continuum_statics.core.routing import hole_in
 
@@ -655,22 +659,23 @@ def loads_from_state(x, fixed_tensions, model, bases, ranks, bending_stiffness, 
 
 
 @numba.njit(cache=True, nogil=True)
-def probe(s_grid, params, model, tip_force, tip_moment, x, n_free, step, fixed_tensions,
-          section_state_index, section_bases, section_ranks, section_cables, section_cable_count,
-          cable_offsets, guide_nodes, cable_last_guide, cable_end_node, section_end_node,
-          hole_offsets, stage_routes, route_kinks):
+def probe(model, tip_force, tip_moment, fixed_tensions, x, n_free):
     """Model outputs at a solver state and their forward-difference Jacobian.
 
-    Integrates ``x`` and ``x + step e_k`` for the first ``n_free`` components in one batch
-    (columns of point moments at the tip are exact and need no integration) and returns
-    values = [tip position (3, m); tip z axis (3); cable lengths (n_cables, m);
-    (M_end - tau) L / (E I) (3), the tip moment balance, zero at equilibrium],
-    jacobian (rows of values, n_free columns), and the nominal (N, 21) states.
-    The last thirteen arguments are the robot's
-    :class:`~continuum_statics.core.layout.SectionArrays`;
-    ``section_state_index`` = [index of the first moment coordinate of each section, or -1]
-    (sections ending at the tip node have exact columns in the point model).
+    ``model`` is the robot's :class:`~continuum_statics.core.layout.KernelModel`. Integrates
+    ``x`` and ``x + model.step e_k`` for the first ``n_free`` components in one batch (columns
+    of point moments at the tip are exact and need no integration) and returns a
+    :class:`~continuum_statics.core.layout.Probe`: values = [tip position (3, m); tip z axis
+    (3); cable lengths (n_cables, m); (M_end - tau) L / (E I) (3), the tip moment balance, zero
+    at equilibrium] (rows :class:`~continuum_statics.core.layout.ProbeRows`), their Jacobian
+    (n_free columns) and the nominal (N, 21) states. ``model.section_state_index`` = [index of
+    the first moment coordinate of each section, or -1] (sections ending at the tip node have
+    exact columns in the point model).
     """
+    s_grid, params, code, step = model.s_grid, model.params, model.code, model.step
+    section_state_index, section_bases = model.section_state_index, model.section_bases
+    section_ranks, section_end_node = model.section_ranks, model.section_end_node
+    cable_offsets = model.cable_offsets
     n_x = x.shape[0]
     n_cables = cable_offsets.shape[0]
     n_sections = section_bases.shape[0]
@@ -678,7 +683,7 @@ def probe(s_grid, params, model, tip_force, tip_moment, x, n_free, step, fixed_t
     length = s_grid[n_nodes - 1]
     ei = params[C_AT]
     exact = np.zeros(n_x, dtype=np.bool_)
-    if model == POINT_MOMENT:
+    if code == POINT_MOMENT:
         for k in range(n_sections):
             if section_end_node[k] == n_nodes - 1 and section_state_index[k] >= 0:
                 for c in range(section_ranks[k]):
@@ -699,26 +704,29 @@ def probe(s_grid, params, model, tip_force, tip_moment, x, n_free, step, fixed_t
             trial[i] = x[i]
         if columns[b] >= 0:
             trial[columns[b]] += step
-        loads_from_state(trial, fixed_tensions, model, section_bases, section_ranks, ei,
-                         section_cables, section_cable_count, cable_offsets, moments[b],
-                         tensions[b])
+        loads_from_state(trial, fixed_tensions, code, section_bases, section_ranks, ei,
+                         model.section_cables, model.section_cable_count, cable_offsets,
+                         moments[b], tensions[b])
         for i in range(3):
             forces[b, i] = tip_force[i]
             bendings[b, i] = trial[i]
-    states = integrate_batch(s_grid, params, model, forces, bendings, moments, tensions,
-                             stage_routes, route_kinks, cable_end_node, section_end_node)
-    lengths = cable_lengths_batch(states, guide_nodes, hole_offsets, cable_last_guide)
-    rows = 9 + n_cables
+    states = integrate_batch(s_grid, params, code, forces, bendings, moments, tensions,
+                             model.stage_routes, model.route_kinks, model.cable_end_node,
+                             section_end_node)
+    lengths = cable_lengths_batch(states, model.guide_nodes, model.hole_offsets,
+                                  model.cable_last_guide)
+    balance_at = LENGTH_ROWS_AT + n_cables
+    rows = balance_at + 3
     table = np.empty((n_batch, rows))
     scale = length / ei
     for b in range(n_batch):
         tip = states[b, n_nodes - 1]
         for i in range(3):
-            table[b, i] = tip[POSITION_AT + i]
-            table[b, 3 + i] = tip[ROTATION_AT + 2 + 3 * i]  # column 2 of R
-            table[b, 6 + n_cables + i] = (tip[MOMENT_AT + i] - tip_moment[i]) * scale
+            table[b, TIP_ROWS_AT + i] = tip[POSITION_AT + i]
+            table[b, AXIS_ROWS_AT + i] = tip[ROTATION_AT + 2 + 3 * i]  # column 2 of R
+            table[b, balance_at + i] = (tip[MOMENT_AT + i] - tip_moment[i]) * scale
         for j in range(n_cables):
-            table[b, 6 + j] = lengths[b, j]
+            table[b, LENGTH_ROWS_AT + j] = lengths[b, j]
     values = table[0].copy()
     jacobian = np.zeros((rows, n_free))
     for b in range(1, n_batch):
@@ -728,7 +736,7 @@ def probe(s_grid, params, model, tip_force, tip_moment, x, n_free, step, fixed_t
     # exact columns: a point moment B c E I at the tip only moves M_end by -R(L) B c E I
     tip = states[0, n_nodes - 1]
     for k in range(n_sections):
-        if (model != POINT_MOMENT or section_end_node[k] != n_nodes - 1
+        if (code != POINT_MOMENT or section_end_node[k] != n_nodes - 1
                 or section_state_index[k] < 0):
             continue
         for c in range(section_ranks[k]):
@@ -739,13 +747,12 @@ def probe(s_grid, params, model, tip_force, tip_moment, x, n_free, step, fixed_t
                 g = (tip[ROTATION_AT + 3 * i] * section_bases[k, 0, c]
                      + tip[ROTATION_AT + 1 + 3 * i] * section_bases[k, 1, c]
                      + tip[ROTATION_AT + 2 + 3 * i] * section_bases[k, 2, c])
-                jacobian[6 + n_cables + i, col] = -g * ei * scale
-    return values, jacobian, states[0].copy()
+                jacobian[balance_at + i, col] = -g * ei * scale
+    return Probe(values, jacobian, states[0].copy())
 
 
 @numba.njit(cache=True, nogil=True)
-def tip_jacobian(s_grid, params, model, tip_force, base_bending, disk_moments, tensions,
-                 stage_routes, route_kinks, cable_end_node, section_end_node, force_step,
+def tip_jacobian(model, tip_force, base_bending, disk_moments, tensions, force_step,
                  bending_step):
     """6x6 tip Jacobian by forward differences (paper sec. V.B) from one batch of 7 IVPs.
 
@@ -765,8 +772,9 @@ def tip_jacobian(s_grid, params, model, tip_force, base_bending, disk_moments, t
     for k in range(3):
         forces[1 + k, k] += force_step
         bendings[4 + k, k] += bending_step
-    states = integrate_batch(s_grid, params, model, forces, bendings, moments, tens,
-                             stage_routes, route_kinks, cable_end_node, section_end_node)
+    states = integrate_batch(model.s_grid, model.params, model.code, forces, bendings, moments,
+                             tens, model.stage_routes, model.route_kinks, model.cable_end_node,
+                             model.section_end_node)
     tip = states.shape[1] - 1
     jac = np.empty((6, 6))
     w = np.empty((3, 3))

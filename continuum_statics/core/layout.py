@@ -29,38 +29,49 @@ C_AT, C_INV_AT, D_AT, D_INV_AT, BODY_FORCE_AT, BASE_POSITION_AT, BASE_ROTATION_A
 PARAMS_SIZE = 27
 
 
+# rows of ``kernel.probe``'s values (and its Jacobian): first index of each block; the balance
+# block follows the n_cables lengths (the compiled code reads these)
+TIP_ROWS_AT, AXIS_ROWS_AT, LENGTH_ROWS_AT = 0, 3, 6
+
+
 @dataclass(frozen=True)
 class ProbeRows:
     """Row blocks of ``kernel.probe`` for a robot with ``n_cables`` cables."""
 
     n_cables: int
 
-    tip = slice(0, 3)
-    axis = slice(3, 6)
+    tip = slice(TIP_ROWS_AT, AXIS_ROWS_AT)
+    axis = slice(AXIS_ROWS_AT, LENGTH_ROWS_AT)
 
     @property
     def lengths(self):
         """Cable lengths, m."""
-        return slice(6, 6 + self.n_cables)
+        return slice(LENGTH_ROWS_AT, LENGTH_ROWS_AT + self.n_cables)
 
     @property
     def balance(self):
         """Tip moment balance (zero at equilibrium)."""
-        return slice(6 + self.n_cables, 9 + self.n_cables)
+        return slice(LENGTH_ROWS_AT + self.n_cables, LENGTH_ROWS_AT + 3 + self.n_cables)
 
     @property
     def size(self):
         """Number of rows."""
-        return 9 + self.n_cables
+        return LENGTH_ROWS_AT + 3 + self.n_cables
 
 
-class SectionArrays(NamedTuple):
-    """The robot's index tables, built once per robot, in the order the kernels take them.
+class KernelModel(NamedTuple):
+    """Everything the compiled solvers read of one robot, passed to them as one argument.
 
-    ``kernel.probe`` and ``tracking.track`` end their argument lists with these (a test checks
-    the names), so callers pass ``*robot.arrays`` and numba still receives flat arrays.
+    Built once per robot (:class:`continuum_statics.core.model.Model`); a solve under other rod
+    constants (gravity continuation, calibration) passes ``_replace(params=...)``. Numba types a
+    record of this shape in ~2.5 us per call (flat arrays: ~1.5 us), so only
+    ``kernel.integrate_batch``, the single IVP of ``Robot.solve_ivp``, keeps flat arguments.
     """
 
+    s_grid: np.ndarray  # (N,) integration nodes, unstretched arc length (m)
+    params: np.ndarray  # rod constants (``kernel.pack_params``)
+    code: int  # cable model: ``kernel.POINT_MOMENT`` or ``kernel.DISTRIBUTED``
+    step: float  # finite-difference step for u(0) and section moments (1/m)
     section_state_index: np.ndarray  # (S,) first solver-state column of each section, or -1
     section_bases: np.ndarray  # (S, 3, 2) orthonormal bases of the moments a section can apply
     section_ranks: np.ndarray  # (S,) columns of each basis used (0, 1 or 2)
@@ -74,3 +85,11 @@ class SectionArrays(NamedTuple):
     hole_offsets: np.ndarray  # (n_cables, G, 3) hole at each guide, local frame, m (routing.py)
     stage_routes: np.ndarray  # (3 (N - 1), 6 n_cables) l and l' at each interval's RK points
     route_kinks: np.ndarray  # (N - 1,) bool: a cable turns where interval i starts
+
+
+class Probe(NamedTuple):
+    """What ``kernel.probe`` returns."""
+
+    values: np.ndarray  # (ProbeRows.size,) rows as :class:`ProbeRows`
+    jacobian: np.ndarray  # (ProbeRows.size, n_free) forward differences
+    states: np.ndarray  # (N, 21) node states at the state probed

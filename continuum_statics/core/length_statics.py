@@ -35,9 +35,13 @@ from continuum_statics.core import bvp
 from continuum_statics.core.inputs import as_vector
 from continuum_statics.core.kernel import POINT_MOMENT
 from continuum_statics.core.layout import ProbeRows
-from continuum_statics.core.length_tracking import BALANCE_TOLERANCE, chord, jacobian_pieces
+from continuum_statics.core.length_tracking import (
+    BALANCE_TOLERANCE,
+    ChordLimits,
+    Pieces,
+    TendonArgs,
+)
 from continuum_statics.core.shape import Shape
-from continuum_statics.core.tendon_kernel import path_stretch
 
 _NO_VALUES, _NO_STATES = np.zeros(0), np.zeros((0, 0))  # tell chord to integrate at its start
 #: Capstan coefficient below which a cable is taken as frictionless (exp(2 pi mu) - 1 < 1e-8).
@@ -105,10 +109,20 @@ class _Problem:
         self.free = free_lengths
         self.motion = motion
         self.tip_force, self.tip_moment = tip_force, tip_moment
-        (self.rows, self.compliance, self.base_axis, self.radius, self.t_ref, self.kappa,
-         self.scale, self.moment_map, self.kernel_moment_map, friction) = problem_constants(robot)
-        self.friction = friction * motion + 0.0  # no -0.0: ModelAt compares the bytes
+        constants = problem_constants(robot)
+        self.rows, self.compliance, self.base_axis = (constants.rows, constants.compliance,
+                                                      constants.base_axis)
+        self.radius, self.t_ref, self.kappa = constants.radius, constants.t_ref, constants.kappa
+        self.scale, self.moment_map = constants.scale, constants.moment_map
+        self.kernel_moment_map = constants.kernel_map
+        # no -0.0: ModelAt compares the bytes
+        self.friction = constants.friction * motion + 0.0
         self.with_friction = bool(self.friction.any())
+
+    def tendon_args(self):
+        """Return the problem's :class:`length_tracking.TendonArgs` (what compiled steps read)."""
+        return TendonArgs(self.kernel_moment_map, self.free, self.friction, self.compliance,
+                          self.base_axis, self.kappa, self.radius)
 
     def state_of(self, z):
         """Solver state x and fixed tensions of z (the robot's solver-state convention)."""
@@ -127,8 +141,9 @@ class _Problem:
         robot, n, rows = self.robot, self.n, self.rows
         x, fixed = self.state_of(z)
         point_columns = parts is None and fixed is None  # the point model's, with the nominal
-        values, jac_x, states = robot.probe(x, robot.state_size if point_columns else 0,
-                                            self.tip_force, self.tip_moment, fixed)
+        probed = robot.probe(x, robot.state_size if point_columns else 0, self.tip_force,
+                             self.tip_moment, fixed)
+        values, jac_x, states = probed.values, probed.jacobian, probed.states
         t = z[3:]
         paths = values[rows.lengths]
         consumed, motor, mean = self.consumed(states, paths, t)
@@ -144,10 +159,10 @@ class _Problem:
             d_consumed[:, 3:] -= np.diag(paths * self.compliance / stretch ** 2)
             parts = (jac[rows.balance], d_consumed)
         elif not chord:  # tension columns too: one compiled batch of 4 + n IVPs
-            args = robot.kernel_args(self.tip_force, self.tip_moment)
-            parts = jacobian_pieces(*args[:6], *args[7:], np.asarray(z, dtype=float),
-                                    self.kernel_moment_map, self.compliance, mean,
-                                    1e-7 * self.t_ref)
+            parts = robot.model.jacobian_pieces(self.tip_force, self.tip_moment,
+                                                np.asarray(z, dtype=float),
+                                                self.kernel_moment_map, self.compliance, mean,
+                                                1e-7 * self.t_ref)
         taut = self.kappa * t >= gap
         residual = np.concatenate([values[rows.balance],
                                    np.where(taut, gap, self.kappa * t) / self.radius])
@@ -170,16 +185,27 @@ class _Problem:
         """Free length each cable's path takes (m), motor-side tension (N), mean tension (N)."""
         if not self.with_friction:
             return paths / (1.0 + t * self.compliance), t.copy(), t.copy()
-        consumed, motor, mean = np.empty(self.n), np.empty(self.n), np.empty(self.n)
-        robot = self.robot
-        path_stretch(states, robot.guide_nodes, robot.cable_last_guide, robot.hole_offsets,
-                     self.base_axis, np.ascontiguousarray(t), self.friction, self.compliance,
-                     consumed, motor, mean)
-        return consumed, motor, mean
+        return self.robot.model.path_stretch(states, self.base_axis, np.ascontiguousarray(t),
+                                             self.friction, self.compliance)
+
+
+class ProblemConstants(NamedTuple):
+    """A robot's fixed data of the tendon problem (:func:`problem_constants`)."""
+
+    rows: ProbeRows
+    compliance: np.ndarray  #: (n,) 1 / EA of each cable (1/N)
+    base_axis: np.ndarray  #: (3,) the rod's axis at the base, global
+    radius: float  #: mean hole radius (m): the scale of the cable rows
+    t_ref: float  #: tension scale E I / (L radius) (N)
+    kappa: float  #: m per N in the semismooth min(kappa t, g)
+    scale: np.ndarray  #: (3 + n,) scales of z
+    moment_map: np.ndarray  #: ``tension_moment_map`` (point-moment model) or None
+    kernel_map: np.ndarray  #: the same, or zeros of its shape: what the compiled code reads
+    friction: np.ndarray  #: (n,) capstan coefficients, negligible ones as 0
 
 
 @functools.lru_cache(maxsize=16)
-def problem_constants(robot):
+def problem_constants(robot) -> ProblemConstants:
     """Return a robot's fixed problem data (per call it cost more than the compiled solve)."""
     n = len(robot.cable_names)
     base_axis = np.ascontiguousarray(robot.base_rotation[:, 2])
@@ -196,8 +222,8 @@ def problem_constants(robot):
     # a capstan factor within 1e-8 of 1 over a full turn is none (a fit that found no friction
     # writes ~1e-13): the frictionless path is much cheaper than the wrap of every hole
     friction = np.where(robot.tendons.friction > NEGLIGIBLE_FRICTION, robot.tendons.friction, 0.0)
-    return (ProbeRows(n), robot.tendons.compliance, base_axis, radius, t_ref, kappa, scale,
-            moment_map, kernel_map, friction)
+    return ProblemConstants(ProbeRows(n), robot.tendons.compliance, base_axis, radius, t_ref,
+                            kappa, scale, moment_map, kernel_map, friction)
 
 
 def motion_since(robot, free_lengths, warm_start, threshold=MOTION_THRESHOLD):
@@ -331,24 +357,24 @@ def _chord(problem, z0, parts, warm_start):
     call, and so does the model at z (:class:`ModelAt`) when its load and friction are the same.
     """
     robot = problem.robot
-    args = robot.kernel_args(problem.tip_force, problem.tip_moment)
     known = getattr(warm_start, 'model_at', None)
     if known is not None and not known.holds_for(problem):
         known = None
     if known is not None:
         z0 = known.z  # the z the model was integrated at (a slack tension reads 0 elsewhere)
-    (z, ok, iterations, _, x, fixed, states, motor, gap, taut, balance, d_consumed, _,
-     values) = chord(*args[:6], *args[7:], np.asarray(z0, dtype=float),
-                     problem.kernel_moment_map, problem.free, problem.friction,
-                     problem.compliance, problem.base_axis, problem.kappa, problem.radius,
-                     problem.scale, parts[0], parts[1], problem.tolerance,
-                     problem.balance_tolerance, CHORD_ITERATIONS, CHORD_REFRESHES,
-                     _NO_VALUES if known is None else known.values,
-                     _NO_STATES if known is None else known.states)
-    info = (x, None if problem.moment_map is not None else fixed, states, motor, gap, taut)
-    model = ModelAt(z.copy(), values, np.array(states), problem.friction.copy(),
+    done = robot.model.chord(
+        problem.tip_force, problem.tip_moment, np.asarray(z0, dtype=float),
+        problem.tendon_args(), problem.scale, Pieces(*parts),
+        ChordLimits(problem.tolerance, problem.balance_tolerance, CHORD_ITERATIONS,
+                    CHORD_REFRESHES),
+        _NO_VALUES if known is None else known.values,
+        _NO_STATES if known is None else known.states)
+    z, x, fixed, states = done.z, done.x, done.fixed, done.states
+    info = (x, None if problem.moment_map is not None else fixed, states, done.motor, done.gap,
+            done.taut)
+    model = ModelAt(z.copy(), done.model_values, np.array(states), problem.friction.copy(),
                     np.concatenate([problem.tip_force, problem.tip_moment]), robot)
-    return z, ok, iterations, info, (balance, d_consumed), model
+    return z, done.ok, done.iterations, info, done.pieces, model
 
 
 class ModelAt(NamedTuple):

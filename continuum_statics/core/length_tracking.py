@@ -7,6 +7,8 @@ IVP per iteration, the Jacobian assembled for each cable's branch of now, and no
 the iterations. It gives up (``ok`` False) as soon as a step gains less than half, and the
 caller then solves afresh (:func:`length_statics._newton`).
 """
+from typing import NamedTuple
+
 import numba
 import numpy as np
 
@@ -17,17 +19,74 @@ from continuum_statics.core.kernel import (
     loads_from_state,
     probe,
 )
-from continuum_statics.core.layout import MOMENT_AT
+from continuum_statics.core.layout import LENGTH_ROWS_AT, MOMENT_AT
 from continuum_statics.core.tendon_kernel import path_stretch
 
 #: Balance tolerance (relative) of a converged solve; cable rows: the estimate tolerance (m).
 BALANCE_TOLERANCE = 1e-9
-#: What :func:`chord` returns, in order (x, fixed, states, motor, gap, taut: ``_Problem``'s info).
-CHORD_RESULT = ('z', 'ok', 'iterations', 'residual', 'x', 'fixed', 'states', 'motor', 'gap',
-                'taut', 'balance', 'd_consumed', 'runs', 'model_values')
 #: Layout of ``model_values`` (3 + 3 n): tip balance (3), then per cable the free length its path
 #: takes (m), its motor-side and its mean tension (N): the model at z, whatever the free lengths.
 MODEL_VALUES = ('balance', 'consumed', 'motor', 'mean')
+
+
+class TendonArgs(NamedTuple):
+    """The tendon problem at one measurement (``length_statics._Problem``'s constants)."""
+
+    moment_map: np.ndarray  #: the robot's ``tension_moment_map`` (any array of it otherwise)
+    free: np.ndarray  #: (n,) free lengths Lf (m)
+    friction: np.ndarray  #: (n,) mu times the sign of motion
+    compliance: np.ndarray  #: (n,) 1 / EA (1/N)
+    base_axis: np.ndarray  #: (3,) the rod's axis at the base, global
+    kappa: float  #: m/N, the semismooth residual's scale of a slack cable's tension
+    radius: float  #: m, the scale of the cable rows
+
+
+class Evaluation(NamedTuple):
+    """What :func:`evaluate_at` returns: the residual at z and the model there."""
+
+    residual: np.ndarray  #: (3 + n,) scaled as ``_Problem.evaluate``
+    x: np.ndarray  #: solver state of z
+    fixed: np.ndarray  #: (n,) fixed tensions of z (N)
+    states: np.ndarray  #: (N, 21) node states
+    motor: np.ndarray  #: (n,) motor-side tensions (N)
+    gap: np.ndarray  #: (n,) free length minus what the path takes (m)
+    taut: np.ndarray  #: (n,) bool
+    mean: np.ndarray  #: (n,) mean tensions (N), what each stretch follows
+    model_values: np.ndarray  #: (3 + 3 n,) :data:`MODEL_VALUES`
+
+
+class Pieces(NamedTuple):
+    """The Jacobian's pieces at z (m per unscaled z)."""
+
+    balance: np.ndarray  #: (3, 3 + n) d balance / dz
+    d_consumed: np.ndarray  #: (n, 3 + n) d consumed free length / dz
+
+
+class ChordLimits(NamedTuple):
+    """How far one :func:`chord` call may go."""
+
+    tolerance: float  #: on the cable rows (m)
+    balance_tolerance: float  #: on the balance rows (relative, :data:`BALANCE_TOLERANCE`)
+    max_iterations: int
+    refreshes: int  #: Jacobian refreshes allowed after a step that gained less than half
+
+
+class Chorded(NamedTuple):
+    """What :func:`chord` returns."""
+
+    z: np.ndarray
+    ok: bool
+    iterations: int
+    residual: np.ndarray
+    x: np.ndarray
+    fixed: np.ndarray
+    states: np.ndarray
+    motor: np.ndarray
+    gap: np.ndarray
+    taut: np.ndarray
+    pieces: Pieces  #: Broyden-updated: they start the next call
+    runs: int  #: IVPs integrated
+    model_values: np.ndarray  #: the model at z (:data:`MODEL_VALUES`)
 
 
 @numba.njit(cache=True, nogil=True)
@@ -61,26 +120,21 @@ def _solve_linear(matrix, rhs):
 
 
 @numba.njit(cache=True, nogil=True)
-def evaluate_at(s_grid, params, model, tip_force, tip_moment, step, section_state_index,
-              section_bases, section_ranks, section_cables, section_cable_count, cable_offsets,
-              guide_nodes, cable_last_guide, cable_end_node, section_end_node, hole_offsets,
-              stage_routes, route_kinks, z, moment_map,
-              free, friction, compliance, base_axis, kappa, radius):
-    """Residual F(z) (3 + n, scaled as ``_Problem.evaluate``), state, tensions, states, gap, taut.
+def evaluate_at(model, tip_force, tip_moment, z, tendon):
+    """Return the residual F(z) and the model there: an :class:`Evaluation`.
 
-    Returns (residual, x, fixed, states, motor, gap, taut, mean, model_values): ``mean`` each
-    cable's mean tension (N), what its stretch follows; ``model_values`` what the residual at
-    any free lengths follows from (:data:`MODEL_VALUES`).
+    ``model`` the robot's :class:`~continuum_statics.core.layout.KernelModel`, ``tendon`` a
+    :class:`TendonArgs`; ``Evaluation.mean`` is each cable's mean tension (N), what its stretch
+    follows; ``model_values`` what the residual at any free lengths follows from.
     """
-    n = cable_offsets.shape[0]
-    x = np.empty(moment_map.shape[0] + 3)
+    n = model.cable_offsets.shape[0]
+    code = model.code
+    x = np.empty(tendon.moment_map.shape[0] + 3)
     fixed = np.empty(n)
-    _state_of(z, model, moment_map, x, fixed)
-    values, _, states = probe(s_grid, params, model, tip_force, tip_moment, x, 0, step, fixed,
-                              section_state_index, section_bases, section_ranks, section_cables,
-                              section_cable_count, cable_offsets, guide_nodes, cable_last_guide,
-                              cable_end_node, section_end_node, hole_offsets, stage_routes,
-                              route_kinks)
+    _state_of(z, code, tendon.moment_map, x, fixed)
+    probed = probe(model, tip_force, tip_moment, fixed, x, 0)
+    values, states = probed.values, probed.states
+    friction, compliance = tendon.friction, tendon.compliance
     tensions = np.ascontiguousarray(z[3:])
     consumed = np.empty(n)
     motor = np.empty(n)
@@ -89,21 +143,21 @@ def evaluate_at(s_grid, params, model, tip_force, tip_moment, step, section_stat
     for j in range(n):
         with_friction = with_friction or friction[j] != 0.0
     if with_friction:
-        path_stretch(states, guide_nodes, cable_last_guide, hole_offsets, base_axis, tensions,
-                     friction, compliance, consumed, motor, mean)
+        path_stretch(states, model.guide_nodes, model.cable_last_guide, model.hole_offsets,
+                     tendon.base_axis, tensions, friction, compliance, consumed, motor, mean)
     else:
         for j in range(n):
-            consumed[j] = values[6 + j] / (1.0 + tensions[j] * compliance[j])
+            consumed[j] = values[LENGTH_ROWS_AT + j] / (1.0 + tensions[j] * compliance[j])
             motor[j] = tensions[j]
             mean[j] = tensions[j]
     model_values = np.empty(3 + 3 * n)
     for i in range(3):
-        model_values[i] = values[6 + n + i]  # rows: core/layout.py ProbeRows
+        model_values[i] = values[LENGTH_ROWS_AT + n + i]  # the balance rows of ProbeRows
     model_values[3:3 + n] = consumed
     model_values[3 + n:3 + 2 * n] = motor
     model_values[3 + 2 * n:] = mean
-    residual, gap, taut = _residual(z, model_values, free, kappa, radius)
-    return residual, x, fixed, states, motor, gap, taut, mean, model_values
+    residual, gap, taut = _residual(z, model_values, tendon.free, tendon.kappa, tendon.radius)
+    return Evaluation(residual, x, fixed, states, motor, gap, taut, mean, model_values)
 
 
 @numba.njit(cache=True, nogil=True)
@@ -124,14 +178,14 @@ def _residual(z, model_values, free, kappa, radius):
 
 
 @numba.njit(cache=True, nogil=True)
-def _state_of(z, model, moment_map, x, fixed):
+def _state_of(z, code, moment_map, x, fixed):
     """Fill the solver state x and fixed tensions of z (``_Problem.state_of``)."""
     n = fixed.shape[0]
     x[:] = 0.0
     fixed[:] = 0.0
     for i in range(3):
         x[i] = z[i]
-    if model == POINT_MOMENT:
+    if code == POINT_MOMENT:
         for r in range(moment_map.shape[0]):
             acc = 0.0
             for j in range(n):
@@ -143,17 +197,17 @@ def _state_of(z, model, moment_map, x, fixed):
 
 
 @numba.njit(cache=True, nogil=True)
-def jacobian_pieces(s_grid, params, model, tip_force, tip_moment, step, section_state_index,
-                    section_bases, section_ranks, section_cables, section_cable_count,
-                    cable_offsets, guide_nodes, cable_last_guide, cable_end_node,
-                    section_end_node, hole_offsets, stage_routes, route_kinks, z, moment_map,
-                    compliance, mean, tension_step):
-    """Return the Jacobian pieces (balance (3, 3 + n), d_consumed (n, 3 + n)) at z.
+def jacobian_pieces(model, tip_force, tip_moment, z, moment_map, compliance, mean,
+                    tension_step):
+    """Return the Jacobian :class:`Pieces` at z.
 
     Forward differences, every column in one batch of 4 + n IVPs (``_Problem.evaluate``'s
-    pieces, the friction profile held: ``mean`` the cables' mean tensions at z, N); ``step``
-    for u(0) (1/m), ``tension_step`` for tensions (N).
+    pieces, the friction profile held: ``mean`` the cables' mean tensions at z, N); the model's
+    ``step`` for u(0) (1/m), ``tension_step`` for tensions (N).
     """
+    s_grid, params, code, step = model.s_grid, model.params, model.code, model.step
+    cable_offsets = model.cable_offsets
+    section_bases = model.section_bases
     n = cable_offsets.shape[0]
     size = 3 + n
     n_sections = section_bases.shape[0]
@@ -169,16 +223,18 @@ def jacobian_pieces(s_grid, params, model, tip_force, tip_moment, step, section_
         trial[:] = z
         if b > 0:
             trial[b - 1] += step if b <= 3 else tension_step
-        _state_of(trial, model, moment_map, x, fixed)
-        loads_from_state(x, fixed, model, section_bases, section_ranks, params[0],
-                         section_cables, section_cable_count, cable_offsets, moments[b],
-                         tensions[b])
+        _state_of(trial, code, moment_map, x, fixed)
+        loads_from_state(x, fixed, code, section_bases, model.section_ranks, params[0],
+                         model.section_cables, model.section_cable_count, cable_offsets,
+                         moments[b], tensions[b])
         for i in range(3):
             forces[b, i] = tip_force[i]
             bendings[b, i] = x[i]
-    states = integrate_batch(s_grid, params, model, forces, bendings, moments, tensions,
-                             stage_routes, route_kinks, cable_end_node, section_end_node)
-    lengths = cable_lengths_batch(states, guide_nodes, hole_offsets, cable_last_guide)
+    states = integrate_batch(s_grid, params, code, forces, bendings, moments, tensions,
+                             model.stage_routes, model.route_kinks, model.cable_end_node,
+                             model.section_end_node)
+    lengths = cable_lengths_batch(states, model.guide_nodes, model.hole_offsets,
+                                  model.cable_last_guide)
     tip = s_grid.shape[0] - 1
     scale = s_grid[tip] / params[0]  # balance rows: (M_end - tau) L / (E I), as kernel.probe
     balance = np.empty((3, size))
@@ -194,7 +250,7 @@ def jacobian_pieces(s_grid, params, model, tip_force, tip_moment, step, section_
     for j in range(n):
         stretch = 1.0 + mean[j] * compliance[j]
         d_consumed[j, 3 + j] -= lengths[0, j] * compliance[j] / (stretch * stretch)
-    return balance, d_consumed
+    return Pieces(balance, d_consumed)
 
 
 @numba.njit(cache=True, nogil=True)
@@ -228,34 +284,26 @@ def _done(residual, radius, tolerance, balance_tolerance):
 
 
 @numba.njit(cache=True, nogil=True)
-def chord(s_grid, params, model, tip_force, tip_moment, step, section_state_index,
-          section_bases, section_ranks, section_cables, section_cable_count, cable_offsets,
-          guide_nodes, cable_last_guide, cable_end_node, section_end_node, hole_offsets,
-          stage_routes, route_kinks, z0, moment_map, free,
-          friction, compliance, base_axis, kappa, radius, scale, balance0, d_consumed0,
-          tolerance, balance_tolerance, max_iterations, refreshes, start_values, start_states):
-    """Chord steps from ``z0``; returns the record :data:`CHORD_RESULT` names.
+def chord(model, tip_force, tip_moment, z0, tendon, scale, pieces, limits, start_values,
+          start_states):
+    """Chord steps from ``z0``; returns a :class:`Chorded`.
 
-    The arguments up to ``route_kinks`` are those of :func:`kernel.probe` without the
-    state, ``n_free`` and the fixed tensions (flat: a tuple argument costs numba's dispatcher
-    time to type). ``z0`` = [u(0) (1/m); end tensions (N)]; ``moment_map`` the robot's
-    ``tension_moment_map`` (point-moment model; any array of its shape otherwise); ``free``
-    (n,) free lengths Lf (m); ``friction`` (n,) mu times the sign of motion; ``compliance`` 1/EA
-    (1/N); ``kappa`` (m/N), ``radius`` (m) and ``scale`` (3 + n) the problem's scales;
-    ``balance0`` (3, 3 + n) and ``d_consumed0`` (n, 3 + n) the previous Jacobian pieces (m per
-    unscaled z), returned Broyden-updated; ``tolerance`` on the cable rows (m) and
-    ``balance_tolerance`` on the balance rows (relative, :data:`BALANCE_TOLERANCE`). A step that
-    gains less than half is retried on Jacobian pieces refreshed by forward differences at z
-    (:func:`jacobian_pieces`, 4 + n IVPs), at most ``refreshes`` times; then ``ok`` is False.
-    ``start_values`` (:data:`MODEL_VALUES`) and ``start_states`` the model at ``z0`` when known
-    from the solve before (same tip load and friction directions): the first IVP is saved;
-    empty: integrate it. The record ends with the IVPs integrated and the model at z.
+    ``model`` the robot's :class:`~continuum_statics.core.layout.KernelModel`; ``z0`` = [u(0)
+    (1/m); end tensions (N)]; ``tendon`` the problem's :class:`TendonArgs`; ``scale`` (3 + n)
+    its scales of z; ``pieces`` the previous Jacobian :class:`Pieces` (m per unscaled z),
+    returned Broyden-updated; ``limits`` a :class:`ChordLimits`. A step that gains less than
+    half is retried on Jacobian pieces refreshed by forward differences at z
+    (:func:`jacobian_pieces`, 4 + n IVPs), at most ``limits.refreshes`` times; then ``ok`` is
+    False. ``start_values`` (:data:`MODEL_VALUES`) and ``start_states`` the model at ``z0`` when
+    known from the solve before (same tip load and friction directions): the first IVP is
+    saved; empty: integrate it.
     """
-    args = (s_grid, params, model, tip_force, tip_moment, step, section_state_index,
-            section_bases, section_ranks, section_cables, section_cable_count, cable_offsets,
-            guide_nodes, cable_last_guide, cable_end_node, section_end_node, hole_offsets,
-            stage_routes, route_kinks)
-    n = cable_offsets.shape[0]
+    n = model.cable_offsets.shape[0]
+    moment_map, free, kappa, radius = (tendon.moment_map, tendon.free, tendon.kappa,
+                                       tendon.radius)
+    balance0, d_consumed0 = pieces.balance, pieces.d_consumed
+    tolerance, balance_tolerance = limits.tolerance, limits.balance_tolerance
+    max_iterations, refreshes = limits.max_iterations, limits.refreshes
     balance = balance0.copy()
     d_consumed = d_consumed0.copy()
     z = z0.copy()
@@ -264,39 +312,39 @@ def chord(s_grid, params, model, tip_force, tip_moment, step, section_state_inde
         states = start_states.copy()  # the caller's stays writable (a Shape of it would not be)
         x = np.empty(moment_map.shape[0] + 3)
         fixed = np.empty(n)
-        _state_of(z, model, moment_map, x, fixed)
+        _state_of(z, model.code, moment_map, x, fixed)
         res, gap, taut = _residual(z, model_values, free, kappa, radius)
         motor = model_values[3 + n:3 + 2 * n].copy()
         mean = model_values[3 + 2 * n:].copy()
         runs = 0
     else:
         res, x, fixed, states, motor, gap, taut, mean, model_values = evaluate_at(
-            *args, z, moment_map, free, friction, compliance, base_axis, kappa, radius)
+            model, tip_force, tip_moment, z, tendon)
         runs = 1
     error = res @ res
     iteration = 0
     limit = max_iterations
     while iteration < limit:
         if _done(res, radius, tolerance, balance_tolerance):
-            return (z, True, iteration, res, x, fixed, states, motor, gap, taut, balance,
-                    d_consumed, runs, model_values)
+            return Chorded(z, True, iteration, res, x, fixed, states, motor, gap, taut,
+                           Pieces(balance, d_consumed), runs, model_values)
         iteration += 1
         jacobian = _jacobian(balance, d_consumed, taut, kappa, radius, scale)
         scaled = -_solve_linear(jacobian, res)
         trial = z + scaled * scale
         t_res, t_x, t_fixed, t_states, t_motor, t_gap, t_taut, t_mean, t_values = evaluate_at(
-            *args, trial, moment_map, free, friction, compliance, base_axis, kappa, radius)
+            model, tip_force, tip_moment, trial, tendon)
         runs += 1
         t_error = t_res @ t_res
         if not t_error <= 0.25 * error:
             if refreshes == 0:
-                return (z, False, iteration, res, x, fixed, states, motor, gap, taut, balance,
-                        d_consumed, runs, model_values)
+                return Chorded(z, False, iteration, res, x, fixed, states, motor, gap, taut,
+                               Pieces(balance, d_consumed), runs, model_values)
             # the secant pieces point nowhere useful: the model's own at z, then retry
             refreshes -= 1
             tension_step = 1e-7 * scale[3] if n else 1.0
-            balance, d_consumed = jacobian_pieces(*args, z, moment_map, compliance, mean,
-                                                  tension_step)
+            balance, d_consumed = jacobian_pieces(model, tip_force, tip_moment, z, moment_map,
+                                                  tendon.compliance, mean, tension_step)
             runs += 4 + n
             limit = iteration + max_iterations
             continue
@@ -312,5 +360,6 @@ def chord(s_grid, params, model, tip_force, tip_moment, step, section_state_inde
         z, res, x, fixed, states, motor, gap, taut, mean, error, model_values = (
             trial, t_res, t_x, t_fixed, t_states, t_motor, t_gap, t_taut, t_mean, t_error,
             t_values)
-    return (z, _done(res, radius, tolerance, balance_tolerance), iteration, res, x, fixed,
-            states, motor, gap, taut, balance, d_consumed, runs, model_values)
+    return Chorded(z, _done(res, radius, tolerance, balance_tolerance), iteration, res, x,
+                   fixed, states, motor, gap, taut, Pieces(balance, d_consumed), runs,
+                   model_values)

@@ -16,23 +16,16 @@ import numpy as np
 
 from continuum_statics.core import bvp, estimation, length_statics, load_estimation, tip_goal
 from continuum_statics.core.inputs import as_vector
-from continuum_statics.core.kernel import (
-    DISTRIBUTED,
-    POINT_MOMENT,
-    cable_lengths_batch,
-    integrate_batch,
-    loads_from_state,
-    pack_params,
-    probe,
-    tip_jacobian,
-)
+from continuum_statics.core.kernel import DISTRIBUTED, POINT_MOMENT, pack_params
 from continuum_statics.core.layout import (
     POSITION,
     ROTATION,
     STATE_SIZE,
+    KernelModel,
+    Probe,
     ProbeRows,
-    SectionArrays,
 )
+from continuum_statics.core.model import Model
 from continuum_statics.core.robot_file import read_robot_description
 from continuum_statics.core.rotations import quaternion_to_rotation
 from continuum_statics.core.routing import Routing
@@ -222,7 +215,10 @@ class Robot:
             self.section_ranks[k] = rank
             self.section_state_index[k] = column if rank else -1
             column += rank
-        self.arrays = SectionArrays(*(getattr(self, name) for name in SectionArrays._fields))
+        # the index tables by their record names (the robot's attributes of the same names)
+        tables = {name: getattr(self, name) for name in KernelModel._fields[4:]}
+        self.model = Model(KernelModel(self.s_grid, self.params, self.model_code,
+                                       self.bending_step(), **tables), self.force_step())
         self.state_size = column
         self.observable_bending = column - 3
         # IVPs in one probe with Jacobians: point moments at the tip have exact columns
@@ -230,9 +226,6 @@ class Robot:
         exact = sum(int(r) for r, n in zip(self.section_ranks, self.section_end_node)
                     if n == tip) if self.model_code == POINT_MOMENT else 0
         self.probe_runs = 1 + column - exact
-        # the loads of a passive state, batch of one (the kernel only reads them)
-        self._no_moments = np.zeros((1, n_sections, 3))
-        self._no_tensions = np.zeros((1, n_cables))
 
     @functools.cached_property
     def tension_moment_map(self):
@@ -265,13 +258,8 @@ class Robot:
 
     def loads(self, state, fixed_tensions=None) -> tuple:
         """Section point moments (S, 3; local, N m) and cable tensions (n_cables, N) of a state."""
-        fixed = self.tensions_or_zero(fixed_tensions)
-        moments = np.zeros((len(self.section_ranks), 3))
-        tensions = np.zeros(len(self.cable_names))
-        loads_from_state(np.asarray(state, dtype=float), fixed, self.model_code,
-                         self.section_bases, self.section_ranks, self.c[0], self.section_cables,
-                         self.section_cable_count, self.cable_offsets, moments, tensions)
-        return moments, tensions
+        return self.model.loads(np.asarray(state, dtype=float),
+                                self.tensions_or_zero(fixed_tensions))
 
     def tensions_or_zero(self, fixed_tensions):
         """Return fixed cable tensions (n_cables,) in N as a float array; zero for None."""
@@ -282,29 +270,20 @@ class Robot:
     def integrate_state(self, state, tip_force, fixed_tensions=None, params=None) -> np.ndarray:
         """(N, 21) kernel states of one solver state under a tip force F (N, global)."""
         moments, tensions = self.loads(state, fixed_tensions)
-        return integrate_batch(self.s_grid, self.params if params is None else params,
-                               self.model_code, np.array(tip_force, dtype=float)[None],
-                               np.asarray(state[:3], dtype=float)[None], moments[None],
-                               tensions[None], self.stage_routes, self.route_kinks,
-                               self.cable_end_node,
-                               self.section_end_node)[0]
+        return self.model.integrate(np.array(tip_force, dtype=float)[None],
+                                    np.asarray(state[:3], dtype=float)[None], moments[None],
+                                    tensions[None], params)[0]
 
-    def probe(self, state, n_free, tip_force, tip_moment, fixed_tensions=None, params=None):
-        """Tip, tip axis, cable lengths, tip balance and their Jacobian (:func:`kernel.probe`).
+    def probe(self, state, n_free, tip_force, tip_moment, fixed_tensions=None,
+              params=None) -> Probe:
+        """Tip, tip axis, cable lengths, tip balance and their Jacobian (:meth:`Model.probe`).
 
         Unchecked fast path for the solvers: arguments must be float arrays.
         """
         # tip loads copied: a read-only view (the nodes' zero load) is another numba signature
-        return probe(self.s_grid, self.params if params is None else params, self.model_code,
-                     np.array(tip_force, dtype=float), np.array(tip_moment, dtype=float), state,
-                     n_free, self.bending_step(),
-                     self.tensions_or_zero(fixed_tensions), *self.arrays)
-
-    def kernel_args(self, tip_force, tip_moment, fixed_tensions=None, params=None):
-        """Return the model arguments of :func:`kernel.probe` but the state (compiled solvers)."""
-        return (self.s_grid, self.params if params is None else params, self.model_code,
-                np.array(tip_force, dtype=float), np.array(tip_moment, dtype=float),
-                self.bending_step(), self.tensions_or_zero(fixed_tensions), *self.arrays)
+        return self.model.probe(state, n_free, np.array(tip_force, dtype=float),
+                                np.array(tip_moment, dtype=float),
+                                self.tensions_or_zero(fixed_tensions), params)
 
     def make_shape(self, state, tip_force, states, fixed_tensions=None) -> Shape:
         """Wrap kernel states in a :class:`Shape` that remembers its solver state."""
@@ -322,10 +301,7 @@ class Robot:
         u0 = as_vector(u0, 3, 'u0')
         tip_force = as_vector(tip_force, 3, 'tip_force')
         # the passive state's loads are zero: no loads_from_state call (a per-call fast path)
-        states = integrate_batch(self.s_grid, self.params, self.model_code, tip_force[None],
-                                 u0[None], self._no_moments, self._no_tensions,
-                                 self.stage_routes, self.route_kinks, self.cable_end_node,
-                                 self.section_end_node)[0]
+        states = self.model.integrate(tip_force[None], u0[None])[0]
         state = np.zeros(self.state_size)
         state[:3] = u0
         return Shape(self.s_grid, states, u0, tip_force, self.node_c, self.d, state=state,
@@ -404,9 +380,7 @@ class Robot:
     # -- cables ----------------------------------------------------------------------------
     def cable_lengths(self, shape) -> np.ndarray:
         """Cable lengths (n_cables,) in m of a shape, order ``cable_names`` (eq. 11, errata)."""
-        states = np.ascontiguousarray(shape.states)[None]
-        return cable_lengths_batch(states, self.guide_nodes, self.hole_offsets,
-                                   self.cable_last_guide)[0]
+        return self.model.cable_lengths(np.ascontiguousarray(shape.states)[None])[0]
 
     # -- Jacobians -------------------------------------------------------------------------
     def force_step(self) -> float:
@@ -423,19 +397,16 @@ class Robot:
         Forward differences as in the paper (section V.B), all seven IVPs in one kernel call;
         the angular rows are vee(dR R^T) (the paper's omega-hat = R-dot R^T), global frame.
         """
-        n_sections = len(self.section_ranks)
-        return tip_jacobian(self.s_grid, self.params, self.model_code,
-                            as_vector(tip_force, 3, 'tip_force'), as_vector(u0, 3, 'u0'),
-                            np.zeros((n_sections, 3)), np.zeros(len(self.cable_names)),
-                            self.stage_routes, self.route_kinks, self.cable_end_node,
-                            self.section_end_node,
-                            self.force_step(), self.bending_step())
+        return self.model.tip_jacobian(as_vector(tip_force, 3, 'tip_force'),
+                                       as_vector(u0, 3, 'u0'),
+                                       np.zeros((len(self.section_ranks), 3)),
+                                       np.zeros(len(self.cable_names)))
 
     def cable_jacobian(self, u0, tip_force=(0.0, 0.0, 0.0)) -> np.ndarray:
         """d(cable lengths)/d u(0) with slack cables, (n_cables, 3) in m per 1/m."""
         state = self.passive_state(as_vector(u0, 3, 'u0'))
-        _, jac, _ = self.probe(state, 3, as_vector(tip_force, 3, 'tip_force'), np.zeros(3))
-        return jac[ProbeRows(len(self.cable_names)).lengths]
+        probed = self.probe(state, 3, as_vector(tip_force, 3, 'tip_force'), np.zeros(3))
+        return probed.jacobian[ProbeRows(len(self.cable_names)).lengths]
 
     # -- inverse problems ------------------------------------------------------------------
     def estimate_shape(self, cable_lengths, tip_force=(0.0, 0.0, 0.0),

@@ -15,7 +15,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from continuum_statics.core.kernel import DISTRIBUTED, section_tensions
+from continuum_statics.core.kernel import DISTRIBUTED
 
 
 @dataclass(frozen=True, eq=False)
@@ -56,7 +56,7 @@ def state_tensions(robot, state, fixed_tensions=None, min_tension=0.0):
         # t = floor + s, s >= 0 least-norm with A s = m - A floor (the kernel's routine)
         rest = moment - arms[cables].T @ floor[cables]
         extra = np.zeros(len(robot.cable_names))
-        section_tensions(np.ascontiguousarray(rest[:2]), cables, robot.cable_offsets, extra)
+        robot.model.section_tensions(np.ascontiguousarray(rest[:2]), cables, extra)
         tensions[cables] = floor[cables] + extra[cables]
     return tensions
 

@@ -144,7 +144,7 @@ class _Problem:
 
     def distance(self, x):
         """Distance (m) from the tip of state ``x`` to the goal, inf when not finite."""
-        values, _, _ = self.robot.probe(x, 0, self.tip_force, self.tip_moment)
+        values = self.robot.probe(x, 0, self.tip_force, self.tip_moment).values
         error = float(np.linalg.norm(values[0:3] - self.goal))
         return error if np.isfinite(error) else math.inf
 
@@ -164,12 +164,12 @@ class _Problem:
         reference = self.start
         iterations = 0
         while True:
-            rows = [6 + i for i in self.held]
+            rows = [ProbeRows(len(robot.cable_names)).lengths.start + i for i in self.held]
             held_at = np.array(self.held_at)
 
             def evaluate(x, rows=rows, held_at=held_at):
-                values, jac, states = robot.probe(x, robot.state_size, self.tip_force,
-                                                  self.tip_moment)
+                probed = robot.probe(x, robot.state_size, self.tip_force, self.tip_moment)
+                values, jac = probed.values, probed.jacobian
                 goal_res, goal_jac = self._goal(values, jac)
                 held_res = (values[rows] - held_at) * self.held_scale
                 held_jac = jac[rows] * self.held_scale

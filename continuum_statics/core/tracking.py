@@ -22,6 +22,7 @@ import numba
 import numpy as np
 
 from continuum_statics.core.kernel import probe
+from continuum_statics.core.layout import LENGTH_ROWS_AT
 from continuum_statics.core.least_squares import constrained_step
 
 #: Levenberg-Marquardt damping a solve starts with (relative to the normal matrix's diagonal).
@@ -42,6 +43,18 @@ class WarmStart(NamedTuple):
     age: int = 0  #: secant updates of ``jac`` since it was the model's own
 
 
+class TrackStart(NamedTuple):
+    """Where :func:`track` starts: a state and what the call before knew there."""
+
+    x: np.ndarray  #: solver state
+    jac: np.ndarray  #: as :class:`WarmStart`; empty (0, 0): finite differences at every step
+    con_jac: np.ndarray
+    damping: float
+    values: np.ndarray  #: empty: integrate the model at ``x`` first
+    states: np.ndarray
+    age: int
+
+
 #: Iterations of a warm-started estimate (one IVP each when the steps succeed).
 TRACK_ITERATIONS = 6
 #: IVPs a node's warm-started estimate may integrate per measurement by default (statics'
@@ -60,59 +73,75 @@ SECANT_FRACTION = 1e-2
 SECANT_AGE = 200
 
 
-@numba.njit(cache=True, nogil=True)
-def _evaluate(model_args, x, measured, n_free):
-    """Length residual (m), tip balance, states and their Jacobians (``n_free`` columns)."""
-    (s_grid, params, model, tip_force, tip_moment, step, fixed, section_state_index,
-     section_bases, section_ranks, section_cables, section_cable_count, cable_offsets,
-     guide_nodes, cable_last_guide, cable_end_node, section_end_node, hole_offsets,
-     stage_routes, route_kinks) = model_args
-    values, jacobian, states = probe(s_grid, params, model, tip_force, tip_moment, x, n_free,
-                                     step, fixed, section_state_index, section_bases,
-                                     section_ranks, section_cables, section_cable_count,
-                                     cable_offsets, guide_nodes, cable_last_guide,
-                                     cable_end_node, section_end_node, hole_offsets,
-                                     stage_routes, route_kinks)
-    n = cable_offsets.shape[0]
-    # rows of probe: core/layout.py ProbeRows (lengths 6:6+n, balance 6+n:9+n)
-    return (values[6:6 + n] - measured, values[6 + n:9 + n].copy(), states,
-            np.ascontiguousarray(jacobian[6:6 + n]), np.ascontiguousarray(jacobian[6 + n:9 + n]))
+class TrackLimits(NamedTuple):
+    """How far one :func:`track` call may go."""
+
+    tolerance: float  #: stop when the predicted change of the lengths is below this (m)
+    weight: float  #: tip balance -> length units in the merit function (m)
+    max_iterations: int  #: iterations before giving up (``ok`` False)
+    probe_runs: int  #: IVPs of one finite-difference Jacobian (``Robot.probe_runs``)
+    #: IVPs before giving up with the best state reached (``ok`` False); a model evaluation or
+    #: Jacobian refresh begun inside it may overrun it by ``probe_runs``
+    max_runs: int
+    secant_fraction: float  #: 0, or the :data:`SECANT_FRACTION` test of a budgeted call
+
+
+class Tracked(NamedTuple):
+    """What :func:`track` returns."""
+
+    x: np.ndarray  #: the state reached
+    residual: np.ndarray  #: (n_cables,) model minus measured lengths there (m)
+    balance: np.ndarray  #: (3,) tip balance there
+    states: np.ndarray  #: (N, 21) node states there
+    jac: np.ndarray  #: (n_cables, state size) d lengths / d x, the model's own or secant
+    con_jac: np.ndarray  #: (3, state size) d balance / d x
+    iterations: int
+    runs: int  #: IVPs integrated
+    ok: bool  #: converged (else the best state reached)
+    damping: float  #: the damping reached
+    age: int  #: secant updates of ``jac`` since it was the model's own
 
 
 @numba.njit(cache=True, nogil=True)
-def track(s_grid, params, model, tip_force, tip_moment, step, fixed, section_state_index,
-          section_bases, section_ranks, section_cables, section_cable_count, cable_offsets,
-          guide_nodes, cable_last_guide, cable_end_node, section_end_node, hole_offsets,
-          stage_routes, route_kinks, measured, x0, jac0,
-          con_jac0, damping0, values0, states0, age0, tolerance, weight, max_iterations,
-          probe_runs, max_runs, secant_fraction):
-    """Estimate from ``x0``; returns (x, residual, balance, states, jac, con_jac, ...).
+def _evaluate(problem, x, measured, n_free):
+    """Length residual (m), tip balance, states and their Jacobians (``n_free`` columns).
 
-    The rest: iterations, runs, ok, damping, age. ``runs`` counts IVPs integrated. The
-    first 20 arguments are those of :func:`kernel.probe` but ``x`` and ``n_free`` (flat: a tuple
-    argument would cost numba's dispatcher ~80 us per call to type).
-    :param measured: (n_cables,) measured lengths (m)
-    :param x0: start state; ``jac0``, ``con_jac0`` its Jacobians (lengths, balance), Broyden-
-        updated (one IVP per evaluation); empty (0 rows): finite-difference Jacobians at every
-        evaluation instead (the cold estimate, ``probe_runs`` IVPs per evaluation)
-    :param values0: (n_cables + 3,) model lengths and balance at ``x0`` (with ``states0`` its node
-        states) when known from the call before (a warm start under the same tip load): the
-        first IVP is then saved; empty: integrate it
-    :param age0: secant updates ``jac0`` has had since it was the model's own (returned updated)
-    :param secant_fraction: 0, or the :data:`SECANT_FRACTION` test of a budgeted call
-    :param damping0: Levenberg-Marquardt damping to start with (a capped call's, returned, lets
-        the next call go on with the step size it had reached)
-    :param tolerance: stop when the predicted change of the lengths is below this (m)
-    :param weight: tip balance -> length units in the merit function (m)
-    :param max_iterations: iterations before giving up (``ok`` False)
-    :param probe_runs: IVPs of one finite-difference Jacobian (``Robot.probe_runs``)
-    :param max_runs: IVPs before giving up with the best state reached (``ok`` False); a model
-        evaluation or Jacobian refresh begun inside it may overrun it by ``probe_runs``
+    ``problem`` = (model, tip force, tip moment, fixed tensions), as :func:`track` takes them.
     """
-    model_args = (s_grid, params, model, tip_force, tip_moment, step, fixed, section_state_index,
-                  section_bases, section_ranks, section_cables, section_cable_count,
-                  cable_offsets, guide_nodes, cable_last_guide, cable_end_node, section_end_node,
-                  hole_offsets, stage_routes, route_kinks)
+    model, tip_force, tip_moment, fixed = problem
+    probed = probe(model, tip_force, tip_moment, fixed, x, n_free)
+    values, jacobian = probed.values, probed.jacobian
+    lengths = LENGTH_ROWS_AT
+    balance = LENGTH_ROWS_AT + measured.shape[0]
+    return (values[lengths:balance] - measured, values[balance:balance + 3].copy(),
+            probed.states, np.ascontiguousarray(jacobian[lengths:balance]),
+            np.ascontiguousarray(jacobian[balance:balance + 3]))
+
+
+@numba.njit(cache=True, nogil=True)
+def track(model, tip_force, tip_moment, fixed, measured, warm, limits):
+    """Estimate from ``warm``'s state; returns a :class:`Tracked`.
+
+    :param model: the robot's :class:`~continuum_statics.core.layout.KernelModel`
+    :param fixed: (n_cables,) fixed tensions (N)
+    :param measured: (n_cables,) measured lengths (m)
+    :param warm: a :class:`TrackStart`: the start state ``x``; ``jac``, ``con_jac`` its
+        Jacobians (lengths, balance), Broyden-updated (one IVP per evaluation); empty (0 rows):
+        finite-difference Jacobians at every evaluation instead (the cold estimate,
+        ``probe_runs`` IVPs per evaluation); ``values`` (n_cables + 3,) model lengths and
+        balance at ``x`` (with ``states`` its node states) when known from the call before (a
+        warm start under the same tip load): the first IVP is then saved; empty: integrate it;
+        ``age`` secant updates ``jac`` has had since it was the model's own (returned
+        updated); ``damping`` the Levenberg-Marquardt damping to start with (a capped call's,
+        returned, lets the next call go on with the step size it had reached)
+    :param limits: a :class:`TrackLimits`
+    """
+    x0, jac0, con_jac0, damping0 = warm.x, warm.jac, warm.con_jac, warm.damping
+    values0, states0, age0 = warm.values, warm.states, warm.age
+    tolerance, weight, max_iterations = limits.tolerance, limits.weight, limits.max_iterations
+    probe_runs, max_runs, secant_fraction = (limits.probe_runs, limits.max_runs,
+                                             limits.secant_fraction)
+    problem = (model, tip_force, tip_moment, fixed)
     fresh = jac0.shape[0] == 0 and con_jac0.shape[0] == 0  # the model's own Jacobians
     # secant Jacobians no longer trusted (a cold estimate's, or too many updates): the
     # model's own first; a try on them costs more than it saves
@@ -127,10 +156,10 @@ def track(s_grid, params, model, tip_force, tip_moment, step, fixed, section_sta
         jac, con_jac = jac0.copy(), con_jac0.copy()
         runs = 0
     elif stale:
-        res, con, states, jac, con_jac = _evaluate(model_args, x, measured, n_all)
+        res, con, states, jac, con_jac = _evaluate(problem, x, measured, n_all)
         runs = probe_runs
     else:
-        res, con, states, jac, con_jac = _evaluate(model_args, x, measured,
+        res, con, states, jac, con_jac = _evaluate(problem, x, measured,
                                                    n_all if fresh else 0)
         runs = probe_runs if fresh else 1
         if not fresh:
@@ -161,12 +190,14 @@ def track(s_grid, params, model, tip_force, tip_moment, step, fixed, section_sta
         trusted = (exact or secant_fraction > 0.0
                    or STATIONARY_FRACTION ** 2 * (res @ res) <= tolerance ** 2)
         if done and trusted:
-            return x, res, con, states, jac, con_jac, max(iteration, 1), runs, True, damping, age
+            return Tracked(x, res, con, states, jac, con_jac, max(iteration, 1), runs, True,
+                           damping, age)
         if failed_secant and secant_fraction > 0.0:
             # a budgeted call that needed the model's own Jacobians ends with them: the next
             # measurement steps on them (their damped tries here doubled the slowest 1 % of
             # calls: 20-21 IVPs instead of 13 on the 3-section distributed robot)
-            return x, res, con, states, jac, con_jac, iteration, runs, False, damping, age
+            return Tracked(x, res, con, states, jac, con_jac, iteration, runs, False, damping,
+                           age)
         refresh = iteration >= limit
         if not refresh:
             iteration += 1
@@ -181,7 +212,7 @@ def track(s_grid, params, model, tip_force, tip_moment, step, fixed, section_sta
                 trial = x + step
                 with_jacobian = fresh and attempt == 0
                 t_res, t_con, t_states, t_jac, t_con_jac = _evaluate(
-                    model_args, trial, measured, n_all if with_jacobian else 0)
+                    problem, trial, measured, n_all if with_jacobian else 0)
                 runs += probe_runs if with_jacobian else 1
                 t_merit = t_res @ t_res + penalty * (t_con @ t_con)
                 if not (np.isfinite(t_merit) and t_merit < current):
@@ -194,7 +225,7 @@ def track(s_grid, params, model, tip_force, tip_moment, step, fixed, section_sta
                                                          con_jac, 0.0)
                         c_trial = c_trial + correction
                         c_res, c_con, c_states, c_jac, c_jac_con = _evaluate(
-                            model_args, c_trial, measured, 0)
+                            problem, c_trial, measured, 0)
                         runs += 1
                         c_merit = c_res @ c_res + penalty * (c_con @ c_con)
                         if np.isfinite(c_merit) and c_merit < current:
@@ -213,9 +244,10 @@ def track(s_grid, params, model, tip_force, tip_moment, step, fixed, section_sta
             # the model's own from x (they alone tell a stationary nonzero misfit); else, or
             # when the budget is spent, the caller goes on from here (the next measurement)
             if fresh or refreshed or exact or runs >= max_runs:
-                return x, res, con, states, jac, con_jac, iteration, runs, False, damping, age
+                return Tracked(x, res, con, states, jac, con_jac, iteration, runs, False, damping,
+                           age)
             # (the refresh may overrun the budget: the next call must start on good Jacobians)
-            res, con, states, jac, con_jac = _evaluate(model_args, x, measured, n_all)
+            res, con, states, jac, con_jac = _evaluate(problem, x, measured, n_all)
             runs += probe_runs
             # a call solved to the end goes on with damped tries and secant updates of them (its
             # caller falls back on the model's own Jacobians at every step if this gives up)
@@ -227,7 +259,7 @@ def track(s_grid, params, model, tip_force, tip_moment, step, fixed, section_sta
         if with_jacobian:
             jac, con_jac = t_jac, t_con_jac
         elif exact:
-            _, _, _, jac, con_jac = _evaluate(model_args, trial, measured, n_all)
+            _, _, _, jac, con_jac = _evaluate(problem, trial, measured, n_all)
             runs += probe_runs
         else:  # Broyden: the secant condition J dx = df for both row blocks
             age += 1

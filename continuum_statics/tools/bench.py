@@ -209,15 +209,11 @@ def bench_sections(path, repeat):
 
 def _kernel_rows(robot, u0, force, ivp, repeat):
     """Print the bare kernel call, the Python overhead of solve_ivp and the old classical RK4."""
-    from continuum_statics.core.kernel import integrate_batch
     from continuum_statics.tools import rk4_reference
 
-    state = robot.passive_state(u0)
-    moments, tensions = robot.loads(state)
-    args = (robot.s_grid, robot.params, robot.model_code, force[None], u0[None], moments[None],
-            tensions[None], robot.stage_routes, robot.route_kinks, robot.cable_end_node,
-            robot.section_end_node)
-    bare = row('kernel call (integrate_batch)', timings(lambda: integrate_batch(*args), repeat))
+    forces, bendings = force[None], u0[None]
+    bare = row('kernel call (Model.integrate)', timings(
+        lambda: robot.model.integrate(forces, bendings), repeat))
     print('  Python overhead per solve_ivp call: %.1f us' % (ivp - bare))
     old = row('old classical RK4 kernel (reference)', timings(
         lambda: rk4_reference.integrate_batch(robot.s_grid, robot.params, force[None],

@@ -70,7 +70,7 @@ def scipy_estimate(robot, lengths, start):
     zero = np.zeros(3)
 
     def residual(x):
-        values, _, _ = robot.probe(x, 0, zero, zero)
+        values = robot.probe(x, 0, zero, zero).values
         return np.concatenate([values[rows.lengths] - lengths,
                                1e3 * robot.length * values[rows.balance]])
 
