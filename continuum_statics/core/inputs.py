@@ -4,10 +4,19 @@ import math
 import numpy as np
 
 
-def as_vector(value, size, name):
-    """Float array of ``size`` finite numbers (a copy), or ``ValueError`` saying what was wrong."""
-    if type(value) is np.ndarray and value.dtype == np.float64 and value.shape == (size,):
+_FLOAT = np.dtype(np.float64)  # a singleton: compared by identity in the per-cycle path
+
+
+def as_vector(value, size, name, finite=True):
+    """Float array of ``size`` finite numbers (a copy), or ``ValueError`` saying what was wrong.
+
+    ``finite=False``: a float64 array of that size is copied unchecked, for a caller whose
+    compiled code checks its inputs itself (and then calls this again to say what was wrong).
+    """
+    if type(value) is np.ndarray and value.dtype is _FLOAT and value.shape == (size,):
         array = value.copy()  # fast path for the per-cycle calls
+        if not finite:
+            return array
     else:
         try:
             array = np.array(value, dtype=float).reshape(-1)
