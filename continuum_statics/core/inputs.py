@@ -3,7 +3,6 @@ import math
 
 import numpy as np
 
-
 _FLOAT = np.dtype(np.float64)  # a singleton: compared by identity in the per-cycle path
 
 
