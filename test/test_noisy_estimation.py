@@ -61,7 +61,8 @@ def test_a_capped_estimate_is_finished_by_the_next_calls():
         if not result.capped or calls == 50:
             break
     assert calls > 1 and result.converged
-    reference = robot.estimate_shape(far, warm_start=start)  # no budget: converges in one call
+    # no budget: converges in one call
+    reference = robot.estimate_shape(far, warm_start=start, exact=True)
     assert reference.converged and not reference.capped
     np.testing.assert_allclose(result.shape.tip_position, reference.shape.tip_position,
                                atol=1e-7)
@@ -78,7 +79,7 @@ def test_the_estimate_on_noisy_lengths_is_the_least_squares_fit(name, model):
     for lengths in measured[1:]:
         previous = robot.estimate_shape(lengths, warm_start=previous, tracking=Tracking())
     # run the budgeted sequence's last estimate to its end (it may have been capped)
-    estimate = robot.estimate_shape(measured[-1], warm_start=previous)
+    estimate = robot.estimate_shape(measured[-1], warm_start=previous, exact=True)
     fit = scipy_estimate(robot, measured[-1], truth.state)
     tip = robot.make_shape(fit.x, np.zeros(3), robot.integrate_state(fit.x, np.zeros(3)))
     np.testing.assert_allclose(estimate.shape.tip_position, tip.tip_position, atol=1e-6)
@@ -103,7 +104,7 @@ def test_the_tendon_model_solves_each_measurement_to_a_tenth_of_the_noise(model)
         steps['noise'].append(estimate.iterations)
         steps['exact'].append(robot.estimate_shape(lengths, warm_start=previous,
                                                    tracking=Tracking()).iterations)
-        full = robot.estimate_shape(lengths, warm_start=previous)  # to solver tolerance
+        full = robot.estimate_shape(lengths, warm_start=previous, exact=True)  # to tolerance
         assert full.converged and full.residual < 1e-8
         if estimate.converged:
             assert estimate.residual <= 0.1 * sigma

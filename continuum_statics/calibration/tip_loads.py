@@ -123,7 +123,8 @@ class TipLoadModel:
                     else:
                         shape = robot.estimate_shape(
                             data.cable_lengths[i], tip_force=data.tip_forces[i],
-                            warm_start=warm, tip_moment=data.tip_moments[i]).shape
+                            warm_start=warm, tip_moment=data.tip_moments[i],
+                            exact=True).shape  # a fit's model: to the solver's tolerance
                 except (ConvergenceError, ValueError):
                     continue
                 if np.all(np.isfinite(shape.tip_position)):

@@ -90,6 +90,11 @@ class Tracking:
         return NOISE_FRACTION * self.length_noise
 
 
+#: What a warm-started ``Robot.estimate_shape`` does without a ``tracking`` of its own: the
+#: statics node's defaults (its per-call budget, thresholds of noise-free encoders).
+DEFAULT_TRACKING = Tracking()
+
+
 @dataclass(frozen=True, eq=False)
 class ShapeEstimate:
     """Result of :func:`estimate_shape`.

@@ -211,7 +211,8 @@ class _Model:
                                                       warm_start=warm)
                 ok = True
             elif self.kind == 'estimate':
-                result = robot.estimate_shape(inputs, force, moment, warm_start=warm)
+                result = robot.estimate_shape(inputs, force, moment, warm_start=warm,
+                                              exact=True)  # differentiated: to the end
                 ok, shape = result.converged, result.shape
             else:
                 result = shape = robot.solve_bvp(force, moment, None if warm is None else

@@ -415,17 +415,23 @@ class Robot:
     # -- inverse problems ------------------------------------------------------------------
     def estimate_shape(self, cable_lengths, tip_force=(0.0, 0.0, 0.0),
                        tip_moment=(0.0, 0.0, 0.0), tensions=None, warm_start=None,
-                       u0_guess=None, tracking=None) -> estimation.ShapeEstimate:
+                       u0_guess=None, tracking=None, exact=False) -> estimation.ShapeEstimate:
         """Shape from measured cable lengths (m) and a tip load (N, N m); :mod:`estimation`.
 
-        ``tracking``: an :class:`estimation.Tracking` when a node calls it once per measurement
-        (bounded work per call: an unfinished estimate is ``capped`` and the next call goes on
-        from it); None: solved to the end.
+        Warm-started (``warm_start`` the previous estimate), a call does bounded work, as the
+        statics node's: the :class:`estimation.Tracking` given, or its defaults; an unfinished
+        estimate is ``capped`` and the next call, warm-started from it, goes on. A cold call
+        (no ``warm_start``) and ``exact=True`` are solved to the solver's tolerances, whatever
+        that costs (on noisy lengths 2-5x the median and up to 10x the slowest tracked call).
         """
         jacobians = getattr(warm_start, 'jacobians', None)
         if jacobians is not None and jacobians[0].shape != (len(self.cable_names),
                                                             self.state_size):
             jacobians = None
+        if exact:
+            tracking = None
+        elif tracking is None and warm_start is not None:
+            tracking = estimation.DEFAULT_TRACKING
         return estimation.estimate_shape(self, cable_lengths, tip_force, tip_moment, tensions,
                                          _warm_or_guess(self, warm_start, u0_guess), jacobians,
                                          warm_start, tracking)
