@@ -158,153 +158,237 @@ def estimate_shape(robot, cable_lengths, tip_force=(0.0, 0.0, 0.0), tip_moment=(
     ``previous`` the previous result itself (the tendon model's warm start and friction history);
     ``tracking`` a :class:`Tracking` when a node calls it once per measurement (bounded work,
     thresholds of its encoders' noise); None: solved to the end.
+    The estimate is the first of :data:`ATTEMPTS` that gives one.
     """
-    n_cables = len(robot.cable_names)
-    measured = as_vector(cable_lengths, n_cables, 'cable_lengths')
-    # a node's per-cycle call: bounded work unless its budget is 0 ("until it converges")
-    bounded = tracking is not None and bool(tracking.max_model_runs)
-    slack_residual = tracking.slack_residual if tracking is not None else SLACK_RESIDUAL
-    tip_force = as_vector(tip_force, 3, 'tip_force')
-    tip_moment = as_vector(tip_moment, 3, 'tip_moment')
-    observable = robot.observable_bending
-    notes = []
-    if observable < 2 * max(len(robot.sections), 1) and n_cables:
-        notes.append('%d cable(s) observe %d of %d bending directions; the rest is held at the '
-                     'passive equilibrium' % (n_cables, observable, 2 * len(robot.sections)))
-    if tensions is not None:
-        tensions = as_vector(tensions, n_cables, 'tensions')
-        if np.any(tensions < 0.0):
-            raise ValueError('tensions must be >= 0 N, got %s' % np.round(tensions, 6).tolist())
-    if not robot.tendons.is_ideal or (not robot.routing.straight
-                                      and robot.cable_model == 'distributed'):
-        # the motor-held lengths decide the shape (stretch, slack, friction); measured
-        # tensions are compared with the model's. A cable that turns round the rod (the
-        # distributed model) has no section moment coordinates (the least-squares path's
-        # unknowns): its tension is one
-        estimate = _tendon_estimate(robot, measured, tip_force, tip_moment, previous,
-                                    observable, notes, tracking)
-        if tensions is not None:
-            off = _rms(estimate.tendons.tensions - tensions)
-            estimate = dataclasses.replace(estimate, message='; '.join(
-                filter(None, [estimate.message, 'measured tensions %.3g N RMS from the '
-                              "tendon model's" % off])))
-        return estimate
-    if tensions is not None:
-        try:
-            state = bvp.solve_loaded(robot, robot.passive_state(), tensions, tip_force,
-                                     tip_moment, start)
-            converged = True
-        except bvp.ConvergenceError as error:
-            state, converged = robot.passive_state(), False
-            notes.insert(0, str(error))
-        states = robot.integrate_state(state, tip_force, tensions)
-        shape = robot.make_shape(state, tip_force, states, tensions)
-        residual = _rms(robot.cable_lengths(shape) - measured)
-        notes.insert(0, 'shape from the measured tensions')
-        return _result(shape, converged, residual, 0, observable, notes)
+    job = _Job.of(robot, cable_lengths, tip_force, tip_moment, tensions, start, jacobians,
+                  previous, tracking)
+    for attempt in ATTEMPTS:
+        estimate = attempt(job)
+        if estimate is not None:
+            return estimate
+    raise AssertionError('the last attempt always answers')  # pragma: no cover
 
-    paid_out = getattr(getattr(previous, 'tendons', None), 'slack_lengths', None)
-    if paid_out is not None and np.any(paid_out > slack_residual):
-        # still slack, most likely: the tendon model first, kept only when it explains the
-        # lengths (ideal cables that all end up shorter than any shape allows have no
-        # equilibrium: then the least-squares fit below, as without slack)
-        slack = _tendon_estimate(robot, measured, tip_force, tip_moment, previous, observable,
-                                 list(notes), tracking)
-        if _plausible(robot, slack):
-            return slack
-    runs = [0]
-    cold = start is None and jacobians is None
-    if cold:
-        # cold: tracked from the passive rod, whose model and Jacobians are known per robot and
-        # load (most cold starts are near it; a bent one refreshes them on the way)
+
+@dataclass(eq=False)
+class _Job:
+    """One estimate's inputs and what its attempts hand on (the start, the model runs)."""
+
+    robot: object
+    measured: np.ndarray  #: (n,) lengths, m
+    tip_force: np.ndarray
+    tip_moment: np.ndarray
+    tensions: np.ndarray  #: (n,) measured tensions (N) or None
+    start: np.ndarray  #: solver state the least squares go on from (None: not yet chosen)
+    jacobians: tuple  #: the previous estimate's :class:`WarmStart` (None: none to reuse)
+    previous: object  #: the previous result
+    tracking: Tracking  #: a node's per-cycle bounds, or None: solved to the end
+    notes: list  #: what limited the estimate so far
+    runs: int = 0  #: IVPs integrated
+    cold: bool = False  #: started on the passive rod's Jacobians
+
+    @classmethod
+    def of(cls, robot, cable_lengths, tip_force, tip_moment, tensions, start, jacobians,
+           previous, tracking):
+        """Validate the inputs (``ValueError`` saying what is wrong) into a job."""
+        n_cables = len(robot.cable_names)
+        measured = as_vector(cable_lengths, n_cables, 'cable_lengths')
+        if tensions is not None:
+            tensions = as_vector(tensions, n_cables, 'tensions')
+            if np.any(tensions < 0.0):
+                raise ValueError('tensions must be >= 0 N, got %s'
+                                 % np.round(tensions, 6).tolist())
+        notes = []
+        observable = robot.observable_bending
+        if observable < 2 * max(len(robot.sections), 1) and n_cables:
+            notes.append('%d cable(s) observe %d of %d bending directions; the rest is held at '
+                         'the passive equilibrium' % (n_cables, observable,
+                                                      2 * len(robot.sections)))
+        return cls(robot, measured, as_vector(tip_force, 3, 'tip_force'),
+                   as_vector(tip_moment, 3, 'tip_moment'), tensions, start, jacobians, previous,
+                   tracking, notes)
+
+    @property
+    def bounded(self):
+        """A node's per-cycle call: bounded work unless its budget is 0 (until it converges)."""
+        return self.tracking is not None and bool(self.tracking.max_model_runs)
+
+    @property
+    def slack_residual(self):
+        """RMS misfit (m) above which ideal cables are tried as slack."""
+        return SLACK_RESIDUAL if self.tracking is None else self.tracking.slack_residual
+
+    @property
+    def load(self):
+        """(6,) the tip force and moment."""
+        return np.concatenate([self.tip_force, self.tip_moment])
+
+    def tendon_estimate(self, notes, tracking):
+        """Return the displacement-driven statics of these lengths (:func:`_tendon_estimate`)."""
+        return _tendon_estimate(self.robot, self.measured, self.tip_force, self.tip_moment,
+                                self.previous, self.robot.observable_bending, notes, tracking)
+
+    def slack_estimate(self, residual, tracking):
+        """Return (estimate or None, unfinished try) of ideal cables as slack."""
+        return _slack_estimate(self.robot, self.measured, self.tip_force, self.tip_moment,
+                               self.previous, self.robot.observable_bending, self.notes,
+                               residual, tracking, self.slack_residual)
+
+    def finish(self, tracked, carry, capped=False, slack_attempt=None):
+        """Return the estimate at a compiled solve's state (``_finish``)."""
+        return _finish(self.robot, tracked.x, self.tip_force, tracked.states, tracked.residual,
+                       tracked.ok, tracked.iterations, self.robot.observable_bending,
+                       self.notes, carry, self.runs, capped=capped, slack_attempt=slack_attempt)
+
+
+def _tendon_model(job):
+    """Estimate tendon robots: the motor-held lengths decide the shape (stretch, slack, friction).
+
+    Measured tensions are compared with the model's. A cable that turns round the rod (the
+    distributed model) has no section moment coordinates (the least-squares unknowns): its
+    tension is one, so such a robot takes this path too.
+    """
+    robot = job.robot
+    if robot.tendons.is_ideal and (robot.routing.straight or robot.cable_model != 'distributed'):
+        return None
+    estimate = job.tendon_estimate(job.notes, job.tracking)
+    if job.tensions is not None:
+        off = _rms(estimate.tendons.tensions - job.tensions)
+        estimate = dataclasses.replace(estimate, message='; '.join(filter(None, [
+            estimate.message, "measured tensions %.3g N RMS from the tendon model's" % off])))
+    return estimate
+
+
+def _measured_tensions(job):
+    """Estimate ideal cables with measured tensions: the forward statics of those tensions."""
+    if job.tensions is None:
+        return None
+    robot, notes = job.robot, job.notes
+    try:
+        state = bvp.solve_loaded(robot, robot.passive_state(), job.tensions, job.tip_force,
+                                 job.tip_moment, job.start)
+        converged = True
+    except bvp.ConvergenceError as error:
+        state, converged = robot.passive_state(), False
+        notes.insert(0, str(error))
+    states = robot.integrate_state(state, job.tip_force, job.tensions)
+    shape = robot.make_shape(state, job.tip_force, states, job.tensions)
+    residual = _rms(robot.cable_lengths(shape) - job.measured)
+    notes.insert(0, 'shape from the measured tensions')
+    return _result(shape, converged, residual, 0, robot.observable_bending, notes)
+
+
+def _still_slack(job):
+    """Try the tendon model first when a cable was paid out at the last measurement.
+
+    It is most likely still slack.
+
+    Kept only when it explains the lengths (ideal cables that all end up shorter than any shape
+    allows have no equilibrium: then the least squares, as without slack).
+    """
+    paid_out = getattr(getattr(job.previous, 'tendons', None), 'slack_lengths', None)
+    if paid_out is None or not np.any(paid_out > job.slack_residual):
+        return None
+    slack = job.tendon_estimate(list(job.notes), job.tracking)
+    return slack if _plausible(job.robot, slack) else None
+
+
+def _tracked(job):
+    """Solve the compiled least squares on the previous estimate's Jacobians, Broyden-updated.
+
+    A cold estimate starts on the passive rod's Jacobians (known per robot and load: most cold
+    starts are near it; a bent one refreshes them on the way). A node's bounded call returns
+    its best state, ``capped``; an estimate solved to the end goes on from there.
+    """
+    robot, tracking = job.robot, job.tracking
+    if job.start is None and job.jacobians is None:
         misses = _passive_start.cache_info().misses
-        start, jacobians = _passive_start(robot, tuple(tip_force), tuple(tip_moment))
+        job.start, job.jacobians = _passive_start(robot, tuple(job.tip_force),
+                                                  tuple(job.tip_moment))
+        job.cold = True
         if _passive_start.cache_info().misses > misses:
-            runs[0] += robot.probe_runs  # integrated now for this robot and load
-    elif start is None:
-        start = robot.passive_state(bvp.linear_guess(robot, tip_force, tip_moment))
-    rows = ProbeRows(n_cables)
-    cables, balance = rows.lengths, rows.balance
-    size = robot.state_size
-    fixed = np.zeros(n_cables)
-    load = np.concatenate([tip_force, tip_moment])
-    if jacobians is not None:  # tracking: the previous Jacobians, Broyden-updated, compiled
-        budget = tracking.max_model_runs if bounded else _UNBOUNDED
-        carry = WarmStart(*jacobians)
-        same_load = np.array_equal(carry.load, load)
-        known = carry.values.shape[0] and same_load
-        tracked = robot.model.track(
-            tip_force, tip_moment, fixed, measured,
-            TrackStart(start, carry.jac, carry.con_jac, carry.damping,
-                       carry.values if known else _NO_VALUES, carry.states,
-                       # under another tip load they are not the model's own here (age 0 says
-                       # they are)
-                       carry.age if same_load else max(carry.age, 1)),
-            TrackLimits(robot.solver.estimate_tolerance, robot.length, TRACK_ITERATIONS,
-                        robot.probe_runs, budget, SECANT_FRACTION if bounded else 0.0))
-        x, res, con, states = tracked.x, tracked.residual, tracked.balance, tracked.states
-        jac, con_jac, iterations, used = (tracked.jac, tracked.con_jac, tracked.iterations,
-                                          tracked.runs)
-        ok, damping, age = tracked.ok, tracked.damping, tracked.age
-        runs[0] += used
-        if cold and age:
-            # secant updates of the straight rod's Jacobians: the next (warm) call makes the
-            # model's own first (probe_runs IVPs, 40 of 170 us on a single section, which a
-            # one-off estimate never needs)
-            age = SECANT_AGE + 1
-        used = runs[0]
-        if ok:
-            slack, attempt = _slack_estimate(robot, measured, tip_force, tip_moment, previous,
-                                             observable, notes, _rms(res), tracking,
-                                             slack_residual)
-            return slack or _finish(
-                robot, x, tip_force, states, res, True, iterations, observable, notes,
-                _carry(jac, con_jac, DAMPING, res, measured, con, states, load, age), used,
-                slack_attempt=attempt)
-        if bounded:
-            # bounded work per measurement: the best state reached; the next call goes on
-            notes.insert(0, 'unfinished after %d model runs%s: refined with the next '
-                            'measurement' % (used, ' (max_model_runs %d)' % tracking.max_model_runs
-                                             if used >= tracking.max_model_runs else ''))
-            return _finish(robot, x, tip_force, states, res, False, iterations, observable,
-                           notes, _carry(jac, con_jac, damping, res, measured, con, states, load,
-                                         age), used, capped=True)
-        start = x  # keep the progress; go on as from a cold start
-    # the fallback: the same compiled loop with finite-difference Jacobians at every evaluation
+            job.runs += robot.probe_runs  # integrated now for this robot and load
+    elif job.start is None:
+        job.start = robot.passive_state(bvp.linear_guess(robot, job.tip_force, job.tip_moment))
+    if job.jacobians is None:
+        return None
+    load = job.load
+    carry = WarmStart(*job.jacobians)
+    same_load = np.array_equal(carry.load, load)
+    known = carry.values.shape[0] and same_load
     tracked = robot.model.track(
-        tip_force, tip_moment, fixed, measured,
-        TrackStart(start, _NO_JACOBIAN, _NO_JACOBIAN, DAMPING, _NO_VALUES, _NO_STATES, 0),
+        job.tip_force, job.tip_moment, np.zeros(len(job.measured)), job.measured,
+        # under another tip load they are not the model's own here (age 0 says they are)
+        TrackStart(job.start, carry.jac, carry.con_jac, carry.damping,
+                   carry.values if known else _NO_VALUES, carry.states,
+                   carry.age if same_load else max(carry.age, 1)),
+        TrackLimits(robot.solver.estimate_tolerance, robot.length, TRACK_ITERATIONS,
+                    robot.probe_runs, tracking.max_model_runs if job.bounded else _UNBOUNDED,
+                    SECANT_FRACTION if job.bounded else 0.0))
+    job.runs += tracked.runs
+    age = tracked.age
+    if job.cold and age:
+        # secant updates of the straight rod's Jacobians: the next (warm) call makes the
+        # model's own first (probe_runs IVPs, 40 of 170 us on a single section, which a one-off
+        # estimate never needs)
+        age = SECANT_AGE + 1
+    if tracked.ok:
+        slack, attempt = job.slack_estimate(_rms(tracked.residual), tracking)
+        return slack or job.finish(tracked, _carry(tracked, job, DAMPING, age),
+                                   slack_attempt=attempt)
+    if job.bounded:
+        # bounded work per measurement: the best state reached; the next call goes on
+        job.notes.insert(0, 'unfinished after %d model runs%s: refined with the next '
+                            'measurement' % (job.runs, ' (max_model_runs %d)'
+                                             % tracking.max_model_runs
+                                             if job.runs >= tracking.max_model_runs else ''))
+        return job.finish(tracked, _carry(tracked, job, tracked.damping, age), capped=True)
+    job.start = tracked.x  # keep the progress; go on as from a cold start
+    return None
+
+
+def _finite_differences(job):
+    """Solve by the same compiled loop with finite-difference Jacobians at every evaluation."""
+    robot = job.robot
+    tracked = robot.model.track(
+        job.tip_force, job.tip_moment, np.zeros(len(job.measured)), job.measured,
+        TrackStart(job.start, _NO_JACOBIAN, _NO_JACOBIAN, DAMPING, _NO_VALUES, _NO_STATES, 0),
         TrackLimits(robot.solver.estimate_tolerance, robot.length, robot.solver.max_iterations,
                     robot.probe_runs, _UNBOUNDED, 0.0))
-    x, res, con, states, jac, con_jac = (tracked.x, tracked.residual, tracked.balance,
-                                         tracked.states, tracked.jac, tracked.con_jac)
-    iterations, used, ok = tracked.iterations, tracked.runs, tracked.ok
-    runs[0] += used
-    if ok:
-        slack, _ = _slack_estimate(robot, measured, tip_force, tip_moment, previous,
-                                   observable, notes, _rms(res), None, slack_residual)
-        return slack or _finish(robot, x, tip_force, states, res, True, iterations, observable,
-                                notes, _carry(jac, con_jac, DAMPING, res, measured, con, states,
-                                              load, 0), runs[0])
-    start = x  # keep the progress; go on in Python (longer line search)
+    job.runs += tracked.runs
+    if tracked.ok:
+        slack, _ = job.slack_estimate(_rms(tracked.residual), None)
+        return slack or job.finish(tracked, _carry(tracked, job, DAMPING, 0))
+    job.start = tracked.x  # keep the progress; go on in Python (longer line search)
+    return None
+
+
+def _python_newton(job):
+    """Solve by the last resort: the constrained Gauss-Newton in Python (longer line search)."""
+    robot, measured = job.robot, job.measured
+    rows = ProbeRows(len(measured))
 
     def evaluate(x):
-        runs[0] += robot.probe_runs
-        probed = robot.probe(x, size, tip_force, tip_moment)
+        job.runs += robot.probe_runs
+        probed = robot.probe(x, robot.state_size, job.tip_force, job.tip_moment)
         values, jac = probed.values, probed.jacobian
-        return (values[cables] - measured, jac[cables], values[balance], jac[balance],
-                probed.states)
+        return (values[rows.lengths] - measured, jac[rows.lengths], values[rows.balance],
+                jac[rows.balance], probed.states)
 
     result = constrained_gauss_newton(
-        evaluate, start, robot.solver.max_iterations, robot.solver.estimate_tolerance,
+        evaluate, job.start, robot.solver.max_iterations, robot.solver.estimate_tolerance,
         constraint_weight=robot.length)
-    slack, _ = _slack_estimate(robot, measured, tip_force, tip_moment, previous, observable,
-                               notes, _rms(result.residual), None, slack_residual)
+    slack, _ = job.slack_estimate(_rms(result.residual), None)
     if slack is not None:
         return slack
-    return _finish(robot, result.x, tip_force, result.evaluation, result.residual,
-                   result.stationary, result.iterations, observable, notes,
-                   WarmStart(*result.jacobians), runs[0])
+    return _finish(robot, result.x, job.tip_force, result.evaluation, result.residual,
+                   result.stationary, result.iterations, robot.observable_bending, job.notes,
+                   WarmStart(*result.jacobians), job.runs)
+
+
+#: The strategies of :func:`estimate_shape`, in the order they are tried: each answers, or
+#: passes (None) to the next, handing on its progress (``_Job.start``).
+ATTEMPTS = (_tendon_model, _measured_tensions, _still_slack, _tracked, _finite_differences,
+            _python_newton)
 
 
 def _finish(robot, x, tip_force, states, length_residual, stationary, iterations, observable,
@@ -393,10 +477,11 @@ def _passive_start(robot, tip_force, tip_moment):
                             probed.states.copy(), np.concatenate([force, moment]))
 
 
-def _carry(jac, con_jac, damping, res, measured, con, states, load, age):
+def _carry(tracked, job, damping, age):
     """Return the :class:`WarmStart` of an estimate (its model values save the next an IVP)."""
-    return WarmStart(jac, con_jac, damping, np.concatenate([res + measured, con]), states.copy(),
-                     load, age)
+    return WarmStart(tracked.jac, tracked.con_jac, damping,
+                     np.concatenate([tracked.residual + job.measured, tracked.balance]),
+                     tracked.states.copy(), job.load, age)
 
 
 def _rms(values):
