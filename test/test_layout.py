@@ -27,6 +27,7 @@ ROD_KERNELS = {
     'kernel': ('integrate_batch', 'cable_lengths_batch', 'loads_from_state', 'section_tensions',
                'probe', 'tip_jacobian'),
     'tracking': ('track',),
+    'goal_tracking': ('goal_solve',),
     'length_tracking': ('evaluate_at', 'jacobian_pieces', 'chord'),
     'tendon_kernel': ('path_stretch',),
 }

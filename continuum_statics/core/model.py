@@ -10,7 +10,7 @@ return (:class:`~continuum_statics.core.layout.Probe`, :class:`tracking.Tracked`
 """
 import numpy as np
 
-from continuum_statics.core import kernel, length_tracking, tendon_kernel, tracking
+from continuum_statics.core import goal_tracking, kernel, length_tracking, tendon_kernel, tracking
 from continuum_statics.core.layout import KernelModel, Probe
 
 
@@ -109,6 +109,12 @@ class Model:
               limits: tracking.TrackLimits) -> tracking.Tracked:
         """Run the shape estimator's constrained Gauss-Newton (``tracking.track``)."""
         return tracking.track(self.record, tip_force, tip_moment, fixed, measured, start, limits)
+
+    def goal_solve(self, tip_force, tip_moment, fixed, x0, rows: goal_tracking.GoalRows,
+                   limits: goal_tracking.GoalLimits) -> goal_tracking.GoalSolved:
+        """Run the tip-goal solver's constrained Gauss-Newton (``goal_tracking.goal_solve``)."""
+        return goal_tracking.goal_solve(self.record, tip_force, tip_moment, fixed, x0, rows,
+                                        limits)
 
     def evaluate_at(self, tip_force, tip_moment, z, tendon: length_tracking.TendonArgs
                     ) -> length_tracking.Evaluation:

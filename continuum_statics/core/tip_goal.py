@@ -22,15 +22,16 @@ import math
 import numpy as np
 
 from continuum_statics.core import bvp
+from continuum_statics.core.goal_tracking import GoalLimits, GoalRows
 from continuum_statics.core.inputs import as_vector
 from continuum_statics.core.layout import ProbeRows
-from continuum_statics.core.least_squares import constrained_gauss_newton
 from continuum_statics.core.shape import Shape
 
 #: Slack on the length limits (m) for round-off.
 LIMIT_SLACK = 1e-9
 #: Weight of a length-limit violation against the change of the section moments (m per m).
 LIMIT_PENALTY = 1e3
+_NO_DIRECTION = np.zeros(0)
 
 
 @dataclass(frozen=True, eq=False)
@@ -141,21 +142,13 @@ class _Problem:
                             initial=1e-3)
         self.held_scale = 1.0 / radius  # m of cable -> rad of bending, like the balance rows
         self.held, self.held_at = [], []
+        self._fixed = np.zeros(n)
 
     def distance(self, x):
         """Distance (m) from the tip of state ``x`` to the goal, inf when not finite."""
         values = self.robot.probe(x, 0, self.tip_force, self.tip_moment).values
         error = float(np.linalg.norm(values[0:3] - self.goal))
         return error if np.isfinite(error) else math.inf
-
-    def _goal(self, values, jac):
-        """Goal residual (m) and its Jacobian: tip position, and the tip axis times L."""
-        res, rows = values[0:3] - self.goal, jac[0:3]
-        if self.direction is not None:
-            length = self.robot.length
-            res = np.concatenate([res, (values[3:6] - self.direction) * length])
-            rows = np.vstack([rows, jac[3:6] * length])
-        return res, rows
 
     def solve(self, x, redundant):
         """Active-set rounds of the constrained solve; (state, iterations, goal reached)."""
@@ -164,41 +157,20 @@ class _Problem:
         reference = self.start
         iterations = 0
         while True:
-            rows = [ProbeRows(len(robot.cable_names)).lengths.start + i for i in self.held]
-            held_at = np.array(self.held_at)
-
-            def evaluate(x, rows=rows, held_at=held_at):
-                probed = robot.probe(x, robot.state_size, self.tip_force, self.tip_moment)
-                values, jac = probed.values, probed.jacobian
-                goal_res, goal_jac = self._goal(values, jac)
-                held_res = (values[rows] - held_at) * self.held_scale
-                held_jac = jac[rows] * self.held_scale
-                # a steep penalty on leaving the length limits: the solve uses what freedom it
-                # has to stay inside them (the active set below is the fallback)
-                lengths = values[self.cables]
-                over = np.maximum(lengths - self.limits[:, 1], 0.0) + np.minimum(
-                    lengths - self.limits[:, 0], 0.0)
-                limit_res = LIMIT_PENALTY * over
-                limit_jac = LIMIT_PENALTY * jac[self.cables] * (over != 0.0)[:, None]
-                if redundant:  # least change of the section moments, the goal a constraint
-                    res = np.concatenate([(x[3:] - reference[3:]) * length ** 2, limit_res])
-                    res_jac = np.vstack([
-                        np.hstack([np.zeros((len(x) - 3, 3)), np.eye(len(x) - 3) * length ** 2]),
-                        limit_jac])
-                    con = np.concatenate([values[self.balance], goal_res / length, held_res])
-                    con_jac = np.vstack([jac[self.balance], goal_jac / length, held_jac])
-                else:
-                    res = np.concatenate([goal_res, limit_res])
-                    res_jac = np.vstack([goal_jac, limit_jac])
-                    con = np.concatenate([values[self.balance], held_res])
-                    con_jac = np.vstack([jac[self.balance], held_jac])
-                return res, res_jac, con, con_jac, values
-
-            result = constrained_gauss_newton(evaluate, x, robot.solver.max_iterations,
-                                              0.01 * self.tolerance, constraint_weight=length)
+            rows = GoalRows(self.goal, _NO_DIRECTION if self.direction is None else
+                            self.direction, np.array(self.held, dtype=np.int64),
+                            np.array(self.held_at, dtype=float), self.held_scale, self.limits,
+                            LIMIT_PENALTY, redundant, reference)
+            result = robot.model.goal_solve(
+                self.tip_force, self.tip_moment, self._fixed, np.array(x, dtype=float), rows,
+                GoalLimits(robot.solver.max_iterations, 0.01 * self.tolerance, length))
+            if not result.finite:
+                raise ValueError('the rod model is not finite at the start state %s (1/m): is '
+                                 'the tip load far beyond what the rod can carry?'
+                                 % np.round(x, 4).tolist())
             iterations += result.iterations
             x = result.x
-            lengths = result.evaluation[self.cables]
+            lengths = result.values[self.cables]
             violated = [i for i in range(len(lengths)) if i not in self.held and not (
                 self.limits[i, 0] - LIMIT_SLACK <= lengths[i] <= self.limits[i, 1] + LIMIT_SLACK)]
             if not violated:
@@ -206,7 +178,7 @@ class _Problem:
             for i in violated:
                 self.held.append(i)
                 self.held_at.append(float(np.clip(lengths[i], *self.limits[i])))
-        values = result.evaluation
+        values = result.values
         reached = (np.linalg.norm(values[0:3] - self.goal) <= self.tolerance
                    and np.linalg.norm(values[self.balance]) <= 1e-6)
         return x, iterations, reached

@@ -24,11 +24,13 @@ _DONE = False
 #: after the warm-up (``test/test_warmup.py``).
 ENTRY_POINTS = (
     'continuum_statics.core.kernel.integrate_batch',
+    'continuum_statics.core.kernel.integrate_passive',
     'continuum_statics.core.kernel.cable_lengths_batch',
     'continuum_statics.core.kernel.loads_from_state',
     'continuum_statics.core.kernel.probe',
     'continuum_statics.core.kernel.tip_jacobian',
     'continuum_statics.core.tracking.track',
+    'continuum_statics.core.goal_tracking.goal_solve',
     'continuum_statics.core.length_tracking.chord',
     'continuum_statics.core.length_tracking.jacobian_pieces',
     'continuum_statics.core.least_squares.constrained_step',
@@ -41,6 +43,7 @@ ENTRY_POINTS = (
 KERNEL_MODULES = (
     'continuum_statics.core.kernel',
     'continuum_statics.core.tracking',
+    'continuum_statics.core.goal_tracking',
     'continuum_statics.core.length_tracking',
     'continuum_statics.core.least_squares',
     'continuum_statics.core.rotations',
@@ -133,7 +136,24 @@ def _exercise(robot):
     robot.solve_tip_goal(bent.tip_position, goal_direction=bent.tip_rotation[:, 2])
     robot.equilibrium_between(estimate, goal, 0.5, tip_force=load[:3], tip_moment=load[3:],
                               warm_start=estimate)
+    _exercise_python_newton(robot, lengths)
     _exercise_tendons(robot, lengths, goal)
+
+
+def _exercise_python_newton(robot, lengths):
+    """Run the Python Gauss-Newton (an estimate's last resort) with its compiled step."""
+    from continuum_statics.core.layout import ProbeRows
+    from continuum_statics.core.least_squares import constrained_gauss_newton
+
+    rows, zero = ProbeRows(len(lengths)), np.zeros(3)
+
+    def evaluate(x):
+        probed = robot.probe(x, robot.state_size, zero, zero)
+        values, jac = probed.values, probed.jacobian
+        return (values[rows.lengths] - lengths, jac[rows.lengths], values[rows.balance],
+                jac[rows.balance], probed.states)
+
+    constrained_gauss_newton(evaluate, robot.passive_state(), 2, 1e-9, robot.length)
 
 
 def _exercise_tendons(robot, lengths, goal):
