@@ -5,6 +5,7 @@ Read with ``ast`` (nothing is imported):
 - ``core/``, ``control/`` and ``drivers/`` import neither rclpy nor a ROS message or ROS
   package (they run and are tested without ROS);
 - ``drivers/`` import nothing from ``nodes/``;
+- the layers are ordered (:data:`LAYERS`): a module imports its own layer or lower ones only;
 - no module imports another module's ``_private`` name, neither ``from m import _name`` nor
   ``m._name`` on an imported module.
 """
@@ -25,7 +26,11 @@ ROS_MODULES = {
     'continuum_statics_interfaces',
 }
 #: Layers that must run without ROS.
-ROS_FREE = ('core', 'control', 'drivers')
+ROS_FREE = ('core', 'control', 'calibration', 'drivers')
+#: The order of the layers: each may import its own and lower ones. The package's
+#: ``__init__`` (its public entry) and ``config_paths`` (where the files are) sit with core.
+LAYERS = {'': 0, 'config_paths': 0, 'core': 0, 'control': 1, 'calibration': 1, 'drivers': 1,
+          'nodes': 2, 'tools': 3, '__main__': 4}
 
 #: Imports of private names allowed: none (the last two, the kernel's section tensions and its
 #: parameter layout, became kernel.section_tensions and layout.py names). Never extend it:
@@ -104,6 +109,19 @@ def test_drivers_import_nothing_from_nodes(name, path):
     found = sorted({'%s (line %d)' % (module, line) for module, _, line in imports(name, path)
                     if module == 'nodes' or module.startswith('nodes.')})
     assert not found, '%s imports the node layer: %s' % (name, ', '.join(found))
+
+
+def test_every_module_is_in_a_layer():
+    assert {name.split('.')[0] for name, _ in ALL} <= set(LAYERS)
+
+
+@pytest.mark.parametrize('name, path', ALL, ids=lambda value: value if isinstance(value, str)
+                         else '')
+def test_a_module_imports_its_own_layer_or_lower_ones(name, path):
+    layer = LAYERS[name.split('.')[0]]
+    above = sorted({'%s (line %d)' % (module, line) for module, _, line in imports(name, path)
+                    if _is_package_module(module) and LAYERS.get(module.split('.')[0], 0) > layer})
+    assert not above, '%s imports a higher layer: %s' % (name, ', '.join(above))
 
 
 def private_imports():

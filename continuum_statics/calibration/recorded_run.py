@@ -20,7 +20,7 @@ from pathlib import Path
 
 import numpy as np
 
-from continuum_statics.tools.bag_reading import open_bag, pick_connections
+from continuum_statics.calibration.bag_reading import open_bag, pick_connections
 
 KINDS = ('length', 'displacement')
 

@@ -23,8 +23,8 @@ import sys
 
 import numpy as np
 
-from continuum_statics.tools.bag_reading import open_bag
-from continuum_statics.tools.bag_reading import pick_connections as pick
+from continuum_statics.calibration.bag_reading import open_bag
+from continuum_statics.calibration.bag_reading import pick_connections as pick
 
 #: Backbone snapshots drawn in backbone.png.
 SNAPSHOTS = 6
