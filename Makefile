@@ -22,6 +22,7 @@ test-jazzy: venv venv-jazzy
 
 bench: venv
 	scripts/ros_env.sh .venv/bin/python -m continuum_statics bench
+	.venv/bin/python -m continuum_statics.tools.bench_release
 	.venv/bin/python -m continuum_statics.tools.bench_tendons
 	.venv/bin/python -m continuum_statics.tools.bench_load
 	.venv/bin/python -m continuum_statics.tools.bench_noisy
