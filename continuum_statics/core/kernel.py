@@ -96,7 +96,7 @@ _CC = tuple((-1.0) ** k / math.factorial(2 * k + 3) for k in range(9))
 
 @numba.njit(cache=True, nogil=True, inline='always')
 def _series(t2, last):
-    """The three Taylor series of :func:`_exp_coefficients` to their terms number ``last``."""
+    """Sum the three Taylor series of :func:`_exp_coefficients` up to term number ``last``."""
     a = _A[last]
     b = _B[last]
     c = _CC[last]
