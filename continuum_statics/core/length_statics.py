@@ -293,46 +293,101 @@ def solve_lengths(robot, lengths, tip_force=(0.0, 0.0, 0.0), tip_moment=(0.0, 0.
         # a per-cycle call solves the balance to the lengths' tolerance: a balance error b
         # (an angle over the rod) moves a cable at radius r by about r b
         problem.balance_tolerance = max(BALANCE_TOLERANCE, problem.tolerance / problem.radius)
-    warm = warm_unknowns(robot, warm_start)
-    total = 0
-    parts = getattr(warm_start, 'jacobian_parts', None)
-    chord_ran = False
-    if warm is not None and parts is not None and parts[0].shape == (3, 3 + n):
-        z, ok, iterations, info, parts, model = _chord(problem, warm, parts, warm_start)
-        total += iterations
-        if ok:
-            return _solution(robot, problem, z, info, True, total, '', parts, model)
-        warm, chord_ran = z, True  # keep the progress
-    bounded = max_newton is not None and warm is not None
-    if bounded and chord_ran:
-        # the chord refreshed its Jacobian and still gave up: the next call goes on from here
-        return _solution(robot, problem, z, info, False, total,
-                         'unfinished (chord steps on a refreshed Jacobian): refined with the '
-                         'next measurement', parts)
-    starts = [] if warm is None else [warm]
-    if not bounded:
-        starts.append(np.concatenate([bvp.linear_guess(robot, tip_force, tip_moment),
-                                      np.zeros(n)]))
+    job = _LengthJob(robot, problem, warm_unknowns(robot, warm_start), warm_start, max_newton,
+                     continuation)
+    for attempt in LENGTH_ATTEMPTS:
+        solution = attempt(job)
+        if solution is not None:
+            return solution
+    raise AssertionError('the last attempt always answers')  # pragma: no cover
+
+
+@dataclass(eq=False)
+class _LengthJob:
+    """One solve's problem and what its attempts hand on (the warm start, the iterations)."""
+
+    robot: object
+    problem: '_Problem'
+    warm: np.ndarray  #: unknowns z of the warm start (progress replaces it), or None
+    warm_start: object  #: the previous result
+    max_newton: int  #: a node's per-cycle bound, or None
+    continuation: bool  #: the slow last resort is allowed
+    iterations: int = 0
+    linear: np.ndarray = None  #: the small-deflection start (continuation starts there)
+
+    @property
+    def bounded(self):
+        """A node's per-cycle call from a warm start: bounded work."""
+        return self.max_newton is not None and self.warm is not None
+
+    def answer(self, z, info, converged, message='', parts=None, model=None):
+        """Return the :class:`LengthSolution` at z."""
+        return _solution(self.robot, self.problem, z, info, converged, self.iterations, message,
+                         parts, model)
+
+
+def _chord_steps(job):
+    """Take compiled quasi-Newton steps on the last solve's Jacobian pieces (one IVP each).
+
+    A node's bounded call whose chord refreshed its Jacobian and still gave up answers from
+    there (the next call goes on); otherwise its progress starts Newton.
+    """
+    n = len(job.robot.cable_names)
+    parts = getattr(job.warm_start, 'jacobian_parts', None)
+    if job.warm is None or parts is None or parts[0].shape != (3, 3 + n):
+        return None
+    z, ok, iterations, info, parts, model = _chord(job.problem, job.warm, parts, job.warm_start)
+    job.iterations += iterations
+    if ok:
+        return job.answer(z, info, True, parts=parts, model=model)
+    job.warm = z  # keep the progress
+    if job.bounded:
+        return job.answer(z, info, False, 'unfinished (chord steps on a refreshed Jacobian): '
+                          'refined with the next measurement', parts)
+    return None
+
+
+def _bounded_newton(job):
+    """Take a few Newton iterations from the warm start: a node's call with no Jacobian."""
+    if not job.bounded:
+        return None
+    z, ok, iterations, info, parts = _newton(job.problem, job.warm, job.max_newton,
+                                             BOUNDED_BACKTRACKS)
+    job.iterations += iterations
+    return job.answer(z, info, ok, '' if ok else 'unfinished after %d Newton iterations (the '
+                      'per-call bound): refined with the next measurement' % job.max_newton,
+                      parts)
+
+
+def _full_newton(job):
+    """Solve by Newton from the warm start, then from the small-deflection (linear) guess."""
+    robot, problem = job.robot, job.problem
+    starts = [] if job.warm is None else [job.warm]
+    starts.append(np.concatenate([bvp.linear_guess(robot, problem.tip_force, problem.tip_moment),
+                                  np.zeros(len(robot.cable_names))]))
     for z0 in starts:
-        z, ok, iterations, info, parts = (
-            _newton(problem, z0, max_newton, BOUNDED_BACKTRACKS) if bounded
-            else _newton(problem, z0))
-        total += iterations
+        z, ok, iterations, info, parts = _newton(problem, z0)
+        job.iterations += iterations
         if ok:
-            return _solution(robot, problem, z, info, True, total, '', parts)
-    if bounded:
-        return _solution(robot, problem, z, info, False, total,
-                         'unfinished after %d Newton iterations (the per-call bound): refined '
-                         'with the next measurement' % max_newton, parts)
-    if not continuation:
-        return _solution(robot, problem, z, info, False, total,
-                         'no equilibrium found from the warm or the small-deflection start',
-                         parts)
-    z, ok, iterations, info, parts = _continuation(robot, problem, starts[-1])
-    total += iterations
+            return job.answer(z, info, True, parts=parts)
+    job.linear = starts[-1]
+    if not job.continuation:
+        return job.answer(z, info, False, 'no equilibrium found from the warm or the '
+                          'small-deflection start', parts)
+    return None
+
+
+def _load_continuation(job):
+    """Move the free lengths from the passive rod's paths in increments (the last resort)."""
+    z, ok, iterations, info, parts = _continuation(job.robot, job.problem, job.linear)
+    job.iterations += iterations
     message = '' if ok else ('no equilibrium found for these lengths (cable residual %.3g m '
                              'after load continuation)' % _cable_residual(info))
-    return _solution(robot, problem, z, info, ok, total, message, parts)
+    return job.answer(z, info, ok, message, parts)
+
+
+#: The strategies of :func:`solve_lengths`, in the order they are tried.
+LENGTH_ATTEMPTS = (_chord_steps, _bounded_newton, _full_newton, _load_continuation)
 
 
 def warm_unknowns(robot, warm_start):
