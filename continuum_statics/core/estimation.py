@@ -25,6 +25,7 @@ import math
 import numpy as np
 
 from continuum_statics.core import bvp, length_statics
+from continuum_statics.core.attempts import first_answer
 from continuum_statics.core.inputs import as_vector
 from continuum_statics.core.layout import ProbeRows
 from continuum_statics.core.least_squares import constrained_gauss_newton
@@ -162,11 +163,7 @@ def estimate_shape(robot, cable_lengths, tip_force=(0.0, 0.0, 0.0), tip_moment=(
     """
     job = _Job.of(robot, cable_lengths, tip_force, tip_moment, tensions, start, jacobians,
                   previous, tracking)
-    for attempt in ATTEMPTS:
-        estimate = attempt(job)
-        if estimate is not None:
-            return estimate
-    raise AssertionError('the last attempt always answers')  # pragma: no cover
+    return first_answer(ATTEMPTS, job)
 
 
 @dataclass(eq=False)

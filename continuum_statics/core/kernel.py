@@ -687,6 +687,27 @@ def loads_from_state(x, fixed_tensions, model, bases, ranks, bending_stiffness, 
 
 
 @numba.njit(cache=True, nogil=True)
+def batch_loads(model, x, fixed_tensions, tip_force, b, forces, bendings, moments, tensions):
+    """Fill row ``b`` of a batch's loads with those of solver state ``x`` (N, N m, 1/m)."""
+    loads_from_state(x, fixed_tensions, model.code, model.section_bases, model.section_ranks,
+                     model.params[C_AT], model.section_cables, model.section_cable_count,
+                     model.cable_offsets, moments[b], tensions[b])
+    for i in range(3):
+        forces[b, i] = tip_force[i]
+        bendings[b, i] = x[i]
+
+
+@numba.njit(cache=True, nogil=True)
+def integrate_with_lengths(model, forces, bendings, moments, tensions):
+    """(B, N, 21) states and (B, n_cables) cable lengths (m) of a batch of a robot's IVPs."""
+    states = integrate_batch(model.s_grid, model.params, model.code, forces, bendings, moments,
+                             tensions, model.stage_routes, model.route_kinks,
+                             model.cable_end_node, model.section_end_node)
+    return states, cable_lengths_batch(states, model.guide_nodes, model.hole_offsets,
+                                       model.cable_last_guide)
+
+
+@numba.njit(cache=True, nogil=True)
 def probe(model, tip_force, tip_moment, fixed_tensions, x, n_free):
     """Model outputs at a solver state and their forward-difference Jacobian.
 
@@ -732,17 +753,9 @@ def probe(model, tip_force, tip_moment, fixed_tensions, x, n_free):
             trial[i] = x[i]
         if columns[b] >= 0:
             trial[columns[b]] += step
-        loads_from_state(trial, fixed_tensions, code, section_bases, section_ranks, ei,
-                         model.section_cables, model.section_cable_count, cable_offsets,
-                         moments[b], tensions[b])
-        for i in range(3):
-            forces[b, i] = tip_force[i]
-            bendings[b, i] = trial[i]
-    states = integrate_batch(s_grid, params, code, forces, bendings, moments, tensions,
-                             model.stage_routes, model.route_kinks, model.cable_end_node,
-                             section_end_node)
-    lengths = cable_lengths_batch(states, model.guide_nodes, model.hole_offsets,
-                                  model.cable_last_guide)
+        batch_loads(model, trial, fixed_tensions, tip_force, b, forces, bendings, moments,
+                    tensions)
+    states, lengths = integrate_with_lengths(model, forces, bendings, moments, tensions)
     balance_at = LENGTH_ROWS_AT + n_cables
     rows = balance_at + 3
     table = np.empty((n_batch, rows))

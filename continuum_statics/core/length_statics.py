@@ -32,6 +32,7 @@ from typing import NamedTuple
 import numpy as np
 
 from continuum_statics.core import bvp
+from continuum_statics.core.attempts import first_answer
 from continuum_statics.core.inputs import as_vector
 from continuum_statics.core.kernel import POINT_MOMENT
 from continuum_statics.core.layout import ProbeRows
@@ -295,11 +296,7 @@ def solve_lengths(robot, lengths, tip_force=(0.0, 0.0, 0.0), tip_moment=(0.0, 0.
         problem.balance_tolerance = max(BALANCE_TOLERANCE, problem.tolerance / problem.radius)
     job = _LengthJob(robot, problem, warm_unknowns(robot, warm_start), warm_start, max_newton,
                      continuation)
-    for attempt in LENGTH_ATTEMPTS:
-        solution = attempt(job)
-        if solution is not None:
-            return solution
-    raise AssertionError('the last attempt always answers')  # pragma: no cover
+    return first_answer(LENGTH_ATTEMPTS, job)
 
 
 @dataclass(eq=False)

@@ -14,9 +14,8 @@ import numpy as np
 
 from continuum_statics.core.kernel import (
     POINT_MOMENT,
-    cable_lengths_batch,
-    integrate_batch,
-    loads_from_state,
+    batch_loads,
+    integrate_with_lengths,
     probe,
 )
 from continuum_statics.core.layout import LENGTH_ROWS_AT, MOMENT_AT
@@ -224,17 +223,8 @@ def jacobian_pieces(model, tip_force, tip_moment, z, moment_map, compliance, mea
         if b > 0:
             trial[b - 1] += step if b <= 3 else tension_step
         _state_of(trial, code, moment_map, x, fixed)
-        loads_from_state(x, fixed, code, section_bases, model.section_ranks, params[0],
-                         model.section_cables, model.section_cable_count, cable_offsets,
-                         moments[b], tensions[b])
-        for i in range(3):
-            forces[b, i] = tip_force[i]
-            bendings[b, i] = x[i]
-    states = integrate_batch(s_grid, params, code, forces, bendings, moments, tensions,
-                             model.stage_routes, model.route_kinks, model.cable_end_node,
-                             model.section_end_node)
-    lengths = cable_lengths_batch(states, model.guide_nodes, model.hole_offsets,
-                                  model.cable_last_guide)
+        batch_loads(model, x, fixed, tip_force, b, forces, bendings, moments, tensions)
+    states, lengths = integrate_with_lengths(model, forces, bendings, moments, tensions)
     tip = s_grid.shape[0] - 1
     scale = s_grid[tip] / params[0]  # balance rows: (M_end - tau) L / (E I), as kernel.probe
     balance = np.empty((3, size))
