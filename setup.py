@@ -33,5 +33,8 @@ setup(
             'tip_load_estimator = continuum_statics.nodes.tip_load_estimator_node:main',
             'bringup = continuum_statics.nodes.bringup:main',
         ],
+        # `ros2 doctor` runs the package's checks on a robot computer (doctor's findings)
+        'ros2doctor.checks': ['continuum_statics = continuum_statics.tools.doctor:RobotCheck'],
+        'ros2doctor.report': ['continuum_statics = continuum_statics.tools.doctor:RobotReport'],
     },
 )
