@@ -165,12 +165,7 @@ def _watch(observation, node, executor, sensor_qos):
             (t.header.frame_id, t.child_frame_id) for t in msg.transforms), sensor_qos)
     except ImportError:  # no tf2_msgs: the tf check says nothing
         pass
-    end = time.monotonic() + observation.duration
-    while time.monotonic() < end:
-        executor.spin_once(timeout_sec=0.05)
-    observation.nodes = tuple(sorted(name for name, namespace in
-                                     node.get_node_names_and_namespaces()
-                                     if namespace.rstrip('/') == ns))
+    observation.nodes = _watch_until_found(node, executor, ns, observation.duration)
     for name, parameters in NODE_PARAMETERS.items():
         if name in observation.nodes:
             observation.parameters[name] = _parameters(node, executor, '%s/%s' % (ns, name),
@@ -181,6 +176,30 @@ def _watch(observation, node, executor, sensor_qos):
 
 
 _LEVEL_NAMES = {0: 'ok', 1: WARN, 2: ERROR, 3: WARN}
+#: Longer watch, s, when no node of the namespace has been discovered yet (a busy machine's DDS
+#: discovery); a namespace found late is watched for at least a second more.
+DISCOVERY_GRACE = 5.0
+
+
+def _watch_until_found(node, executor, ns, duration):
+    """Spin for ``duration`` s (longer while the namespace has no node); return its nodes."""
+    start = time.monotonic()
+    end, found, next_look = start + duration, (), start
+    while True:
+        executor.spin_once(timeout_sec=0.05)
+        now = time.monotonic()
+        if now >= next_look:
+            next_look = now + 0.2
+            if not found:
+                found = tuple(sorted(name for name, namespace in
+                                     node.get_node_names_and_namespaces()
+                                     if namespace.rstrip('/') == ns))
+                if found:
+                    end = max(end, now + min(duration, 1.0))
+        if now >= end and (found or now >= start + duration + DISCOVERY_GRACE):
+            break
+    return tuple(sorted(name for name, namespace in node.get_node_names_and_namespaces()
+                        if namespace.rstrip('/') == ns))
 
 
 def _parameters(node, executor, node_name, names, timeout=3.0):
