@@ -24,7 +24,7 @@ import time
 import uuid
 
 from conftest import REPO
-from nodes_helpers import pose_xyz, stop_process
+from nodes_helpers import client_node, pose_xyz, stop_process
 import numpy as np
 import pytest
 
@@ -203,11 +203,7 @@ def test_nodes_start_from_the_install_space_and_reach_a_goal(workspace):
                                   env=env, stdout=subprocess.PIPE, stderr=subprocess.STDOUT,
                                   text=True, cwd=workspace)
                  for name in ('cable_driver', 'statics', 'tip_controller')]
-    context = rclpy.Context()
-    rclpy.init(context=context)
-    executor = rclpy.executors.SingleThreadedExecutor(context=context)
-    client = rclpy.create_node('colcon_route_client', namespace=namespace, context=context)
-    executor.add_node(client)
+    context, executor, client = client_node('colcon_route_client', namespace)
     try:
         service = client.create_client(GetPlan, 'tip_goal')
 
