@@ -195,10 +195,12 @@ def check_nodes(observation):
                 % name))
         elif status is None:
             findings.append(Finding(WARN, 'nodes', '%s is in the graph but published no '
-                                    '/diagnostics in %.0f s' % (name, observation.duration),
+                                    '/diagnostics in %g s' % (name, observation.duration),
                                     'it may be stuck or starting: read its log'))
         elif status[2].get('state') == 'starting':
-            findings.append(Finding(WARN, 'nodes', '%s is starting: %s' % (name, status[1]),
+            waiting = status[1][len('starting: '):] if status[1].startswith('starting: ') \
+                else status[1]
+            findings.append(Finding(WARN, 'nodes', '%s is starting: %s' % (name, waiting),
                                     'wait for it; if it stays, do what it waits for'))
         elif status[0] == ERROR:
             findings.append(Finding(ERROR, 'nodes', '%s reports an error: %s' % (
@@ -272,7 +274,7 @@ def check_rates(observation):
     wanted = observation.parameters.get('cable_driver', {}).get('publish_rate')
     if states.publishers and states.count == 0:
         findings.append(Finding(ERROR, 'rates', 'cable_states is silent (%d publisher(s), no '
-                                'message in %.0f s)' % (states.publishers,
+                                'message in %g s)' % (states.publishers,
                                                         observation.duration),
                                 'the driver reads nothing: check its connection and '
                                 'lifecycle state'))
@@ -306,7 +308,7 @@ def check_tf(observation):
     tip = observation.parameters.get('statics', {}).get('tip_frame_id') or '%s_tip' % robot.name
     parents = {parent for parent, child in observation.tf_frames if child == tip}
     if not parents:
-        return [Finding(ERROR, 'tf', 'no %s on /tf in %.0f s' % (tip, observation.duration),
+        return [Finding(ERROR, 'tf', 'no %s on /tf in %g s' % (tip, observation.duration),
                         'statics publishes /tf with each shape: give it cable_states (see '
                         'rates) and check that nothing remaps /tf')]
     if parents != {robot.base_frame_id}:
@@ -329,7 +331,7 @@ def check_sensors(observation):
             continue
         if sample.count == 0:
             findings.append(Finding(ERROR, 'sensors', '%s (%s) has %d publisher(s) but sent '
-                                    'nothing in %.0f s: a silent sensor' % (
+                                    'nothing in %g s: a silent sensor' % (
                                         topic, what, sample.publishers, observation.duration),
                                     'check the %s driver (running, its device connected, a '
                                     'topic remap)' % what))
