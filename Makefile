@@ -16,7 +16,7 @@ test: venv
 # (a broken internal link or anchor, a bad docstring) are errors. `make test` builds it too
 # (test/test_docs_build.py).
 docs: venv
-	.venv/bin/python -m sphinx -W --keep-going -q -b html doc build/doc
+	.venv/bin/python -m sphinx -E -W --keep-going -q -b html doc build/doc
 	@echo "docs: build/doc/index.html"
 
 # The second route: the same suite on ROS 2 Jazzy wheels (requirements-jazzy.txt, .venv-jazzy).

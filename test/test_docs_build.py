@@ -41,6 +41,7 @@ def test_every_declared_parameter_is_in_the_generated_tables(built):
     for backend in ('sim', 'dynamixel', 'canopen', 'ros2_control'):
         cls = backend_class(backend)
         names += ['%s.%s' % (cls.name, option.name) for option in cls.options_spec]
+    assert str(REPO) not in page  # run-time defaults shown relative to the share
     missing = [name for name in names if name not in page]
     assert not missing, missing
     assert len(names) > 60

@@ -19,6 +19,11 @@ def _range(spec):
 
 def _default(value):
     if isinstance(value, str):
+        from continuum_statics.config_paths import share_dir
+
+        share = str(share_dir()) + '/'
+        if value.startswith(share):  # a default found at run time: not this machine's path
+            return "'<package share>/%s'" % value[len(share):]
         return repr(value)
     return str(value)
 
