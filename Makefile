@@ -1,6 +1,6 @@
 # The two commands of README.md: `make demo` (main job) and `make test` (whole suite).
 # Both create .venv on first use and reuse it afterwards.
-.PHONY: venv venv-jazzy demo test test-jazzy bench bench-nodes bench-nodes-noisy bench-drivers bench-tendons bench-calibration bench-load lint clean fuzz soak
+.PHONY: venv venv-jazzy demo test docs test-jazzy bench bench-nodes bench-nodes-noisy bench-drivers bench-tendons bench-calibration bench-load lint clean fuzz soak
 
 venv:
 	@scripts/setup_venv.sh
@@ -11,6 +11,13 @@ demo: venv
 test: venv
 	scripts/install_browser.sh
 	scripts/ros_env.sh --private .venv/bin/python -m pytest -q test
+
+# The documentation (doc/, Sphinx + MyST, what rosdoc2 builds) into build/doc/index.html; warnings
+# (a broken internal link or anchor, a bad docstring) are errors. `make test` builds it too
+# (test/test_docs_build.py).
+docs: venv
+	.venv/bin/python -m sphinx -E -W --keep-going -q -b html doc build/doc
+	@echo "docs: build/doc/index.html"
 
 # The second route: the same suite on ROS 2 Jazzy wheels (requirements-jazzy.txt, .venv-jazzy).
 venv-jazzy:
@@ -61,7 +68,7 @@ clean:
 
 # Real tendons: solve_lengths warm/cold beside SciPy.
 bench-load: venv
-	.venv/bin/python -m continuum_statics.tools.bench_load --plot docs/images/tip_load_noise.png
+	.venv/bin/python -m continuum_statics.tools.bench_load --plot doc/images/tip_load_noise.png
 
 bench-tendons: venv
 	.venv/bin/python -m continuum_statics.tools.bench_tendons

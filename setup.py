@@ -16,7 +16,7 @@ setup(
         ('share/' + package_name, ['package.xml']),
         ('share/' + package_name + '/launch', glob('launch/*.launch.py')),
         ('share/' + package_name + '/config', glob('config/*.yaml') + glob('config/*.xml')
-         + glob('config/*.rviz')),
+         + glob('config/*.rviz') + glob('config/*.json')),
     ],
     install_requires=['setuptools'],
     zip_safe=True,
@@ -33,5 +33,8 @@ setup(
             'tip_load_estimator = continuum_statics.nodes.tip_load_estimator_node:main',
             'bringup = continuum_statics.nodes.bringup:main',
         ],
+        # `ros2 doctor` runs the package's checks on a robot computer (doctor's findings)
+        'ros2doctor.checks': ['continuum_statics = continuum_statics.tools.doctor:RobotCheck'],
+        'ros2doctor.report': ['continuum_statics = continuum_statics.tools.doctor:RobotReport'],
     },
 )

@@ -164,3 +164,19 @@ def all_finite_path(path):
 def pose_xyz(pose):
     """Position of a Pose as an array."""
     return np.array([pose.position.x, pose.position.y, pose.position.z])
+
+
+def client_node(name, namespace):
+    """Return (context, executor, node): a client node in a context of its own, spun by the test.
+
+    For tests whose nodes run in other processes; end with ``executor.shutdown()``,
+    ``node.destroy_node()`` and ``rclpy.try_shutdown(context=context)``.
+    """
+    from rclpy.executors import SingleThreadedExecutor
+
+    context = rclpy.Context()
+    rclpy.init(context=context)
+    executor = SingleThreadedExecutor(context=context)
+    node = rclpy.create_node(name, namespace=namespace, context=context)
+    executor.add_node(node)
+    return context, executor, node

@@ -1,4 +1,4 @@
-"""The layers of the package as a test (docs/architecture.md, "the folders show the layers").
+"""The layers of the package as a test (doc/architecture.md, "the folders show the layers").
 
 Read with ``ast`` (nothing is imported):
 

@@ -1,6 +1,6 @@
 """Cable length <-> actuator position on a spool: the one conversion every real backend shares.
 
-docs/architecture.md, "Actuator backends" (contract)::
+doc/architecture.md, "Actuator backends" (contract)::
 
     L_j = L0_j + direction_j * 2 pi r_j * (p_j - zero_j) / (counts_per_rev * gear_ratio)
 

@@ -1,4 +1,4 @@
-"""The QoS of every topic of the package, stated once (docs/architecture.md, ROS interfaces)."""
+"""The QoS of every topic of the package, stated once (doc/architecture.md, ROS interfaces)."""
 from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
 
 #: Newest measurement only: best effort, keep last 1 (a slow cycle never builds a backlog).

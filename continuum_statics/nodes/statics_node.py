@@ -81,6 +81,7 @@ from continuum_statics.nodes.node_params import (
 from continuum_statics.nodes.parameter_tables import statics_parameters
 from continuum_statics.nodes.pose_encoder import PoseSequenceEncoder
 from continuum_statics.nodes.qos import LATCHED_QOS, LATEST_SENSOR_QOS
+from continuum_statics.nodes.robot_description import disk_diameter, publish_robot_description
 from continuum_statics.nodes.ros_conversions import stamp_or_now, tip_load
 from continuum_statics.nodes.tf_outputs import tf_outputs
 from continuum_statics.nodes.timers import steady_timer
@@ -106,9 +107,7 @@ class StaticsNode(Node):
         self._tracker = ShapeTracker(self.robot, self.cable_names, self._params['max_iterations'],
                                      self._params['max_model_runs'])
         self.base_frame_id = self.robot.base_frame_id
-        self._disk_diameter = 2.0 * float(np.max(np.linalg.norm(
-            np.asarray(self.robot.cable_offsets, dtype=float).reshape(-1, 3), axis=1),
-            initial=0.005)) + 0.006
+        self._disk_diameter = disk_diameter(self.robot)
 
         # Hot path: the name index of the last good message is kept; no array allocated.
         self._cable_states = CableStatesReader(self.cable_names)
@@ -141,6 +140,8 @@ class StaticsNode(Node):
         self._tip_pub = self.create_publisher(PoseStamped, 'tip_pose', LATCHED_QOS)
         self._tf = tf_outputs(self, self.robot, self._params['tip_frame_id'],
                               self._params['tf_disks']) if self._params['publish_tf'] else None
+        self._description = publish_robot_description(  # latched URDF, links = the /tf frames
+            self, self.robot, self._params['tip_frame_id'], self._params['tf_disks'])
         self._marker_pub = self.create_publisher(MarkerArray, 'backbone_markers', LATCHED_QOS)
         input_qos = QoSProfile(history=HistoryPolicy.KEEP_LAST,
                                depth=self._params['input_queue_depth'],
