@@ -686,7 +686,7 @@ def loads_from_state(x, fixed_tensions, model, bases, ranks, bending_stiffness, 
         tensions[j] += fixed_tensions[j]
 
 
-@numba.njit(cache=True, nogil=True)
+@numba.njit(cache=True, nogil=True, inline='always')
 def batch_loads(model, x, fixed_tensions, tip_force, b, forces, bendings, moments, tensions):
     """Fill row ``b`` of a batch's loads with those of solver state ``x`` (N, N m, 1/m)."""
     loads_from_state(x, fixed_tensions, model.code, model.section_bases, model.section_ranks,
@@ -697,7 +697,7 @@ def batch_loads(model, x, fixed_tensions, tip_force, b, forces, bendings, moment
         bendings[b, i] = x[i]
 
 
-@numba.njit(cache=True, nogil=True)
+@numba.njit(cache=True, nogil=True, inline='always')
 def integrate_with_lengths(model, forces, bendings, moments, tensions):
     """(B, N, 21) states and (B, n_cables) cable lengths (m) of a batch of a robot's IVPs."""
     states = integrate_batch(model.s_grid, model.params, model.code, forces, bendings, moments,
