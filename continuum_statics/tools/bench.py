@@ -211,9 +211,8 @@ def _kernel_rows(robot, u0, force, ivp, repeat):
     """Print the bare kernel call, the Python overhead of solve_ivp and the old classical RK4."""
     from continuum_statics.tools import rk4_reference
 
-    forces, bendings = force[None], u0[None]
-    bare = row('kernel call (Model.integrate)', timings(
-        lambda: robot.model.integrate(forces, bendings), repeat))
+    bare = row('kernel call (Model.integrate_passive)', timings(
+        lambda: robot.model.integrate_passive(force, u0), repeat))
     print('  Python overhead per solve_ivp call: %.1f us' % (ivp - bare))
     old = row('old classical RK4 kernel (reference)', timings(
         lambda: rk4_reference.integrate_batch(robot.s_grid, robot.params, force[None],
