@@ -75,7 +75,7 @@ from continuum_statics.nodes.ros_conversions import (
     twist_vectors,
 )
 from continuum_statics.nodes.timers import steady_timer
-from continuum_statics.nodes.waits import Waits
+from continuum_statics.nodes.waits import InFlight, Waits
 
 #: Reachable tips drawn as RViz click targets (workspace_markers).
 WORKSPACE_SAMPLES = 400
@@ -107,6 +107,7 @@ class TipControllerNode(Node):
         self._control_group = MutuallyExclusiveCallbackGroup()
         self.goal_group = ReentrantCallbackGroup()
         self._waits = Waits(self, WAIT_PERIOD, MutuallyExclusiveCallbackGroup())
+        self.goals_in_flight = InFlight()  # goals still to answer (the runner waits at shutdown)
         self.control = TipControl(self.robot, self._params, self.get_logger(),
                                   self._waits.until)
         self.control.on_goal_started = self._publish_active_goal
@@ -153,7 +154,8 @@ class TipControllerNode(Node):
                             callback_group=self.goal_group)
         action = load_interface()
         self._action = None if action is None else MoveTipServer(
-            self, self.control, self.base_frame_id, action, self.goal_group)
+            self, self.control, self.base_frame_id, action, self.goal_group,
+            self.goals_in_flight)
         if action is None:
             self.get_logger().warning('continuum_statics_interfaces is not built: no move_tip '
                                       'action (scripts/build_interfaces.sh, or colcon build)')
@@ -235,6 +237,10 @@ class TipControllerNode(Node):
         return goal_direction(pose_stamped, 'goal_orientation is direction')
 
     async def _on_tip_goal(self, request, response):
+        with self.goals_in_flight:
+            return await self._answer_tip_goal(request, response)
+
+    async def _answer_tip_goal(self, request, response):
         header = Header(frame_id=self.base_frame_id, stamp=self.get_clock().now().to_msg())
         response.plan = Path(header=header)
         control = self.control
