@@ -371,7 +371,7 @@ def estimate_tip_wrench(robot, lengths=None, tensions=None, tip_position=None, t
 
 
 def _estimate(robot, lengths, tensions, tip_position, tip_rotation, levels, moment, previous):
-    """The body of :func:`estimate_tip_wrench` on checked arguments; may raise _ForwardFailed."""
+    """Estimate on checked arguments (:func:`estimate_tip_wrench`); may raise _ForwardFailed."""
     size = 6 if moment else 3
     force_scale, moment_scale = plausible_tip_load(robot)
     prior = np.concatenate([np.full(3, force_scale), np.full(3, moment_scale)])[:size]

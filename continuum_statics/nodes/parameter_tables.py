@@ -33,6 +33,13 @@ def _six_finite(value):
     return None
 
 
+def max_stamp_offset_spec():
+    """Return the stamp rule's parameter (:mod:`continuum_statics.control.stamps`)."""
+    return ParamSpec('max_stamp_offset', 1.0, 'an input stamped further than this from the '
+                     "node's clock, or going backwards, is stamped on arrival instead (with a "
+                     'warning), s', 1e-3, 1e9)
+
+
 def statics_parameters():
     """Return the statics node's ParamSpecs."""
     return [
@@ -213,4 +220,10 @@ def tip_load_estimator_parameters():
         ParamSpec('contact_threshold', 0.0, 'tip_contact turns true when the force exceeds '
                   'this with 3-sigma confidence, N (0: E I / L^2 of the rod, the force that '
                   'bends it by about 30 degrees)', 0.0, 1e6),
+        # 0.2 s: 20 estimates at the default rate, so that no single outlier or transient
+        # declares contact, and still below a human's reaction time (~0.25 s)
+        ParamSpec('contact_min_time', 0.2, 'tip_contact changes only once the force has '
+                  'stayed past the threshold this long (and the cables have stood still), s',
+                  0.0, 60.0),
+        max_stamp_offset_spec(),
     ]
