@@ -1,5 +1,6 @@
-"""Issue 38 over DDS: the tip_load_estimator node sets aside what the model cannot explain,
-keeps running, and stamps its output honestly.
+"""Issue 38 over DDS: the tip_load_estimator sets aside what the model cannot explain.
+
+It keeps running, and stamps its output honestly.
 
 Before the fix: tensions 1000x too large (a bridge reporting mN) were published as a load of
 newtons with converged=True (and on the 3-section robot stopped the node); a cable_states stamp
