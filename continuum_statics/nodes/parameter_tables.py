@@ -37,7 +37,7 @@ def max_stamp_offset_spec():
     """Return the stamp rule's parameter (:mod:`continuum_statics.control.stamps`)."""
     return ParamSpec('max_stamp_offset', 1.0, 'an input stamped further than this from the '
                      "node's clock, or going backwards, is stamped on arrival instead (with a "
-                     'warning), s', 1e-3, 1e9)
+                     'warning), s (1e12: effectively off)', 1e-3, 1e12)
 
 
 def statics_parameters():
@@ -53,6 +53,10 @@ def statics_parameters():
                   read_only=True),
         ParamSpec('tf_disks', False, 'also one /tf frame per guide disk (<robot name>_disk_<i>)',
                   read_only=True),
+        ParamSpec('frame_prefix', '', 'put before every frame statics publishes on /tf (e.g. '
+                  "'arm1/': two arms from one robot file); the base frame stays the robot "
+                  "file's", read_only=True),
+        max_stamp_offset_spec(),
         ParamSpec('tip_wrench_timeout', 1.0, 'a tip_wrench estimate older than this is '
                   'replaced by zero, s (0: never expires)', 0.0, 3600.0),
         ParamSpec('tip_wrench_source', 'topic', 'where the tip load comes from: topic '
