@@ -198,3 +198,15 @@ def test_stamps_never_go_backwards_and_unstamped_is_arrival_without_a_warning():
     # a good stamp after a replaced one goes on from there, never back
     used, reason = rule.judge('cable_states', 5 * NS + 250, 5 * NS + 260)
     assert used >= 5 * NS + 300
+
+
+def test_while_the_cables_move_the_last_estimate_at_rest_holds():
+    rest = fake([0.1, 0.0, 0.0])
+    solver = Solver(rest, fake([3.0, 0.0, 0.0]))
+    loads = watch(min_time=0.2)
+    assert loads.step(kwargs(0.3), NOISE, 0.0, solver).estimate is rest
+    for k, now in enumerate((0.05, 0.1, 0.2, 0.25)):  # moving, then still for < 0.2 s
+        outcome = loads.step(kwargs(0.3 + 1e-3 * min(k + 1, 2)), NOISE, now, solver)
+        assert outcome.verdict is Verdict.HELD and outcome.estimate is rest
+    assert len(solver.warm) == 1  # nothing solved while the cables moved
+    assert loads.step(kwargs(0.302), NOISE, 0.45, solver).verdict is Verdict.PUBLISH

@@ -5,6 +5,8 @@ One entry point per timer tick, :meth:`LoadWatch.step`, given the newest inputs 
 1. inputs: the fresh cable lengths, tensions and tracked tip; none that sees a load -> a reason;
 2. gates before the solve: a tension above its cable's ``tension_limits`` (plus 3 sigma of
    noise) is not a reading of this robot (a bridge reporting mN, a faulty load cell): set aside;
+   while the cables move (and ``contact_min_time`` after), the last estimate at rest is held:
+   the model is a statics model, and friction turning in a reversed cable is no load;
 3. an input within ``UNCHANGED_SIGMAS`` of the one last solved, once a re-solve no longer moves
    the estimate -> the last estimate unchanged (an unchanged measurement gives an unchanged
    estimate, and costs nothing);
@@ -32,7 +34,7 @@ UNCHANGED_SIGMAS = 1.0
 #: standard deviations has reached the fixed point: later ones are not solved.
 SETTLED_SIGMAS = 0.1
 #: A cable length that moves by more than this many noise standard deviations is motion: the
-#: cables are moving and a load estimate (a statics model of a moving rod) may not begin contact.
+#: cables are moving, the last estimate at rest holds and contact may not begin.
 #: Five: noise alone exceeds it between two readings once in ~10^5 (the difference of two
 #: readings has sigma sqrt(2)).
 MOVING_SIGMAS = 5.0
@@ -46,6 +48,7 @@ class Verdict(enum.Enum):
 
     NO_INPUT = 'no input'          # nothing fresh that sees a load (reason says what)
     UNCHANGED = 'unchanged'        # the input equals the one last solved: the same estimate
+    HELD = 'held'                  # the cables move: the last estimate at rest, unchanged
     PUBLISH = 'publish'            # a new estimate to publish
     SET_ASIDE = 'set aside'        # the input or its estimate was rejected (reason says why)
 
@@ -55,7 +58,7 @@ class Outcome:
     """Result of :meth:`LoadWatch.step`."""
 
     verdict: Verdict
-    estimate: object = None  # the estimate to publish (PUBLISH, UNCHANGED)
+    estimate: object = None  # the estimate to publish (PUBLISH, UNCHANGED, HELD)
     reason: str = ''
     contact_changed: bool = False
 
@@ -118,6 +121,11 @@ class LoadWatch:
         if reason:
             return self._set_aside(reason)
         moving = self._moving(kwargs.get('lengths'), noise, now)
+        if moving and self.estimate is not None:
+            # a statics model of a moving rod (and friction turning in the cables) is no load
+            # estimate: the last one at rest holds until the cables have stood still
+            return Outcome(Verdict.HELD, self.estimate, contact_changed=self._contact(
+                self.estimate, now, moving))
         vector, sigma = _measurement_vector(kwargs, noise)
         unchanged = self._solved is not None and self._solved.shape == vector.shape and \
             bool(np.all(np.abs(vector - self._solved) <= UNCHANGED_SIGMAS * sigma))
@@ -171,8 +179,9 @@ class LoadWatch:
         """Return True while the cables move or stopped less than the contact time ago."""
         if lengths is None:
             return False
-        if self._still is None or self._still[0].shape != lengths.shape or np.any(
-                np.abs(lengths - self._still[0]) > MOVING_SIGMAS * noise['length']):
+        if self._still is None or self._still[0].shape != lengths.shape:
+            self._still = (lengths.copy(), -np.inf)  # no motion seen yet
+        elif np.any(np.abs(lengths - self._still[0]) > MOVING_SIGMAS * noise['length']):
             self._still = (lengths.copy(), now)
         return now - self._still[1] < self.contact.min_time
 

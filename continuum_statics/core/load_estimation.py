@@ -116,6 +116,7 @@ class WrenchEstimate:
     solution: object = None
     weights: object = None  # the residual's whitener, reused by the next warm estimate
     measurements: int = 0  # how many scalar measurements chi2 is the mean over
+    friction_reference: object = None  # free lengths (m) where each cable last moved
 
     @property
     def dof(self):
@@ -177,8 +178,10 @@ def tension_sigma(level, tensions):
 class _Model:
     """The forward model f(u, w) for one estimate: which solver, which predictions."""
 
-    def __init__(self, robot, lengths, tensions, tip_position, tip_rotation, levels, warm):
+    def __init__(self, robot, lengths, tensions, tip_position, tip_rotation, levels, warm,
+                 reference=None):
         self.robot = robot
+        self.reference = None  # free lengths where each cable last moved beyond the noise
         n = len(robot.cable_names)
         self.tip_position, self.tip_rotation = tip_position, tip_rotation
         self.warm = warm
@@ -207,7 +210,8 @@ class _Model:
             self.kind, self.inputs, self.input_sigma = 'rod', np.zeros(0), np.zeros(0)
             self.input_step = 0.0
         if self.kind == 'lengths':
-            self.warm = _noise_deadband(robot, warm, lengths, levels['length'])
+            self.warm, self.reference = _noise_deadband(robot, warm, reference, lengths,
+                                                        levels['length'])
         self.predicts_cables = bool(outputs)
         if tip_position is not None:
             outputs.append(tip_position)
@@ -296,19 +300,24 @@ class _Model:
         return np.linalg.inv(np.linalg.cholesky(covariance))
 
 
-def _noise_deadband(robot, warm, lengths, sigma):
-    """Return the previous length solve as if cables that moved under 3 sigma had not moved.
+def _noise_deadband(robot, warm, reference, lengths, sigma):
+    """Return (warm start, motion reference): cables that moved under 3 sigma have not moved.
 
     Friction acts against each cable's last direction of motion (``solve_lengths`` reads it
     from the warm start's free lengths); encoder noise is not motion, so it must not flip it.
+    Motion counts from ``reference``, where each cable last moved by more than 3 sigma, so that
+    slow motion (under 3 sigma between two estimates) still counts once it adds up.
     """
     previous = getattr(warm, 'free_lengths', None)
     if previous is None or len(previous) != len(lengths):
-        return warm
+        return warm, None
+    if reference is None or len(reference) != len(lengths):
+        reference = previous
     free = robot.tendons.free_lengths(lengths, robot.straight_cable_lengths)
-    still = np.abs(free - previous) < 3.0 * sigma
-    return dataclasses.replace(warm, free_lengths=np.where(still, free, previous),
-                               motion_reference=None)
+    still = np.abs(free - reference) < 3.0 * sigma
+    return (dataclasses.replace(warm, free_lengths=np.where(still, free, reference),
+                                motion_reference=None),
+            np.where(still, reference, free))
 
 
 def _angle(rotation):
@@ -377,7 +386,8 @@ def _estimate(robot, lengths, tensions, tip_position, tip_rotation, levels, mome
     prior = np.concatenate([np.full(3, force_scale), np.full(3, moment_scale)])[:size]
     steps = LOAD_STEP * np.concatenate([np.full(3, force_scale), np.full(3, moment_scale)])
     model = _Model(robot, lengths, tensions, tip_position, tip_rotation, levels,
-                   None if previous is None else previous.solution)
+                   None if previous is None else previous.solution,
+                   None if previous is None else previous.friction_reference)
     load = np.zeros(6)
     if previous is not None and np.all(np.isfinite(previous.wrench)):
         load[:size] = previous.wrench[:size]
@@ -483,7 +493,7 @@ def _estimate(robot, lengths, tensions, tip_position, tip_rotation, levels, mome
                           covariance=covariance, shape=shape, converged=converged,
                           message='; '.join(notes), unseen=unseen, iterations=iterations,
                           chi2=chi2, solution=result, weights=weights,
-                          measurements=len(residual))
+                          measurements=len(residual), friction_reference=model.reference)
 
 
 @dataclass(frozen=True, eq=False)

@@ -15,6 +15,13 @@ runs :meth:`Robot.estimate_tip_wrench` (warm-started from the previous estimate)
 A robot whose cable_states carry no tensions and which has no tracker gives the estimator nothing
 that sees a load: it says so on /diagnostics (WARN) and publishes no estimate. Nothing
 non-finite is published; a failed estimate keeps the last good one and is counted.
+
+What is published is decided by :class:`~continuum_statics.control.load_watch.LoadWatch`: a
+measurement the model cannot explain (tensions beyond their limits, the chi-square gate, a
+capped solve) is set aside with its reason on /diagnostics, never published as a load; an
+unchanged measurement gives the same estimate; while the cables move the last estimate at rest
+holds; contact needs ``contact_min_time``. Stamps follow :mod:`continuum_statics.control.
+stamps` (``max_stamp_offset``); a callback that fails is counted and the node goes on.
 """
 import dataclasses
 import sys
