@@ -1,8 +1,11 @@
 """Issue 38 items 6-8 over DDS: honest stamps, a frame prefix per arm, a passive rod's /tf.
 
+(and a tracker stamped 1970: used by the controller without a word before)
+
 Each failed on main: a cable_states stamp of 1970 was copied onto backbone and /tf; /tf went
 backwards when two stamp sources mixed; two arms from one robot file published the same frames;
-a passive rod's /tf was published once, so a listener started later never saw it.
+a passive rod's /tf was published once, so a listener started later never saw it; the
+controller used a tracker stamped 1970 without a word.
 """
 import time
 
@@ -17,12 +20,14 @@ rclpy = pytest.importorskip('rclpy')
 TFMessage = pytest.importorskip('tf2_msgs.msg').TFMessage
 from builtin_interfaces.msg import Time  # noqa: E402
 from diagnostic_msgs.msg import DiagnosticArray  # noqa: E402
+from geometry_msgs.msg import PoseStamped  # noqa: E402
 from nav_msgs.msg import Path  # noqa: E402
 from rclpy.qos import qos_profile_sensor_data  # noqa: E402
 from sensor_msgs.msg import JointState  # noqa: E402
 
 from continuum_statics.nodes.qos import TF_QOS  # noqa: E402
 from continuum_statics.nodes.statics_node import StaticsNode  # noqa: E402
+from continuum_statics.nodes.tip_controller_node import TipControllerNode  # noqa: E402
 
 THREE_FILE = str(REPO / 'config' / 'three_section_robot.yaml')
 THREE = load_robot(THREE_FILE)
@@ -114,3 +119,23 @@ def test_a_passive_rods_frames_reach_a_listener_started_later(harness):
     wait_until(lambda: any(t.child_frame_id == 'jones2009_nitinol_rod_tip'
                            for m in list(late.messages) for t in m.transforms), 10.0,
                "the rod's tip on /tf for a late listener")
+
+
+def test_a_tracker_stamped_1970_is_stamped_on_arrival_warned_and_counted(harness):
+    harness.add(TipControllerNode, robot_file=THREE_FILE)
+    client = harness.client()
+    diagnostics = Collector(client, DiagnosticArray, '/diagnostics', 10)
+    tracker = client.create_publisher(PoseStamped, 'tip_pose_measured', 10)
+    pose = PoseStamped()
+    pose.header.frame_id = 'base_link'
+    pose.header.stamp = Time(sec=1)
+    pose.pose.position.z = 0.3
+    pose.pose.orientation.w = 1.0
+
+    def counted():
+        found = diagnostic_values(diagnostics, '/tip_controller')
+        return found and int(found[0].get('rejected_stamp', 0)) >= 1
+
+    publish_until(tracker, pose, counted, 15.0, 'the 1970 stamp counted on /diagnostics')
+    values = diagnostic_values(diagnostics, '/tip_controller')[0]
+    assert 'tip_pose_measured stamped' in values['last_rejection']

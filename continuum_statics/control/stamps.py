@@ -43,6 +43,11 @@ class StampRule:
         self._last[stream] = stamp_ns
         return stamp_ns, reason
 
+    def judge_age(self, stream, stamp_ns, now_ns):
+        """Return (the stamp to use, ns; its age, s; the reason it was replaced, or '')."""
+        stamp_ns, reason = self.judge(stream, stamp_ns, now_ns)
+        return stamp_ns, max((now_ns - stamp_ns) / _NS, 0.0), reason
+
     def values(self):
         """Key/values for diagnostics: stamps replaced per stream."""
         return {'stamps_replaced_%s' % stream: count

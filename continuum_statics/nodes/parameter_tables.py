@@ -164,6 +164,7 @@ def tip_controller_parameters():
         ParamSpec('dedicated_intake_thread', True, 'serve tip_pose, backbone, cable_states '
                   'and tip_wrench from a thread of their own instead of the executor',
                   read_only=True),
+        max_stamp_offset_spec(),
     ] + tip_wrench_limit_specs()
 
 

@@ -46,6 +46,7 @@ from std_msgs.msg import Bool, Header
 from visualization_msgs.msg import MarkerArray
 
 from continuum_statics.control.health import ControllerHealth
+from continuum_statics.control.stamps import StampRule
 from continuum_statics.control.tip_control import TipControl
 from continuum_statics.core.rotations import quaternion_to_rotation
 from continuum_statics.core.warmup import warm_up
@@ -112,6 +113,7 @@ class TipControllerNode(Node):
                                   self._waits.until)
         self.control.on_goal_started = self._publish_active_goal
         self.health = ControllerHealth(self.control)
+        self._stamps = StampRule(self._params['max_stamp_offset'])
         self._cable_states = CableStatesReader(self.cable_names)
         self._command_msg = JointState()
         self._command_pub = self.create_publisher(JointState, 'cable_commands', COMMAND_QOS)
@@ -197,7 +199,12 @@ class TipControllerNode(Node):
         except ValueError as error:
             self.control.reject('tip_pose_measured', error)
             return
-        self.control.on_tip_pose_measured(position, stamp)
+        # a stamp far from the clock (1970) or backwards: arrival, warned and counted
+        stamp, age, reason = self._stamps.judge_age('tip_pose_measured', stamp,
+                                                    self.get_clock().now().nanoseconds)
+        if reason:
+            self.control.reject('stamp', reason)
+        self.control.on_tip_pose_measured(position, stamp, age)
 
     def _on_backbone(self, data):
         # Only the stamp is read here (decoding every Path costs ~0.2 ms); the whole message
