@@ -173,3 +173,14 @@ def test_partial_cable_columns_are_refused(tmp_path, capsys):
     data.write_text(HEADER + ',cable_0\n0,0,0,0,0,0.3,0.3\n')
     assert calibrate.main(['--robot', str(TENDON), '--data', str(data)]) == 1
     assert 'give all cables or none' in capsys.readouterr().err
+
+
+def test_zero_evaluations_are_refused_at_once_in_words_of_the_tool(capsys):
+    # issue 38: --max-evaluations 0 failed after 12 s in SciPy's words
+    from continuum_statics.tools.calibrate import main
+
+    with pytest.raises(SystemExit) as exit_info:
+        main(['--robot', 'r.yaml', '--data', 'd.csv', '--fit', 'youngs_modulus',
+              '--output', 'o.yaml', '--max-evaluations', '0'])
+    assert exit_info.value.code == 2
+    assert '--max-evaluations: must be at least 1, got 0' in capsys.readouterr().err

@@ -41,6 +41,17 @@ def is_recorded_run(path, column_map):
     return False
 
 
+def _positive_int(text):
+    """Argparse type: an integer >= 1 (0 evaluations cannot fit anything)."""
+    try:
+        value = int(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError('%r is not an integer' % text)
+    if value < 1:
+        raise argparse.ArgumentTypeError('must be at least 1, got %d' % value)
+    return value
+
+
 def main(argv=None):
     """Run the calibration; returns the exit code."""
     parser = argparse.ArgumentParser(
@@ -65,7 +76,7 @@ def main(argv=None):
                         help='recorded runs: held-out run to report the errors on (never fitted)')
     parser.add_argument('--tip-topic', default='tip_pose_measured',
                         help='recorded runs in a bag: the measured tip topic (PoseStamped)')
-    parser.add_argument('--max-evaluations', type=int, default=40,
+    parser.add_argument('--max-evaluations', type=_positive_int, default=40,
                         help='recorded runs: most model evaluations of the fit (default 40)')
     parser.add_argument('--select', nargs='+', metavar='PARAM', default=(),
                         help='recorded runs: candidate fit names added to --fit only where they '
