@@ -311,6 +311,10 @@ class CableDriverNode(LifecycleNode):
             self.get_clock().now().to_msg(), self.get_fully_qualified_name().lstrip('/'),
             self.robot.name, level, message, values))
 
+    def on_node_failure(self, text):
+        """Count a restart by the runner after a callback raised (on diagnostics)."""
+        self._problems.add('node', text)
+
     def destroy_node(self):
         """Stop publishing, hold and release the actuators, then destroy the node."""
         if getattr(self, '_loop', None) is not None:  # None or unset: __init__ failed early

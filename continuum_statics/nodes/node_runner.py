@@ -110,7 +110,8 @@ def _restart(node, executor, context, failures, restarts, index):
         thread = threading.Thread(target=_spin, args=(executor, context, failures, name),
                                   name='spin_' + name, daemon=True)
     print(text, file=sys.stderr)
-    report = getattr(node, 'on_node_failure', None)
+    node.get_logger().error(text)
+    report = getattr(node, 'on_node_failure', None)  # counted on the node's diagnostics
     if report is not None:
         report(text)
     thread.start()

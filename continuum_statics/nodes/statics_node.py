@@ -305,6 +305,10 @@ class StaticsNode(Node):
             self.get_clock().now().to_msg(), self.get_fully_qualified_name().lstrip('/'),
             self.robot.name, level, message, values))
 
+    def on_node_failure(self, text):
+        """Count a restart by the runner after a callback raised (on diagnostics)."""
+        self._problems.add('node', text)
+
     def destroy_node(self):
         """Stop the intake thread, then destroy the node."""
         self._intake.stop()
