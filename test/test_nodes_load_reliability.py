@@ -56,18 +56,25 @@ def force_of(msg):
     return np.array([f.x, f.y, f.z])
 
 
-@pytest.mark.ros
-def test_millinewton_tensions_are_set_aside_and_good_ones_give_the_load_again(harness):
-    harness.add(TipLoadEstimatorNode, robot_file=str(REAL_FILE))
+def estimator_rig(harness):
+    """Return (the node, its estimates, a cable_states publisher, its diagnostics values())."""
+    node = harness.add(TipLoadEstimatorNode, robot_file=str(REAL_FILE))
     client = harness.client()
     estimates = Collector(client, WrenchStamped, 'tip_wrench_estimate', 10)
     diagnostics = Collector(client, DiagnosticArray, '/diagnostics', 10)
     states = client.create_publisher(JointState, 'cable_states', qos_profile_sensor_data)
-    tensions = REAL.solve_lengths(REAL.straight_cable_lengths, LOAD).tensions
 
     def values():
         found = diagnostic_values(diagnostics, '/tip_load_estimator')
         return found[0] if found else {}
+
+    return node, estimates, states, values
+
+
+@pytest.mark.ros
+def test_millinewton_tensions_are_set_aside_and_good_ones_give_the_load_again(harness):
+    _, estimates, states, values = estimator_rig(harness)
+    tensions = REAL.solve_lengths(REAL.straight_cable_lengths, LOAD).tensions
 
     good, scaled = cable_states(tensions), cable_states(tensions * 1000.0)
     publish_until(states, good, lambda: len(estimates) >= 5, 20.0, 'estimates of good input')
@@ -84,16 +91,8 @@ def test_millinewton_tensions_are_set_aside_and_good_ones_give_the_load_again(ha
 
 @pytest.mark.ros
 def test_a_stamp_of_1970_is_replaced_by_arrival_with_a_count(harness):
-    node = harness.add(TipLoadEstimatorNode, robot_file=str(REAL_FILE))
-    client = harness.client()
-    estimates = Collector(client, WrenchStamped, 'tip_wrench_estimate', 10)
-    diagnostics = Collector(client, DiagnosticArray, '/diagnostics', 10)
-    states = client.create_publisher(JointState, 'cable_states', qos_profile_sensor_data)
+    node, estimates, states, values = estimator_rig(harness)
     tensions = REAL.solve_lengths(REAL.straight_cable_lengths, LOAD).tensions
-
-    def values():
-        found = diagnostic_values(diagnostics, '/tip_load_estimator')
-        return found[0] if found else {}
 
     publish_until(states, cable_states(tensions, sec=1), lambda: len(estimates) >= 3
                   and int(values().get('stamps_replaced_cable_states', 0)) >= 1, 20.0,
