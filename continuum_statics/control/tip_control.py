@@ -509,6 +509,7 @@ class TipControl:
         if warning:
             self.problems.add('tip_pose_measured', warning)
             self.log.warning(warning)
+        self.run.tip_source = self.tip_source  # the abort message names the real cause
         commanded = self.run.tick(now, dt, self.measurement, tip, tips, self.current_tip_load())
         for note in self.run.notes:
             self.problems.add('ramp', note)
