@@ -201,12 +201,23 @@ def test_stamps_never_go_backwards_and_unstamped_is_arrival_without_a_warning():
 
 
 def test_while_the_cables_move_the_last_estimate_at_rest_holds():
-    rest = fake([0.1, 0.0, 0.0])
-    solver = Solver(rest, fake([3.0, 0.0, 0.0]))
+    rest, moving = fake([0.1, 0.0, 0.0]), fake([3.0, 0.0, 0.0])
+    solver = Solver(rest, *[moving] * 4, fake([0.2, 0.0, 0.0]))
     loads = watch(min_time=0.2)
     assert loads.step(kwargs(0.3), NOISE, 0.0, solver).estimate is rest
     for k, now in enumerate((0.05, 0.1, 0.2, 0.25)):  # moving, then still for < 0.2 s
         outcome = loads.step(kwargs(0.3 + 1e-3 * min(k + 1, 2)), NOISE, now, solver)
         assert outcome.verdict is Verdict.HELD and outcome.estimate is rest
-    assert len(solver.warm) == 1  # nothing solved while the cables moved
+    # solved meanwhile (friction directions follow), each from the last: the warm starts
+    assert solver.warm[1:] == [rest, moving, moving, moving]
     assert loads.step(kwargs(0.302), NOISE, 0.45, solver).verdict is Verdict.PUBLISH
+
+
+def test_a_measurement_set_aside_is_not_solved_again_while_it_stays():
+    solver = Solver(fake([5.0, 0.0, 0.0], explains=False), fake([0.1, 0.0, 0.0]))
+    loads = watch()
+    first = loads.step(kwargs(tensions=2.0), NOISE, 0.0, solver)
+    again = loads.step(kwargs(tensions=2.0), NOISE, 0.01, solver)
+    assert first.verdict is again.verdict is Verdict.SET_ASIDE and again.reason == first.reason
+    assert len(solver.warm) == 1  # one solve for the same faulty measurement
+    assert loads.step(kwargs(tensions=1.0), NOISE, 0.02, solver).verdict is Verdict.PUBLISH

@@ -195,11 +195,34 @@ def test_the_demo_goals_with_the_estimated_load_land_where_they_say(harness):
     print('estimates at rest: %s' % np.round(rest, 3).tolist())
     for (reached, error), outcome in zip(errors, outcomes):
         if reached:  # the tolerance, 1 mm, plus the model's friction resolution (the statics
-            # and the simulator turn a cable's friction at different travels after a reversal)
-            assert error <= 2.5e-3, outcome
+            # and the simulator turn a cable's friction at different travels after a reversal:
+            # up to 2.4 mm seen); a third of the 9 mm the issue saw
+            assert error <= 3e-3, outcome
         else:  # no tracker runs, every goal is reachable: never blamed on either
             assert 'disagree' not in outcome and 'unreachable' not in outcome, outcome
     # most goals land (a goal under friction may run out of corrections: said so)
     assert sum(reached for reached, _ in errors) >= 7, outcomes
     for force in rest:  # the lateral load is seen; the push along the rod is not (held at 0)
         assert np.all(np.abs(force[:2] - LOAD[:2]) < 0.05), force
+
+
+@pytest.mark.ros
+def test_one_faulty_load_cell_is_set_aside_and_never_toggles_contact(harness):
+    # issue 38: one load cell at 10 N (inside its limits) made the estimate alternate 0 <-> 13 N
+    # on the same measurement and tip_contact toggle 45-65 times in 4 s
+    _, estimates, states, values = estimator_rig(harness)
+    contact = Collector(harness.client('contact_listener'), Bool, 'tip_contact', LATCHED)
+    tensions = REAL.solve_lengths(REAL.straight_cable_lengths, LOAD).tensions
+    publish_until(states, cable_states(tensions), lambda: len(estimates) >= 3, 20.0,
+                  'estimates of good input')
+    faulty = tensions.copy()
+    faulty[1] = 10.0
+    count = len(estimates)
+    began = time.monotonic()
+    publish_until(states, cable_states(faulty), lambda: time.monotonic() - began > 4.0
+                  and int(values().get('rejected_estimate', 0)) >= 3, 20.0,
+                  '4 s of the faulty load cell, set aside')
+    assert 'cannot explain' in values()['last_rejection']
+    for msg in estimates.messages[count:]:  # what was published is still the true load
+        assert np.all(np.abs(force_of(msg)[:2] - LOAD[:2]) < 0.05), force_of(msg)
+    assert all(msg.data is False for msg in contact.messages)

@@ -5,8 +5,9 @@ One entry point per timer tick, :meth:`LoadWatch.step`, given the newest inputs 
 1. inputs: the fresh cable lengths, tensions and tracked tip; none that sees a load -> a reason;
 2. gates before the solve: a tension above its cable's ``tension_limits`` (plus 3 sigma of
    noise) is not a reading of this robot (a bridge reporting mN, a faulty load cell): set aside;
-   while the cables move (and ``contact_min_time`` after), the last estimate at rest is held:
-   the model is a statics model, and friction turning in a reversed cable is no load;
+   while the cables move (and ``contact_min_time`` after), the last estimate at rest is held
+   (still solved: the warm start follows each cable's friction direction): the model is a
+   statics model, and friction turning in a reversed cable is no load;
 3. an input within ``UNCHANGED_SIGMAS`` of the one last solved, once a re-solve no longer moves
    the estimate -> the last estimate unchanged (an unchanged measurement gives an unchanged
    estimate, and costs nothing);
@@ -86,9 +87,11 @@ class LoadWatch:
     def __init__(self, robot, contact_threshold, contact_min_time):
         self.robot = robot
         self.contact = ContactDetector(contact_threshold, contact_min_time)
-        self.estimate = None  # the last published estimate (the warm start)
+        self.estimate = None  # the last estimate that passed the gates (the warm start)
+        self.published = None  # the last estimate at rest (what is published)
         self._solved = None  # the measurement vector the last estimate was solved from
         self._settled = False  # re-solving that measurement no longer moves the estimate
+        self._rejected = None  # (measurement vector, reason) of the last one set aside
         self._still = None  # (lengths, monotonic s): where the cables last stopped moving
 
     def measurements(self, inputs, now, timeout, use_tip_pose):
@@ -120,42 +123,54 @@ class LoadWatch:
         reason = self._beyond_limits(kwargs.get('tensions'), noise)
         if reason:
             return self._set_aside(reason)
-        moving = self._moving(kwargs.get('lengths'), noise, now)
-        if moving and self.estimate is not None:
-            # a statics model of a moving rod (and friction turning in the cables) is no load
-            # estimate: the last one at rest holds until the cables have stood still
-            return Outcome(Verdict.HELD, self.estimate, contact_changed=self._contact(
-                self.estimate, now, moving))
+        moving = self._moving(kwargs.get('lengths'), noise, now) and self.published is not None
+        if moving:
+            return self._held(kwargs, now, solve)
         vector, sigma = _measurement_vector(kwargs, noise)
-        unchanged = self._solved is not None and self._solved.shape == vector.shape and \
-            bool(np.all(np.abs(vector - self._solved) <= UNCHANGED_SIGMAS * sigma))
+        unchanged = _within(vector, self._solved, UNCHANGED_SIGMAS * sigma)
+        if self._rejected is not None and _within(vector, self._rejected[0],
+                                                  UNCHANGED_SIGMAS * sigma):
+            return self._set_aside(self._rejected[1])  # the same verdict, not solved again
         if unchanged and self._settled:
-            return Outcome(Verdict.UNCHANGED, self.estimate,
-                           contact_changed=self._contact(self.estimate, now, moving))
+            return Outcome(Verdict.UNCHANGED, self.published,
+                           contact_changed=self._contact(self.published, now, False))
         try:
             estimate = solve(self.estimate, **kwargs)
         except ValueError as error:
-            return self._set_aside('no estimate: %s' % error)
-        if not (np.isfinite(estimate.wrench).all() and np.isfinite(estimate.covariance).all()):
-            return self._set_aside('non-finite estimate')
-        if not estimate.converged:
-            return self._set_aside('not converged: %s' % (estimate.message or 'capped solve'))
-        if not estimate.explains():
-            return self._set_aside(
-                'the model cannot explain these measurements (chi-square %.3g per '
-                'measurement over %d degrees of freedom: a faulty sensor, wrong units or a '
-                'wrong noise figure)' % (estimate.chi2, estimate.dof))
+            return self._set_aside('no estimate: %s' % error, vector)
+        reason = _flagged(estimate)
+        if reason:
+            return self._set_aside(reason, vector)
+        self._rejected = None
         # settled: a second solve of the same measurement moved it by noise of noise (one warm
         # solve after a jump may stop short of the fixed point: its Jacobian was the old one's)
         self._settled = unchanged and bool(np.all(
             np.abs(estimate.wrench - self.estimate.wrench)[:len(estimate.sigma)]
             <= SETTLED_SIGMAS * estimate.sigma))
-        self.estimate, self._solved = estimate, vector
+        self.estimate = self.published = estimate
+        self._solved = vector
         return Outcome(Verdict.PUBLISH, estimate,
-                       contact_changed=self._contact(estimate, now, moving))
+                       contact_changed=self._contact(estimate, now, False))
 
-    def _set_aside(self, reason):
+    def _held(self, kwargs, now, solve):
+        """Hold the last estimate at rest while the cables move (a moving rod is no statics).
+
+        Still solved: the warm start follows each cable's friction direction.
+        """
+        try:
+            estimate = solve(self.estimate, **kwargs)
+        except ValueError:
+            estimate = None
+        if estimate is not None and not _flagged(estimate):
+            self.estimate = estimate
+        self._solved, self._settled, self._rejected = None, False, None
+        return Outcome(Verdict.HELD, self.published,
+                       contact_changed=self._contact(self.published, now, True))
+
+    def _set_aside(self, reason, vector=None):
         self.contact.hold()
+        if vector is not None:
+            self._rejected = (vector, reason)
         return Outcome(Verdict.SET_ASIDE, reason=reason)
 
     def _contact(self, estimate, now, moving):
@@ -184,6 +199,25 @@ class LoadWatch:
         elif np.any(np.abs(lengths - self._still[0]) > MOVING_SIGMAS * noise['length']):
             self._still = (lengths.copy(), now)
         return now - self._still[1] < self.contact.min_time
+
+
+def _flagged(estimate):
+    """Return why an estimate may not be published as a load, or ''."""
+    if not (np.isfinite(estimate.wrench).all() and np.isfinite(estimate.covariance).all()):
+        return 'non-finite estimate'
+    if not estimate.converged:
+        return 'not converged: %s' % (estimate.message or 'capped solve')
+    if not estimate.explains():
+        return ('the model cannot explain these measurements (chi-square %.3g per measurement '
+                'over %d degrees of freedom: a faulty sensor, wrong units or a wrong noise '
+                'figure)' % (estimate.chi2, estimate.dof))
+    return ''
+
+
+def _within(vector, reference, tolerance):
+    """Return True if ``vector`` is within ``tolerance`` (elementwise) of ``reference``."""
+    return reference is not None and reference.shape == vector.shape and \
+        bool(np.all(np.abs(vector - reference) <= tolerance))
 
 
 def _measurement_vector(kwargs, noise):
