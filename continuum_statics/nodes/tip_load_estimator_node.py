@@ -123,18 +123,21 @@ class TipLoadEstimatorNode(Node):
         tensions, problem = self._cable_states.tensions(view)
         if problem:
             self._problems.reject('cable_states', problem)
-        self._stamp_ns = self._judged_stamp('cable_states', view.sec * NS + view.nanosec)
+        self._stamp_ns, taken = self._judged('cable_states', view.sec * NS + view.nanosec)
         self._inputs = dataclasses.replace(self._inputs, lengths=lengths, tensions=tensions,
-                                           cables_received=time.monotonic())
+                                           cables_received=taken)
         self._fresh = True
 
-    def _judged_stamp(self, stream, stamp_ns):
-        """Return the stamp to use (ns): the message's, or its arrival if it is not trusted."""
-        stamp_ns, reason = self._stamps.judge(stream, stamp_ns,
-                                              self.get_clock().now().nanoseconds)
+    def _judged(self, stream, stamp_ns):
+        """Return (the stamp to use, ns; when it was taken, monotonic s: freshness).
+
+        The message's stamp, or its arrival when the stamp is not trusted (warned, counted).
+        """
+        stamp_ns, age, reason = self._stamps.judge_age(stream, stamp_ns,
+                                                       self.get_clock().now().nanoseconds)
         if reason:
             self._problems.reject('stamp', reason)
-        return stamp_ns
+        return stamp_ns, time.monotonic() - age
 
     def _on_tip_pose(self, msg):
         try:
@@ -150,11 +153,9 @@ class TipLoadEstimatorNode(Node):
         rotation = None
         if self._params['use_tip_orientation'] and abs(np.linalg.norm(quaternion) - 1.0) < 1e-3:
             rotation = quaternion_to_rotation(quaternion)
-        # freshness by the same rule as the stamps: a tracker stamped far from now is stale
-        stamp_ns = self._judged_stamp('tip_pose_measured', stamp_ns_of(msg.header.stamp))
-        received = time.monotonic() - (self.get_clock().now().nanoseconds - stamp_ns) / NS
+        _, taken = self._judged('tip_pose_measured', stamp_ns_of(msg.header.stamp))
         self._inputs = dataclasses.replace(self._inputs, tip_position=position,
-                                           tip_rotation=rotation, tip_received=received)
+                                           tip_rotation=rotation, tip_received=taken)
         self._fresh = True
 
     # -- estimation: the decisions are the LoadWatch's -------------------------------------
