@@ -128,10 +128,19 @@ def _run_report(summary):
     lines = ['fitted (%s, %d evaluations, %.0f s):' % (
         summary['optimizer']['message'], summary['optimizer']['evaluations'],
         summary['seconds'])]
+    undetermined = []
     for name, value in summary['fitted'].items():
-        lines.append('  %-17s %s %s' % (name, ' '.join(
-            '%.5g' % v for v in ([value['after']] if np.isscalar(value['after'])
-                                 else value['after'])), value['unit']))
+        after, sigma = (np.atleast_1d(np.asarray(value.get(key, np.nan), dtype=float))
+                        for key in ('after', 'std'))
+        lines.append('  %-17s %s %s (1-sigma %s)' % (
+            name, ' '.join('%.5g' % v for v in after), value['unit'],
+            ' '.join('%.2g' % v for v in sigma)))
+        # a value whose 1-sigma reaches its own size: the data do not determine it
+        if np.any(~(sigma < np.abs(after))):
+            undetermined.append(name)
+    if undetermined:
+        lines.append('note: the data do not determine %s (1-sigma >= the value): the written '
+                     'file carries them, check before using it' % ', '.join(undetermined))
     lines.append('tip RMS: file as given %.2f mm -> fitted %.2f mm (%.2f mm mean-offset '
                  'aligned), max %.2f mm; %d rows did not converge' % (
                      summary['rms_before'] * 1e3, summary['rms_after'] * 1e3,
