@@ -92,3 +92,34 @@ def test_a_goal_running_at_sigint_gets_a_result_saying_so(tmp_path):
         executor.shutdown()
     finally:
         bringup.close()
+
+
+def test_a_service_goal_running_at_sigint_gets_its_answer(tmp_path):
+    """The service side of item 5 (answered before the fix as well: a guard)."""
+    from nav_msgs.srv import GetPlan
+
+    bringup = Bringup(tmp_path / 'bringup.log', 'shutdown38s', '-p', 'max_cable_speed:=0.002')
+    try:
+        node = rclpy.create_node('shutdown_client', namespace='/shutdown38s',
+                                 context=bringup.context)
+        executor = rclpy.executors.SingleThreadedExecutor(context=bringup.context)
+        executor.add_node(node)
+        service = node.create_client(GetPlan, 'tip_goal')
+        threading.Thread(target=executor.spin, daemon=True).start()
+        assert service.wait_for_service(timeout_sec=60.0), bringup.output()
+        request = GetPlan.Request(tolerance=1e-3)
+        request.goal.header.frame_id = 'base_link'
+        p = request.goal.pose.position
+        p.x, p.y, p.z = (float(v) for v in ROBOT.solve_ivp([2.5, 0.0, 0.0]).tip_position)
+        answer = service.call_async(request)
+        wait_until(lambda: 'tip_goal service' in bringup.output(), 20.0,
+                   'the goal started: %s' % bringup.output())
+        assert not answer.done()
+        bringup.process.send_signal(2)
+        wait_until(answer.done, 8.0, 'the answer of the goal running at SIGINT: %s'
+                   % bringup.output())
+        assert not answer.result().plan.poses  # not reached: an empty plan, reason logged
+        assert bringup.process.wait(timeout=10.0) == 0, bringup.output()
+        executor.shutdown()
+    finally:
+        bringup.close()
