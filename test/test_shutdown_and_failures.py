@@ -61,13 +61,19 @@ def test_a_callback_that_raises_stops_no_node_and_is_reported(tmp_path):
             process.wait()
 
 
+def slow_bringup(tmp_path, namespace):
+    """Return (bringup with slow cables: a goal runs for seconds, a client node, its executor)."""
+    bringup = Bringup(tmp_path / 'bringup.log', namespace, '-p', 'max_cable_speed:=0.002')
+    node = rclpy.create_node('shutdown_client', namespace='/' + namespace,
+                             context=bringup.context)
+    executor = rclpy.executors.SingleThreadedExecutor(context=bringup.context)
+    executor.add_node(node)
+    return bringup, node, executor
+
+
 def test_a_goal_running_at_sigint_gets_a_result_saying_so(tmp_path):
-    bringup = Bringup(tmp_path / 'bringup.log', 'shutdown38', '-p', 'max_cable_speed:=0.002')
+    bringup, node, executor = slow_bringup(tmp_path, 'shutdown38')
     try:
-        node = rclpy.create_node('shutdown_client', namespace='/shutdown38',
-                                 context=bringup.context)
-        executor = rclpy.executors.SingleThreadedExecutor(context=bringup.context)
-        executor.add_node(node)
         client = action_client(node)
         threading.Thread(target=executor.spin, daemon=True).start()
         wait_until(client.server_is_ready, 60.0, 'bringup up')
@@ -98,12 +104,8 @@ def test_a_service_goal_running_at_sigint_gets_its_answer(tmp_path):
     """The service side of item 5 (answered before the fix as well: a guard)."""
     from nav_msgs.srv import GetPlan
 
-    bringup = Bringup(tmp_path / 'bringup.log', 'shutdown38s', '-p', 'max_cable_speed:=0.002')
+    bringup, node, executor = slow_bringup(tmp_path, 'shutdown38s')
     try:
-        node = rclpy.create_node('shutdown_client', namespace='/shutdown38s',
-                                 context=bringup.context)
-        executor = rclpy.executors.SingleThreadedExecutor(context=bringup.context)
-        executor.add_node(node)
         service = node.create_client(GetPlan, 'tip_goal')
         threading.Thread(target=executor.spin, daemon=True).start()
         assert service.wait_for_service(timeout_sec=60.0), bringup.output()
