@@ -317,3 +317,11 @@ def test_the_point_moment_model_takes_a_routed_cable_at_its_end_disk():
     shape = helical.solve_tensions(tensions)
     estimate = helical.estimate_shape(helical.cable_lengths(shape))
     assert np.linalg.norm(estimate.shape.positions[-1] - shape.positions[-1]) < 1e-6
+
+
+@pytest.mark.parametrize('turns', [40.0, 20.0, -25.0])
+def test_a_helix_with_more_turns_than_the_disks_can_carry_is_refused(turns):
+    # issue 38: 40 turns/m at 25 mm disk spacing loaded silently and aliased to a straight cable
+    with pytest.raises(ValueError, match='more than the disks can carry'):
+        make(robot_file(helix_turns=turns))
+    make(robot_file(helix_turns=19.0))  # under half a turn per 25 mm spacing: a helix

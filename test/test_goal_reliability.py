@@ -465,3 +465,19 @@ def test_a_soak_of_a_thousand_goals_from_four_clients_all_answered_then_sigint(t
         executor.shutdown()
     finally:
         bringup.close()
+
+
+def test_an_abort_without_a_tracker_does_not_blame_one():
+    # issue 38: with no tracker running the abort said "the measured tip and the model disagree
+    # (check the tracker ...)"; the judged tip was the model's own, moved by its inputs
+    run, goal, _ = straight_run_to_a_goal(RunSettings(max_correction=0.03, settle_time=0.0))
+    run.tip_source = 'tip_pose'
+    away = goal.position + np.array([0.02, 0.0, 0.0])
+    now = 0.0
+    while not goal.done.is_set() and now < 40.0:
+        now += 0.02
+        tips = [sample(away, now - 0.001 * k) for k in range(5)]
+        run.tick(now, 0.02, Measurement(run.commanded.copy(), 0, now), tips[0], tips[::-1],
+                 np.zeros(6))
+    assert goal.done.is_set() and not goal.reached
+    assert 'no tracker is used' in goal.reason and 'check the tracker' not in goal.reason

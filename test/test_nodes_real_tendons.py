@@ -85,7 +85,7 @@ def test_a_paid_out_cable_is_slack_and_the_tip_is_the_shape_without_its_tension(
     fit = least_squares_fit(IDEAL, paid_out)  # computed before any node runs (module global)
     assert np.linalg.norm(fit.shape.tip_position - truth.shape.tip_position) > 0.01
 
-    statics = harness.add(StaticsNode, marker_rate=0.0)
+    statics = harness.add(StaticsNode, marker_rate=0.0, max_stamp_offset=1e12)  # small stamps
     client = harness.client()
     backbone = Collector(client, Path, 'backbone', LATCHED)
     tip = Collector(client, PoseStamped, 'tip_pose', LATCHED)
@@ -212,7 +212,7 @@ def test_lengths_and_tensions_of_the_tendon_model_itself_are_not_distrusted(harn
     lengths = command_for(REAL, REAL.solve_tip_goal(goal).shape, 1.0).lengths
     held = REAL.solve_lengths(lengths)  # what the motors' lengths give: shape and tensions
     assert held.converged and not held.slack.any(), held.message
-    harness.add(StaticsNode, marker_rate=0.0, robot_file=str(REAL_FILE))
+    harness.add(StaticsNode, marker_rate=0.0, robot_file=str(REAL_FILE), max_stamp_offset=1e12)
     client = harness.client()
     tip = Collector(client, PoseStamped, 'tip_pose', LATCHED)
     diagnostics = Collector(client, DiagnosticArray, '/diagnostics', 10)

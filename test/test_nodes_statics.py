@@ -40,6 +40,9 @@ class Rig:
     """statics plus a client that feeds cable_states/tip_wrench and collects the outputs."""
 
     def __init__(self, harness, **overrides):
+        # these tests follow each measurement by its stamp (small, increasing: 101, 102, ...),
+        # far from the clock: the stamp rule's offset check is off here (tested on its own)
+        overrides.setdefault('max_stamp_offset', 1e12)
         self.node = harness.add(StaticsNode, **overrides)
         client = self.client = harness.client()
         self.backbone = Collector(client, Path, 'backbone', LATCHED)
@@ -242,8 +245,9 @@ def test_empty_malformed_and_badly_stamped_payloads_are_counted(harness):
     assert int(rig.values()['empty_payloads_total']) >= 1
     assert rig.backbone.last.header.stamp == good.header.stamp
     # The hand-made encoding itself is fine with a valid stamp.
-    data = raw_joint_state(8, 5, NAMES, lengths)
-    publish_until(rig.states, data, lambda: rig.backbone.last.header.stamp.sec == 8, 5.0,
+    data = raw_joint_state(rig.stamp + 100, 5, NAMES, lengths)  # later: stamps go forward
+    publish_until(rig.states, data,
+                  lambda: rig.backbone.last.header.stamp.sec == rig.stamp + 100, 5.0,
                   'the backbone of a hand-serialized measurement')
 
 
@@ -302,9 +306,10 @@ def test_a_robot_without_cables_is_a_passive_rod_under_gravity_and_tip_load(harn
         s.topic_name.split('/')[-1] != 'cable_states' for s in rig.node.subscriptions)
     load = WrenchStamped()
     load.header.frame_id = rod.base_frame_id
-    load.header.stamp = Time(sec=42, nanosec=0)
+    later = int(time.time()) + 42  # after the start-up shape's stamp (now): stamps go forward
+    load.header.stamp = Time(sec=later, nanosec=0)
     load.wrench.force.z = -0.196  # the paper's 20 g tip mass
-    publish_until(rig.wrench, load, lambda: rig.backbone.last.header.stamp.sec == 42, 10.0,
+    publish_until(rig.wrench, load, lambda: rig.backbone.last.header.stamp.sec == later, 10.0,
                   'the backbone under the tip load')
     np.testing.assert_allclose(pose_xyz(rig.backbone.last.poses[-1].pose),
                                rod.solve_bvp(tip_force=(0.0, 0.0, -0.196)).tip_position,

@@ -87,6 +87,19 @@ def test_passive_rod_is_base_tip_and_one_end_disk():
                                  '%s_section_0' % robot.name)
 
 
+def test_links_follow_the_frame_prefix_of_two_arms_from_one_file():
+    robot = load_robot(REPO / 'config' / 'two_section_robot.yaml')
+    for disks in (False, True):
+        plain = link_names(robot, disks=disks)
+        arm = link_names(robot, disks=disks, prefix='arm1/')
+        assert arm[0] == plain[0] == robot.base_frame_id  # the base frame is not prefixed
+        assert arm[1:] == tuple('arm1/' + name for name in plain[1:])
+        assert set(arm[1:]) <= set(frames(robot, '', disks, 'arm1/')[0])
+        urdf = URDF.from_xml_string(robot_urdf(robot, disks=disks, prefix='arm1/'))
+        materials = {link.name: link.visual.material.name for link in urdf.links}
+        assert materials['arm1/%s_section_1' % robot.name] == 'end_disk'
+
+
 def test_rviz_config_shows_the_description_from_the_latched_topic():
     config = yaml.safe_load((REPO / 'config' / 'continuum_robot.rviz').read_text())
     displays = {d['Class']: d for d in config['Visualization Manager']['Displays']}

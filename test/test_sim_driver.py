@@ -128,3 +128,22 @@ def test_registry_knows_sim_and_module_specs():
 def test_registry_rejects_unknown_backends(spec, message):
     with pytest.raises(ValueError, match=message):
         backend_class(spec)
+
+
+def test_a_hidden_load_beyond_the_rod_is_refused_and_the_last_one_kept():
+    # issue 38: a 100 N hidden load made every reading run the slow last resort (200 -> 4 Hz)
+    from conftest import REPO
+
+    from continuum_statics import load_robot
+    from continuum_statics.core.load_estimation import plausible_tip_load
+
+    robot = load_robot(REPO / 'config' / 'tendon_robot_real_tendons.yaml')
+    backend = SimulatedCableBackend(robot.cable_names, robot.cable_length_limits,
+                                    robot.straight_cable_lengths, robot=robot)
+    backend.start(0.0)
+    backend.set_tip_wrench([0.12, -0.08, 0.0, 0.0, 0.0, 0.0])
+    assert plausible_tip_load(robot)[0] < 100.0
+    with pytest.raises(ValueError, match='beyond what the rod can carry'):
+        backend.set_tip_wrench([100.0, 0.0, 0.0, 0.0, 0.0, 0.0])
+    np.testing.assert_array_equal(backend.tip_wrench, [0.12, -0.08, 0.0, 0.0, 0.0, 0.0])
+    assert backend.read(0.1).tensions is not None

@@ -173,3 +173,31 @@ def test_partial_cable_columns_are_refused(tmp_path, capsys):
     data.write_text(HEADER + ',cable_0\n0,0,0,0,0,0.3,0.3\n')
     assert calibrate.main(['--robot', str(TENDON), '--data', str(data)]) == 1
     assert 'give all cables or none' in capsys.readouterr().err
+
+
+def test_zero_evaluations_are_refused_at_once_in_words_of_the_tool(capsys):
+    # issue 38: --max-evaluations 0 failed after 12 s in SciPy's words
+    from continuum_statics.tools.calibrate import main
+
+    with pytest.raises(SystemExit) as exit_info:
+        main(['--robot', 'r.yaml', '--data', 'd.csv', '--fit', 'youngs_modulus',
+              '--output', 'o.yaml', '--max-evaluations', '0'])
+    assert exit_info.value.code == 2
+    assert '--max-evaluations: must be at least 1, got 0' in capsys.readouterr().err
+
+
+def test_the_run_report_prints_each_1_sigma_and_names_what_the_data_do_not_determine():
+    # issue 38: disk_mass at 1-sigma 21 kg was written with no note and no 1-sigma printed
+    from continuum_statics.tools.calibrate import _run_report
+
+    summary = {'optimizer': {'message': 'ok', 'evaluations': 12}, 'seconds': 3.0,
+               'fitted': {'youngs_modulus': {'after': 54e9, 'std': 1e8, 'unit': 'Pa'},
+                          'disk_mass': {'after': [0.002, 0.003], 'std': [21.0, 0.001],
+                                        'unit': 'kg'}},
+               'rms_before': 1e-3, 'rms_after': 5e-4, 'rms_aligned_after': 4e-4,
+               'max_after': 1e-3, 'unconverged_rows': 0, 'output': None}
+    report = _run_report(summary)
+    assert 'youngs_modulus    5.4e+10 Pa (1-sigma 1e+08)' in report, report
+    assert 'disk_mass         0.002 0.003 kg (1-sigma 21 0.001)' in report, report
+    assert 'the data do not determine disk_mass (1-sigma >= the value)' in report
+    assert 'do not determine youngs_modulus' not in report

@@ -82,3 +82,15 @@ def test_estimate_load_finds_the_force_that_bent_the_rod():
     assert 'do not determine the tip force' in human.stdout
     wrong = solve('--tip-position', '0', '0', '0.3')
     assert wrong.returncode == 1 and '--estimate-load' in wrong.stderr
+
+
+@pytest.mark.parametrize('args, words', [
+    (('--tip-force', '0.1', '0', '0'), '--tip-force, --tip-moment and --plot do not go with'),
+    (('--plot', 'x.png'), 'do not go with --estimate-load'),
+    (('--noise', 'length', '2%'), 'a percentage P% only for tension'),
+])
+def test_estimate_load_refuses_options_it_would_ignore_with_the_reason(args, words):
+    # issue 38: --tip-force and --plot were ignored silently; '2%' for a length said "could not
+    # convert string to float"
+    result = solve('--estimate-load', '--tensions', '1', '1', '1', '1', *args)
+    assert result.returncode == 1 and words in result.stderr, result.stderr

@@ -156,6 +156,8 @@ class GoalRun:
         self.moved_onto_model = 0
         self.judged_error = None  # mean tip error of the judgement in progress (m)
         self.notes = []  # degraded behaviour to report (the node drains it)
+        # which tip is judged: 'tip_pose_measured' (a tracker) or 'tip_pose' (the model's own)
+        self.tip_source = 'tip_pose_measured'
         self._target = None
         self._corrected_goal = None
         self._path = None  # (start, goal solution, tip load) of the ramp in progress
@@ -215,9 +217,17 @@ class GoalRun:
         robot = self.robot
         begin = self.start_point(measured, load, snapshot, tip_fresh)
         start, recover, commanded = begin.state, begin.recover, begin.commanded
-        solution = robot.solve_tip_goal(position, tip_force=load[:3], tip_moment=load[3:],
-                                        tolerance=self.model_tolerance(tolerance),
-                                        goal_direction=direction, warm_start=start)
+        solution = None
+        # warm from the start, then cold: a warm start far from the goal can end in a local
+        # minimum of the tip error and call a reachable goal unreachable (seen 1.5-3 mm away)
+        for warm_start in (start, None):
+            trial = robot.solve_tip_goal(position, tip_force=load[:3], tip_moment=load[3:],
+                                         tolerance=self.model_tolerance(tolerance),
+                                         goal_direction=direction, warm_start=warm_start)
+            if solution is None or trial.error < solution.error:
+                solution = trial
+            if solution.error <= tolerance:
+                break
         if direction is not None:
             # judged against the goal's tolerance (the model solved to 1 % of it, which a
             # direction goal may not reach): position within it, direction within it over L
@@ -444,10 +454,9 @@ class GoalRun:
         total = float(np.linalg.norm(corrected - goal.position))
         if total > self.settings.max_correction:
             self.finish(goal, False, 'the corrections would move the target %.1f mm from the '
-                        'goal, more than tracker_max_disagreement %.1f mm: the measured tip and '
-                        'the model disagree that much (check the tracker and its registration, '
-                        'or calibrate the robot)%s'
-                        % (total * 1e3, self.settings.max_correction * 1e3, not_following))
+                        'goal, more than tracker_max_disagreement %.1f mm: %s%s'
+                        % (total * 1e3, self.settings.max_correction * 1e3,
+                           _correction_cause(self.tip_source), not_following))
             return
         self._corrected_goal = corrected
         start = self.command_state
@@ -471,3 +480,13 @@ class GoalRun:
         self.warm = solution
         self._start_path(start, solution, load, target)
         self.phase = Phase.RAMP
+
+
+def _correction_cause(tip_source):
+    """Why the corrections grew, by the tip that was judged (the real cause, never a guess)."""
+    if tip_source == 'tip_pose_measured':
+        return ('the measured tip and the model disagree that much (check the tracker and its '
+                'registration, or calibrate the robot)')
+    return ("no tracker is used: the model's own tip (tip_pose) moved that far from the shape "
+            'it commanded, so its inputs changed under the goal (the tip load on tip_wrench or '
+            'the tip-load estimate, or lengths the cables did not reach)')

@@ -184,3 +184,15 @@ class ShapeTracker:
             notes['load_problem'] = ('the model has no finite shape under tip load %s (%s): '
                                      'using zero' % (np.array2string(load, precision=3), error))
             return robot.estimate_shape(lengths, tensions=tensions, warm_start=None)
+
+
+def passive_shape(robot, load):
+    """Return (shape, '') of a passive rod under gravity and ``load`` (6,), or (None, reason).
+
+    None when the rod has no equilibrium under that load (the last shape stays published).
+    """
+    try:
+        return robot.solve_bvp(tip_force=load[:3], tip_moment=load[3:]), ''
+    except Exception as error:  # ConvergenceError, ValueError, a solver failure: never fatal
+        return None, 'no equilibrium of the passive rod under %s: %s' % (
+            np.array2string(np.asarray(load), precision=3), error)

@@ -161,12 +161,15 @@ class TipControl:
         self._tips.append(self.tip)
         self._tip_rotation = rotation
 
-    def on_tip_pose_measured(self, marker_position, stamp_ns) -> None:
-        """Take a tracker's marker position (3,) m, base frame (ignored before a tip_pose)."""
+    def on_tip_pose_measured(self, marker_position, stamp_ns, age=0.0) -> None:
+        """Take a tracker's marker position (3,) m, base frame (ignored before a tip_pose).
+
+        ``age``: s since the measurement (its judged stamp): freshness counts from then.
+        """
         if self._tip_rotation is None:
             return  # the marker's offset needs the model's tip frame: wait for tip_pose
         tip = tracked_tip(marker_position, self._tip_rotation, self.robot.tip_marker)
-        self.measured_tip = TipSample(tip, stamp_ns, self.clock())
+        self.measured_tip = TipSample(tip, stamp_ns, self.clock() - age)
         self._measured_tips.append(self.measured_tip)
 
     def on_cable_states(self, lengths, stamp_ns) -> None:
@@ -506,6 +509,7 @@ class TipControl:
         if warning:
             self.problems.add('tip_pose_measured', warning)
             self.log.warning(warning)
+        self.run.tip_source = self.tip_source  # the abort message names the real cause
         commanded = self.run.tick(now, dt, self.measurement, tip, tips, self.current_tip_load())
         for note in self.run.notes:
             self.problems.add('ramp', note)

@@ -32,6 +32,7 @@ from dataclasses import dataclass
 import math
 
 import numpy as np
+from scipy.stats import chi2 as chi2_distribution
 
 from continuum_statics.core.bvp import ConvergenceError
 from continuum_statics.core.inputs import as_vector
@@ -65,6 +66,12 @@ LOAD_STEP = 1e-5
 LENGTH_STEP, TENSION_STEP = 1e-6, 1e-5
 #: The smallest tension standard deviation (N) of a 'P%' noise figure (a zero reading).
 MIN_TENSION_NOISE = 1e-3
+#: The chi-square gate: a measurement set whose weighted squared residual exceeds the (1 - p)
+#: quantile of the chi-square distribution with (measurements - seen load directions) degrees
+#: of freedom is one the model cannot explain at the stated noise (a faulty sensor, a wrong
+#: unit, a tracker the tensions contradict). p = 1e-3: measurements whose noise is as stated
+#: are set aside once in a thousand; a faulty one is off by orders of magnitude more.
+CHI2_GATE_PROBABILITY = 1e-3
 
 
 class _ForwardFailed(Exception):
@@ -108,6 +115,22 @@ class WrenchEstimate:
     chi2: float
     solution: object = None
     weights: object = None  # the residual's whitener, reused by the next warm estimate
+    measurements: int = 0  # how many scalar measurements chi2 is the mean over
+    friction_reference: object = None  # free lengths (m) where each cable last moved
+
+    @property
+    def dof(self):
+        """Degrees of freedom of the residual: measurements less the seen load directions."""
+        return self.measurements - (len(self.covariance) - len(self.unseen))
+
+    def explains(self, probability=CHI2_GATE_PROBABILITY):
+        """Return True if the measurements pass the chi-square gate (see CHI2_GATE_PROBABILITY)."""
+        if not np.isfinite(self.chi2):
+            return False
+        if self.dof <= 0:
+            return True
+        total = self.chi2 * self.measurements
+        return bool(total <= chi2_distribution.ppf(1.0 - probability, self.dof))
 
     @property
     def sigma(self):
@@ -145,7 +168,7 @@ def noise_levels(noise):
     return levels
 
 
-def _tension_sigma(level, tensions):
+def tension_sigma(level, tensions):
     """Per-cable tension standard deviations (N) of a noise level (N or 'P%')."""
     if isinstance(level, str):
         return np.maximum(float(level[:-1]) / 100.0 * np.abs(tensions), MIN_TENSION_NOISE)
@@ -155,8 +178,10 @@ def _tension_sigma(level, tensions):
 class _Model:
     """The forward model f(u, w) for one estimate: which solver, which predictions."""
 
-    def __init__(self, robot, lengths, tensions, tip_position, tip_rotation, levels, warm):
+    def __init__(self, robot, lengths, tensions, tip_position, tip_rotation, levels, warm,
+                 reference=None):
         self.robot = robot
+        self.reference = None  # free lengths where each cable last moved beyond the noise
         n = len(robot.cable_names)
         self.tip_position, self.tip_rotation = tip_position, tip_rotation
         self.warm = warm
@@ -167,10 +192,10 @@ class _Model:
             self.input_step = LENGTH_STEP * robot.length
             if tensions is not None:
                 outputs.append(tensions)
-                sigmas.append(_tension_sigma(levels['tension'], tensions))
+                sigmas.append(tension_sigma(levels['tension'], tensions))
         elif tensions is not None:
             self.kind, self.inputs = 'tensions', tensions
-            self.input_sigma = _tension_sigma(levels['tension'], tensions)
+            self.input_sigma = tension_sigma(levels['tension'], tensions)
             radius = np.hypot(robot.cable_offsets[:, 0], robot.cable_offsets[:, 1])
             self.input_step = TENSION_STEP * robot.c[0] / (robot.length * float(
                 np.mean(radius)))
@@ -185,7 +210,8 @@ class _Model:
             self.kind, self.inputs, self.input_sigma = 'rod', np.zeros(0), np.zeros(0)
             self.input_step = 0.0
         if self.kind == 'lengths':
-            self.warm = _noise_deadband(robot, warm, lengths, levels['length'])
+            self.warm, self.reference = _noise_deadband(robot, warm, reference, lengths,
+                                                        levels['length'])
         self.predicts_cables = bool(outputs)
         if tip_position is not None:
             outputs.append(tip_position)
@@ -275,19 +301,24 @@ class _Model:
         return np.linalg.inv(np.linalg.cholesky(covariance))
 
 
-def _noise_deadband(robot, warm, lengths, sigma):
-    """Return the previous length solve as if cables that moved under 3 sigma had not moved.
+def _noise_deadband(robot, warm, reference, lengths, sigma):
+    """Return (warm start, motion reference): cables that moved under 3 sigma have not moved.
 
     Friction acts against each cable's last direction of motion (``solve_lengths`` reads it
     from the warm start's free lengths); encoder noise is not motion, so it must not flip it.
+    Motion counts from ``reference``, where each cable last moved by more than 3 sigma, so that
+    slow motion (under 3 sigma between two estimates) still counts once it adds up.
     """
     previous = getattr(warm, 'free_lengths', None)
     if previous is None or len(previous) != len(lengths):
-        return warm
+        return warm, None
+    if reference is None or len(reference) != len(lengths):
+        reference = previous
     free = robot.tendons.free_lengths(lengths, robot.straight_cable_lengths)
-    still = np.abs(free - previous) < 3.0 * sigma
-    return dataclasses.replace(warm, free_lengths=np.where(still, free, previous),
-                               motion_reference=None)
+    still = np.abs(free - reference) < 3.0 * sigma
+    return (dataclasses.replace(warm, free_lengths=np.where(still, free, reference),
+                                motion_reference=None),
+            np.where(still, reference, free))
 
 
 def _angle(rotation):
@@ -330,13 +361,34 @@ def estimate_tip_wrench(robot, lengths=None, tensions=None, tip_position=None, t
     if n == 0 and (lengths is not None or tensions is not None):
         raise ValueError('this robot has no cables: estimate from the tip pose')
     levels = noise_levels(noise)
+    previous = warm_start if isinstance(warm_start, WrenchEstimate) else None
+    if previous is not None and not previous.explains():
+        # an estimate of measurements the model could not explain (a wrong unit, a faulty
+        # sensor) sits on a branch of equilibria of its own: the next one starts afresh
+        previous = None
+    try:
+        return _estimate(robot, lengths, tensions, tip_position, tip_rotation, levels, moment,
+                         previous)
+    except _ForwardFailed as error:
+        # a solve failed after the start (a re-linearisation, the final Jacobian): the
+        # measurements have no equilibrium near the last estimate; it stays, marked so
+        if previous is None:
+            raise ValueError('no equilibrium for these measurements: %s' % error) from error
+        return dataclasses.replace(
+            previous, converged=False,
+            message='no equilibrium for these measurements (%s): kept the last estimate'
+            % error)
+
+
+def _estimate(robot, lengths, tensions, tip_position, tip_rotation, levels, moment, previous):
+    """Estimate on checked arguments (:func:`estimate_tip_wrench`); may raise _ForwardFailed."""
     size = 6 if moment else 3
     force_scale, moment_scale = plausible_tip_load(robot)
     prior = np.concatenate([np.full(3, force_scale), np.full(3, moment_scale)])[:size]
     steps = LOAD_STEP * np.concatenate([np.full(3, force_scale), np.full(3, moment_scale)])
-    previous = warm_start if isinstance(warm_start, WrenchEstimate) else None
     model = _Model(robot, lengths, tensions, tip_position, tip_rotation, levels,
-                   None if previous is None else previous.solution)
+                   None if previous is None else previous.solution,
+                   None if previous is None else previous.friction_reference)
     load = np.zeros(6)
     if previous is not None and np.all(np.isfinite(previous.wrench)):
         load[:size] = previous.wrench[:size]
@@ -441,7 +493,8 @@ def estimate_tip_wrench(robot, lengths=None, tensions=None, tip_position=None, t
                           moment=load[3:].copy() if moment else np.zeros(3),
                           covariance=covariance, shape=shape, converged=converged,
                           message='; '.join(notes), unseen=unseen, iterations=iterations,
-                          chi2=chi2, solution=result, weights=weights)
+                          chi2=chi2, solution=result, weights=weights,
+                          measurements=len(residual), friction_reference=model.reference)
 
 
 @dataclass(frozen=True, eq=False)

@@ -301,6 +301,22 @@ def _hole(value, field):
     return offset
 
 
+def _check_helix_sampling(helix, path_guides, field):
+    """Refuse a helix with half a turn or more between two disks of its path.
+
+    The cable runs straight hole to hole: beyond half a turn per disk spacing the holes are
+    those of a slower helix (one turn per spacing: a straight cable), the sampling limit.
+    """
+    spacing = float(np.max(np.diff(np.concatenate([[0.0], path_guides])), initial=0.0))
+    turns = abs(helix.turns_per_metre) * spacing
+    if turns >= 0.5:
+        raise ValueError('%s.helix.turns_per_metre = %g is more than the disks can carry: %.2f '
+                         'turn between disks %.1f mm apart, its holes alias another route '
+                         '(fewer than %.3g turns/m: under half a turn per spacing)'
+                         % (field, helix.turns_per_metre, turns, spacing * 1e3,
+                            0.5 / spacing))
+
+
 def _parse_route(cable, field, path_guides):
     """Return a cable's route and its hole at the end disk: ``offset``, ``offsets`` or ``helix``.
 
@@ -325,6 +341,7 @@ def _parse_route(cable, field, path_guides):
             turns_per_metre=_number(_section(helix, 'turns_per_metre',
                                              field + '.helix.turns_per_metre'),
                                     field + '.helix.turns_per_metre'))
+        _check_helix_sampling(route, path_guides, field)
         return route, route.at([end])[0][0]
     holes = cable['offsets']
     disks = np.concatenate([[0.0], path_guides])

@@ -12,6 +12,7 @@ import math
 
 import numpy as np
 
+from continuum_statics.core.load_estimation import plausible_tip_load
 from continuum_statics.drivers.base import (
     OK,
     BackendOption,
@@ -90,6 +91,10 @@ class SimulatedCableBackend(CableBackend):
         if wrench.shape != (6,) or not np.all(np.isfinite(wrench)):
             raise ValueError('tip wrench must be 6 finite numbers [fx, fy, fz, mx, my, mz], '
                              'got %s' % wrench.tolist())
+        if self._robot is not None:
+            problem = implausible_load(self._robot, wrench)
+            if problem:
+                raise ValueError(problem)
         self._tip_wrench = wrench
 
     @property
@@ -183,3 +188,18 @@ class SimulatedCableBackend(CableBackend):
             decayed = np.zeros_like(start)
         new_distance = np.where(in_fast, distance - max_speed * dt, decayed)
         return targets - np.sign(gap) * new_distance
+
+
+def implausible_load(robot, wrench):
+    """Return why a hidden tip load (6,) is beyond the rod's plausible load, or ''.
+
+    Beyond 10 E I / L^2 of force (2 pi E I / L of moment) the simulated rod has no equilibrium
+    near: every reading then runs the tendon solve's slow last resort (200 Hz fell to 4 Hz).
+    """
+    force_limit, moment_limit = plausible_tip_load(robot)
+    force, moment = np.linalg.norm(wrench[:3]), np.linalg.norm(wrench[3:])
+    if force <= force_limit and moment <= moment_limit:
+        return ''
+    return ('hidden tip load |F| %.3g N, |M| %.3g N m is beyond what the rod can carry (%.3g N, '
+            '%.3g N m: 10 E I / L^2, 2 pi E I / L); kept the last one'
+            % (force, moment, force_limit, moment_limit))

@@ -157,7 +157,11 @@ class CableDriverNode(LifecycleNode):
             self.get_logger().error('configure failed: %s' % error)
             return TransitionCallbackReturn.FAILURE
         if backend.takes_tip_wrench:
-            backend.set_tip_wrench(self._hidden_load)
+            try:
+                backend.set_tip_wrench(self._hidden_load)
+            except ValueError as error:  # sim_tip_wrench beyond the rod: none
+                self._problems.reject('sim_tip_wrench', error)
+                self._hidden_load = np.zeros(6)
         self.actuators.configure(backend, self._lend_topics)
         return TransitionCallbackReturn.SUCCESS
 
@@ -216,9 +220,13 @@ class CableDriverNode(LifecycleNode):
 
     def _set_hidden_load(self, wrench):
         """Set the simulated robot's hidden tip load (6,), now and for the next configure."""
-        self._hidden_load = wrench
         if self._backend_cls.takes_tip_wrench:
-            self.actuators.call(lambda backend: backend.set_tip_wrench(wrench))
+            try:
+                self.actuators.call(lambda backend: backend.set_tip_wrench(wrench))
+            except ValueError as error:  # beyond the rod: the last load stays
+                self._problems.reject('sim_tip_wrench', error)
+                return
+        self._hidden_load = wrench
 
     def _on_option_change(self, name, value):
         key = name.split('.', 1)[1]
@@ -302,6 +310,10 @@ class CableDriverNode(LifecycleNode):
         self._diagnostics.publish(diag.diagnostic_array(
             self.get_clock().now().to_msg(), self.get_fully_qualified_name().lstrip('/'),
             self.robot.name, level, message, values))
+
+    def on_node_failure(self, text):
+        """Count a restart by the runner after a callback raised (on diagnostics)."""
+        self._problems.add('node', text)
 
     def destroy_node(self):
         """Stop publishing, hold and release the actuators, then destroy the node."""

@@ -28,6 +28,7 @@ from continuum_statics.nodes.ros_conversions import (
     ns_to_stamp,
     set_pose,
 )
+from continuum_statics.nodes.waits import InFlight
 
 #: Feedback rate while a goal runs, Hz.
 FEEDBACK_HZ = 10.0
@@ -67,11 +68,13 @@ class MoveTipServer:
     :param base_frame_id: the robot's base frame
     """
 
-    def __init__(self, node, control, base_frame_id, action_type, callback_group):
+    def __init__(self, node, control, base_frame_id, action_type, callback_group,
+                 in_flight=None):
         self.control = control
+        self.in_flight = in_flight or InFlight()
         self.base_frame_id = base_frame_id
         self.action_type = action_type
-        self.server = ActionServer(node, action_type, 'move_tip', self._execute,
+        self.server = ActionServer(node, action_type, 'move_tip', self._counted,
                                    goal_callback=self._on_goal,
                                    cancel_callback=lambda _: CancelResponse.ACCEPT,
                                    callback_group=callback_group,
@@ -99,6 +102,10 @@ class MoveTipServer:
         if not request.use_direction:
             return None
         return goal_direction(request.target, 'use_direction', 'target')
+
+    async def _counted(self, handle):
+        with self.in_flight:
+            return await self._execute(handle)
 
     async def _execute(self, handle):
         control, frame = self.control, self.base_frame_id

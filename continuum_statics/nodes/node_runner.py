@@ -10,6 +10,7 @@ busy-loops at 100 % CPU and does not return on SIGINT.
 import signal
 import sys
 import threading
+import time
 
 import rclpy
 from rclpy.executors import (
@@ -21,6 +22,15 @@ from rclpy.signals import SignalHandlerOptions
 
 #: Threads of a multi-threaded executor: waiting service calls each hold one.
 MULTI_THREADS = 8
+#: How often a node whose callback raised is spun again before it is given up, per process.
+#: A callback that fails on every message would otherwise restart forever; five is enough for
+#: rare failures and stops a node that fails on each input within a second.
+MAX_RESTARTS = 5
+#: At shutdown, how long the executors keep running after the goals were released so that
+#: every active goal (action, service) sends its result, s.
+SHUTDOWN_GRACE = 3.0
+#: A goal's result is sent just after its callback returns: the time given to that, s.
+RESULT_SEND_TIME = 0.2
 
 
 def make_executor(kind, context=None):
@@ -47,6 +57,7 @@ def run_nodes(factories, args=None, context=None):
     previous = {signum: signal.signal(signum, lambda *_: stop.set())
                 for signum in (signal.SIGINT, signal.SIGTERM)}
     nodes, executors, threads, failures = [], [], [], []
+    restarts = {}
     try:
         try:
             for factory in factories:
@@ -58,18 +69,18 @@ def run_nodes(factories, args=None, context=None):
             executor = make_executor(getattr(node, 'EXECUTOR', 'single'), context)
             executor.add_node(node)
             executors.append(executor)
-            thread = threading.Thread(target=_spin, args=(executor, context, failures),
+            thread = threading.Thread(target=_spin, args=(executor, context, failures,
+                                                          node.get_name()),
                                       name='spin_' + node.get_name(), daemon=True)
             thread.start()
             threads.append(thread)
-        while not stop.wait(0.1):
-            if not context.ok() or not all(thread.is_alive() for thread in threads):
-                break
+        while not stop.wait(0.1) and context.ok():
+            for index, thread in enumerate(threads):
+                if not thread.is_alive() and restarts.get(index, 0) <= MAX_RESTARTS:
+                    threads[index] = _restart(nodes[index], executors[index], context,
+                                              failures, restarts, index)
     finally:
-        for node in nodes:
-            release = getattr(node, 'release_waiters', None)
-            if release is not None:
-                release()
+        _release_goals(nodes, threads)
         for executor in executors:
             executor.shutdown(timeout_sec=2.0)
         for thread in threads:
@@ -79,16 +90,53 @@ def run_nodes(factories, args=None, context=None):
         rclpy.try_shutdown(context=context)
         for signum, handler in previous.items():
             signal.signal(signum, handler)
-    for error in failures:
-        print('continuum_statics: a node stopped: %r' % error, file=sys.stderr)
     return 1 if failures else 0
 
 
-def _spin(executor, context, failures):
+def _restart(node, executor, context, failures, restarts, index):
+    """Report the failure of a node's executor and spin it again (or say why not)."""
+    name = node.get_name()
+    error = next((error for who, error in reversed(failures) if who == name),
+                 'its executor stopped')
+    restarts[index] = restarts.get(index, 0) + 1
+    if restarts[index] > MAX_RESTARTS:
+        text = ('continuum_statics: node %r failed %d times (last: %r): not restarted; the '
+                'other nodes go on' % (name, MAX_RESTARTS + 1, error))
+        thread = threading.Thread(target=lambda: None)
+    else:
+        text = ('continuum_statics: a callback of node %r failed: %r; its state is kept and '
+                'it spins again (restart %d of %d)' % (name, error, restarts[index],
+                                                      MAX_RESTARTS))
+        thread = threading.Thread(target=_spin, args=(executor, context, failures, name),
+                                  name='spin_' + name, daemon=True)
+    print(text, file=sys.stderr)
+    node.get_logger().error(text)
+    report = getattr(node, 'on_node_failure', None)  # counted on the node's diagnostics
+    if report is not None:
+        report(text)
+    thread.start()
+    return thread
+
+
+def _release_goals(nodes, threads):
+    """End every active goal and let the executors send their results (shutdown)."""
+    for node in nodes:
+        release = getattr(node, 'release_waiters', None)
+        if release is not None:
+            release()
+    deadline = time.monotonic() + SHUTDOWN_GRACE
+    while time.monotonic() < deadline and any(
+            getattr(node, 'goals_in_flight', lambda: 0)() for node, thread in zip(nodes, threads)
+            if thread.is_alive()):
+        time.sleep(0.01)
+    time.sleep(RESULT_SEND_TIME)
+
+
+def _spin(executor, context, failures, name):
     try:
         executor.spin()
     except (KeyboardInterrupt, ExternalShutdownException):
         pass
     except Exception as error:
         if context.ok():
-            failures.append(error)
+            failures.append((name, error))

@@ -33,6 +33,13 @@ def _six_finite(value):
     return None
 
 
+def max_stamp_offset_spec():
+    """Return the stamp rule's parameter (:mod:`continuum_statics.control.stamps`)."""
+    return ParamSpec('max_stamp_offset', 1.0, 'an input stamped further than this from the '
+                     "node's clock, or going backwards, is stamped on arrival instead (with a "
+                     'warning), s (1e12: effectively off)', 1e-3, 1e12)
+
+
 def statics_parameters():
     """Return the statics node's ParamSpecs."""
     return [
@@ -46,6 +53,10 @@ def statics_parameters():
                   read_only=True),
         ParamSpec('tf_disks', False, 'also one /tf frame per guide disk (<robot name>_disk_<i>)',
                   read_only=True),
+        ParamSpec('frame_prefix', '', 'put before every frame statics publishes on /tf (e.g. '
+                  "'arm1/': two arms from one robot file); the base frame stays the robot "
+                  "file's", read_only=True),
+        max_stamp_offset_spec(),
         ParamSpec('tip_wrench_timeout', 1.0, 'a tip_wrench estimate older than this is '
                   'replaced by zero, s (0: never expires)', 0.0, 3600.0),
         ParamSpec('tip_wrench_source', 'topic', 'where the tip load comes from: topic '
@@ -153,6 +164,7 @@ def tip_controller_parameters():
         ParamSpec('dedicated_intake_thread', True, 'serve tip_pose, backbone, cable_states '
                   'and tip_wrench from a thread of their own instead of the executor',
                   read_only=True),
+        max_stamp_offset_spec(),
     ] + tip_wrench_limit_specs()
 
 
@@ -213,4 +225,10 @@ def tip_load_estimator_parameters():
         ParamSpec('contact_threshold', 0.0, 'tip_contact turns true when the force exceeds '
                   'this with 3-sigma confidence, N (0: E I / L^2 of the rod, the force that '
                   'bends it by about 30 degrees)', 0.0, 1e6),
+        # 0.2 s: 20 estimates at the default rate, so that no single outlier or transient
+        # declares contact, and still below a human's reaction time (~0.25 s)
+        ParamSpec('contact_min_time', 0.2, 'tip_contact changes only once the force has '
+                  'stayed past the threshold this long (and the cables have stood still), s',
+                  0.0, 60.0),
+        max_stamp_offset_spec(),
     ]

@@ -59,32 +59,35 @@ def _visual(link, geometry, size, material, xyz=(0.0, 0.0, 0.0), rpy=(0.0, 0.0, 
     return shape
 
 
-def link_names(robot, tip_frame_id='', disks=False):
+def link_names(robot, tip_frame_id='', disks=False, prefix=''):
     """Return the description's links: the base frame, then the /tf frames statics publishes.
 
-    Guide disks that are a section's end disk are drawn by their ``section`` link only.
+    Guide disks that are a section's end disk are drawn by their ``section`` link only;
+    ``prefix`` is statics' ``frame_prefix`` (its frames', not the base frame's).
     """
-    names, arc_lengths = frames(robot, tip_frame_id, disks)
+    names, arc_lengths = frames(robot, tip_frame_id, disks, prefix)
     _, section_ends = section_layout(robot)
+    own = len(prefix) + len(robot.name)  # what follows the robot's name in a frame id
     keep = [name for name, s in zip(names, arc_lengths)
-            if '_disk_' not in name[len(robot.name):]
+            if '_disk_' not in name[own:]
             or not np.any(np.isclose(section_ends, s, atol=1e-9))]
     return (robot.base_frame_id,) + tuple(keep)
 
 
-def robot_urdf(robot, tip_frame_id='', disks=False):
+def robot_urdf(robot, tip_frame_id='', disks=False, prefix=''):
     """Return the URDF (str) of ``robot``'s base and disks, links named as statics' /tf frames.
 
     :param robot: a :class:`~continuum_statics.core.robot.Robot`
     :param tip_frame_id: statics' ``tip_frame_id`` parameter (empty: ``<robot name>_tip``)
     :param disks: statics' ``tf_disks`` parameter: one link per guide disk too
+    :param prefix: statics' ``frame_prefix`` parameter (before every link but the base)
     """
     root = ElementTree.Element('robot', name=robot.name)
     for name, rgba in MATERIALS.items():
         ElementTree.SubElement(ElementTree.SubElement(root, 'material', name=name), 'color',
                                rgba=_numbers(rgba))
     radius = disk_diameter(robot) / 2.0
-    names = link_names(robot, tip_frame_id, disks)
+    names = link_names(robot, tip_frame_id, disks, prefix)
     base = ElementTree.SubElement(root, 'link', name=names[0])
     # the clamp: the rod leaves it at base.position along the base rotation's z axis
     rotation = np.asarray(robot.base_rotation, dtype=float)
@@ -96,7 +99,7 @@ def robot_urdf(robot, tip_frame_id='', disks=False):
         if name == names[1]:  # frames() lists the tip first
             _visual(link, 'sphere', {'radius': 0.6 * DISK_THICKNESS}, 'tip')
         else:
-            marked = '_section_' in name[len(robot.name):]
+            marked = '_section_' in name[len(prefix) + len(robot.name):]
             _visual(link, 'cylinder', {'radius': radius, 'length': DISK_THICKNESS},
                     'end_disk' if marked else 'guide_disk')
         joint = ElementTree.SubElement(root, 'joint', name=name + '_joint', type='floating')
@@ -106,12 +109,12 @@ def robot_urdf(robot, tip_frame_id='', disks=False):
     return '<?xml version="1.0"?>\n' + ElementTree.tostring(root, encoding='unicode') + '\n'
 
 
-def publish_robot_description(node, robot, tip_frame_id='', disks=False):
+def publish_robot_description(node, robot, tip_frame_id='', disks=False, prefix=''):
     """Create the latched ``robot_description`` publisher on ``node``, publish once, return it."""
     from std_msgs.msg import String
 
     from continuum_statics.nodes.qos import LATCHED_QOS
 
     publisher = node.create_publisher(String, 'robot_description', LATCHED_QOS)
-    publisher.publish(String(data=robot_urdf(robot, tip_frame_id, disks)))
+    publisher.publish(String(data=robot_urdf(robot, tip_frame_id, disks, prefix)))
     return publisher

@@ -9,11 +9,7 @@ and ``tip_pose`` (geometry_msgs/PoseStamped), both latched, stamped with the mea
 the robot's base frame. ``backbone_markers`` (visualization_msgs/MarkerArray) follows at
 ``marker_rate``; ``/diagnostics`` at 1 Hz.
 
-Markers are built by the thread that published the shape, right after it, once ``1/marker_rate``
-has passed since the last ones (a timer only publishes a shape whose measurements stopped). Built
-on the executor's thread instead, the 0.5 ms Python build held the GIL while the intake thread
-waited with the next measurement: it alone raised the p99 latency at 1 kHz from 1.2-1.9 ms to
-3.1-3.5 ms.
+Markers are drawn by the thread that published the shape (:mod:`.shape_markers` says why).
 
 Newest measurement, no backlog: ``cable_states`` is served by a thread of its own
 (:mod:`~continuum_statics.nodes.dedicated_intake`) from a short queue (``input_queue_depth``) that
@@ -36,7 +32,13 @@ dropped. ``length_noise_std`` (the encoders' noise, m) raises the thresholds to 
 (warn) and 10x (drop) the noise, so noise alone never warns or drops.
 
 A robot file without cables is a passive rod: its shape under gravity and ``tip_wrench`` is
-published at start-up and whenever the tip load changes (``cable_states`` is not subscribed).
+published at start-up and whenever the tip load changes (``cable_states`` is not subscribed);
+its /tf frames again at ``diagnostics_rate``, stamped now, for listeners that start later.
+
+Stamps: outputs carry the measurement's stamp, unless it is further than ``max_stamp_offset``
+from the node's clock or goes backwards (:mod:`continuum_statics.control.stamps`): then the
+arrival time, with a throttled warning and a count on diagnostics. ``frame_prefix`` goes before
+every frame on /tf (two arms from one robot file).
 
 Bad input (unknown, repeated or missing names, size mismatch, NaN, an empty or malformed payload,
 a stamp with nanosec >= 1e9, a tip wrench in another frame or beyond ``max_tip_force`` /
@@ -45,33 +47,24 @@ state stays published and nothing non-finite is ever published.
 """
 import math
 import sys
-import threading
 import time
 
 from geometry_msgs.msg import PoseStamped, WrenchStamped
 from nav_msgs.msg import Path
 import numpy as np
 from rclpy.node import Node
-from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
 from sensor_msgs.msg import JointState
-from visualization_msgs.msg import MarkerArray
 
 from continuum_statics.control.health import StaticsHealth, load_values
 from continuum_statics.control.records import TipLoad, current_load
-from continuum_statics.control.shape_tracking import ShapeTracker, Thresholds
+from continuum_statics.control.shape_tracking import ShapeTracker, Thresholds, passive_shape
+from continuum_statics.control.stamps import StampRule
 from continuum_statics.core.backbone_sampling import BackboneSampler
-from continuum_statics.core.rotations import rotation_to_quaternion
 from continuum_statics.core.tendons import full_circle_tension
 from continuum_statics.core.warmup import warm_up
 from continuum_statics.nodes import diagnostics_util as diag
 from continuum_statics.nodes.dedicated_intake import make_intake
 from continuum_statics.nodes.joint_state_parser import CableStatesReader
-from continuum_statics.nodes.marker_geometry import (
-    guide_and_cable_points,
-    section_layout,
-    section_of,
-)
-from continuum_statics.nodes.markers import BackboneMarkers
 from continuum_statics.nodes.node_params import (
     ParameterTable,
     load_robot_file,
@@ -80,11 +73,14 @@ from continuum_statics.nodes.node_params import (
 )
 from continuum_statics.nodes.parameter_tables import statics_parameters
 from continuum_statics.nodes.pose_encoder import PoseSequenceEncoder
-from continuum_statics.nodes.qos import LATCHED_QOS, LATEST_SENSOR_QOS
-from continuum_statics.nodes.robot_description import disk_diameter, publish_robot_description
-from continuum_statics.nodes.ros_conversions import stamp_or_now, tip_load
+from continuum_statics.nodes.qos import LATCHED_QOS, LATEST_SENSOR_QOS, measurement_queue_qos
+from continuum_statics.nodes.robot_description import publish_robot_description
+from continuum_statics.nodes.ros_conversions import tip_load
+from continuum_statics.nodes.shape_markers import ShapeMarkers
 from continuum_statics.nodes.tf_outputs import tf_outputs
 from continuum_statics.nodes.timers import steady_timer
+
+NS = 1_000_000_000
 
 
 class StaticsNode(Node):
@@ -107,18 +103,11 @@ class StaticsNode(Node):
         self._tracker = ShapeTracker(self.robot, self.cable_names, self._params['max_iterations'],
                                      self._params['max_model_runs'])
         self.base_frame_id = self.robot.base_frame_id
-        self._disk_diameter = disk_diameter(self.robot)
 
         # Hot path: the name index of the last good message is kept; no array allocated.
         self._cable_states = CableStatesReader(self.cable_names)
         self._lengths = np.empty(len(self.cable_names))
         self._tensions = np.empty(len(self.cable_names))
-        # (shape, sampler, (sec, nanosec)) of the newest publication, set in one assignment:
-        # the marker timer reads it from another thread; the last one drawn is kept by identity
-        self._latest = self._drawn = None
-        self._marker_timer = None
-        self._marker_period = self._markers_due = math.inf  # s; time.monotonic(), s
-        self._marker_lock = threading.Lock()  # the shape's thread or the timer, never both
         self._load = None  # the newest TipLoad
         self._wrench_expired = False
         self._stamp = None
@@ -127,11 +116,6 @@ class StaticsNode(Node):
                                                  self._params['path_samples'])
         self._tip_encoder = PoseSequenceEncoder(self.base_frame_id)
         self._sampler = BackboneSampler(self.robot.s_grid, self._params['path_samples'])
-        self._markers = BackboneMarkers(self.get_name(), self._params['tube_diameter'],
-                                        self._disk_diameter)
-        # Multi-section robots: each cable drawn to its own end disk, the tube by section.
-        self._cable_ends, self._section_ends = section_layout(self.robot)
-        self._cable_sections = section_of(self._cable_ends, self._section_ends)
         self.health = StaticsHealth(self.cable_names, self.get_logger().warning, self._passive)
         self._problems = self.health.problems
         self._full_circle_tension = full_circle_tension(self.robot)
@@ -139,24 +123,25 @@ class StaticsNode(Node):
         self._backbone_pub = self.create_publisher(Path, 'backbone', LATCHED_QOS)
         self._tip_pub = self.create_publisher(PoseStamped, 'tip_pose', LATCHED_QOS)
         self._tf = tf_outputs(self, self.robot, self._params['tip_frame_id'],
-                              self._params['tf_disks']) if self._params['publish_tf'] else None
+                              self._params['tf_disks'], self._params['frame_prefix']) \
+            if self._params['publish_tf'] else None
         self._description = publish_robot_description(  # latched URDF, links = the /tf frames
-            self, self.robot, self._params['tip_frame_id'], self._params['tf_disks'])
-        self._marker_pub = self.create_publisher(MarkerArray, 'backbone_markers', LATCHED_QOS)
-        input_qos = QoSProfile(history=HistoryPolicy.KEEP_LAST,
-                               depth=self._params['input_queue_depth'],
-                               reliability=ReliabilityPolicy.BEST_EFFORT,
-                               durability=DurabilityPolicy.VOLATILE)
+            self, self.robot, self._params['tip_frame_id'], self._params['tf_disks'],
+            self._params['frame_prefix'])
+        self._stamps = StampRule(self._params['max_stamp_offset'])
+        self._markers = ShapeMarkers(self, lambda: self._params['tube_diameter'],
+                                     self._problems.reject)
         self._intake = make_intake(self, self._params['dedicated_intake_thread'])
         self._input = None
         if not self._passive:  # a passive rod has nothing to measure
             self._input = self._intake.add(
-                JointState, 'cable_states', self._on_cable_states, input_qos, raw=True,
+                JointState, 'cable_states', self._on_cable_states,
+                measurement_queue_qos(self._params['input_queue_depth']), raw=True,
                 max_lag=self._params['max_input_lag'], fallback_qos=LATEST_SENSOR_QOS)
             self._intake.start()
         self.create_subscription(WrenchStamped, tip_wrench_topic(self._params),
                                  self._on_tip_wrench, LATEST_SENSOR_QOS)
-        self._set_marker_timer(self._params['marker_rate'])
+        self._markers.set_rate(self._params['marker_rate'])
         self._passive_load = None
         if self._passive:
             self._solve_passive(None)
@@ -170,21 +155,11 @@ class StaticsNode(Node):
     # -- parameters ------------------------------------------------------------------------
     def _on_parameter_change(self, name, value):
         if name == 'marker_rate':
-            self._set_marker_timer(value)
+            self._markers.set_rate(value)
         elif name == 'max_iterations':
             self._tracker.set_max_iterations(value)
         elif name == 'max_model_runs':
             self._tracker.max_model_runs = value
-
-    def _set_marker_timer(self, rate):
-        if self._marker_timer is not None:
-            self.destroy_timer(self._marker_timer)
-            self._marker_timer = None
-        with self._marker_lock:  # not while a draw is setting the next due time
-            self._marker_period = 1.0 / rate if rate > 0.0 else math.inf
-            self._markers_due = 0.0 if rate > 0.0 else math.inf  # the next shape's are due
-        if rate > 0.0:
-            self._marker_timer = steady_timer(self, self._marker_period, self._flush_markers)
 
     # -- inputs ----------------------------------------------------------------------------
     def _on_tip_wrench(self, msg):
@@ -239,7 +214,7 @@ class StaticsNode(Node):
             return
         self.health.estimated(result, time.perf_counter() - start)
         if not result.rejection and self._publish_shape(result.estimate.shape, view.sec,
-                                                        view.nanosec):
+                                                        view.nanosec, 'cable_states'):
             self._tracker.accept(result)
             self.health.published(time.perf_counter() - start)
 
@@ -253,26 +228,31 @@ class StaticsNode(Node):
         if self._passive_load is not None and np.array_equal(load, self._passive_load):
             return
         start = time.perf_counter()
-        try:
-            shape = self.robot.solve_bvp(tip_force=load[:3], tip_moment=load[3:])
-        except Exception as error:  # ConvergenceError or ValueError: keep the last shape
-            self._problems.reject('tip_wrench', 'no equilibrium of the passive rod under %s: %s'
-                         % (np.array2string(load, precision=3), error))
+        shape, problem = passive_shape(self.robot, load)
+        if shape is None:
+            self._problems.reject('tip_wrench', problem)
             return
         sec, nanosec = (0, 0) if stamp is None else (stamp.sec, stamp.nanosec)
-        if self._publish_shape(shape, sec, nanosec):
+        if self._publish_shape(shape, sec, nanosec, 'tip_wrench'):
             self._passive_load = load
             self.health.published()
             self.health.solved_passive(time.perf_counter() - start)
 
-    def _publish_shape(self, shape, sec, nanosec):
-        """Publish backbone and tip pose of ``shape``; return False if it was not finite."""
+    def _publish_shape(self, shape, sec, nanosec, stream):
+        """Publish backbone and tip pose of ``shape``; return False if it was not finite.
+
+        Stamped with the measurement's stamp (``stream``'s), unless the stamp rule replaces it.
+        """
         samples = self._params['path_samples']
         sampler = self._sampler
         if not sampler.matches(shape.s, samples):
             sampler = self._sampler = BackboneSampler(shape.s, samples)
         points, quaternions = sampler.sample(shape.positions, shape.rotations)
-        sec, nanosec = stamp_or_now(sec, nanosec, self.get_clock())  # unstamped: on arrival
+        stamp_ns, reason = self._stamps.judge(stream, sec * NS + nanosec,
+                                              self.get_clock().now().nanoseconds)
+        if reason:
+            self._problems.reject('stamp', reason)
+        sec, nanosec = divmod(stamp_ns, NS)
         if self._path_encoder.count != samples:
             self._path_encoder = PoseSequenceEncoder(self.base_frame_id, samples)
         try:
@@ -290,51 +270,27 @@ class StaticsNode(Node):
             publisher.publish(transforms)
         self._stamp = (sec, nanosec)
         self._tip_position = points[-1]
-        self._latest = (shape, sampler, self._stamp)
-        if time.monotonic() >= self._markers_due:
-            self._publish_markers()
+        self._markers.published(shape, sampler, self._stamp)
         return True
 
     # -- outputs ---------------------------------------------------------------------------
-    def _flush_markers(self):
-        """Timer: the markers of a shape that no later measurement has drawn for a period."""
-        if time.monotonic() >= self._markers_due + self._marker_period:
-            self._publish_markers()
-
-    def _publish_markers(self):
-        if not self._marker_lock.acquire(blocking=False):
-            return  # the other thread is drawing them
-        try:
-            self._draw_markers()
-        finally:
-            self._marker_lock.release()
-
-    def _draw_markers(self):
-        latest = self._latest
-        if latest is None or latest is self._drawn:
+    def _republish_tf(self):
+        """Passive rod: its frames again, stamped now (a listener started later sees them)."""
+        latest = self._markers.latest
+        if self._tf is None or latest is None:
             return
-        self._drawn = latest
-        self._markers_due = time.monotonic() + self._marker_period
-        shape, sampler, stamp = latest
+        publisher, encoder, poses = self._tf
+        sec, nanosec = divmod(self.get_clock().now().nanoseconds, NS)
         try:
-            guide_points, guide_rotations, cable_points = guide_and_cable_points(
-                shape.s, shape.positions, shape.rotations, self.robot.guides,
-                self.robot.hole_offsets, self._cable_ends)
-            positions, quaternions = sampler.sample(shape.positions, shape.rotations)
-            self._markers.tube_diameter = self._params['tube_diameter']
-            markers = self._markers.encode(
-                self.base_frame_id, *stamp, positions, quaternions,
-                guide_points, rotation_to_quaternion(guide_rotations), cable_points,
-                section_of(sampler.s, self._section_ends), self._cable_sections)
+            publisher.publish(encoder.encode(sec, nanosec, *poses.of(latest[0])))
         except ValueError as error:
-            self._problems.reject('markers', error)
-            return
-        self._marker_pub.publish(markers)
+            self._problems.reject('shape', error)
 
     def _publish_diagnostics(self):
         now = time.monotonic()
         if self._passive:
             self._solve_passive(None)  # a tip load that expired: back to the unloaded shape
+            self._republish_tf()
         else:
             self._current_tip_load(now)  # expire a stale tip load while no measurement comes
         thresholds, intake = self._thresholds(), self._input
@@ -342,6 +298,7 @@ class StaticsNode(Node):
             thresholds.warn, thresholds.drop, 0 if intake is None else max(intake.lost, 0),
             0 if intake is None else intake.skipped)
         values['max_tension_n'] = self._tension_limit()
+        values.update(self._stamps.values())
         values.update(load_values(
             current_load(self._load, now, self._params['tip_wrench_timeout']),
             math.inf if self._load is None else now - self._load.received, self._wrench_expired,
@@ -351,6 +308,10 @@ class StaticsNode(Node):
         self._diagnostics.publish(diag.diagnostic_array(
             self.get_clock().now().to_msg(), self.get_fully_qualified_name().lstrip('/'),
             self.robot.name, level, message, values))
+
+    def on_node_failure(self, text):
+        """Count a restart by the runner after a callback raised (on diagnostics)."""
+        self._problems.add('node', text)
 
     def destroy_node(self):
         """Stop the intake thread, then destroy the node."""

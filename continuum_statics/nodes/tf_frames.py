@@ -5,7 +5,9 @@ transform), at an arc length of the backbone, oriented as the rod's cross-sectio
 
 - ``<robot name>_tip`` (or ``tip_frame_id``) at the tip, the pose ``tip_pose`` also carries;
 - ``<robot name>_section_<k>`` at the end disk of section k (0 = nearest the base);
-- with ``tf_disks``, ``<robot name>_disk_<i>`` at guide disk i (base to tip).
+- with ``tf_disks``, ``<robot name>_disk_<i>`` at guide disk i (base to tip);
+- each behind ``frame_prefix`` (e.g. ``arm1/``: two arms from one robot file). The base frame
+  is the robot file's, unprefixed: every topic and goal is in it (contract).
 
 The tracker's marker (``tip_marker`` of the robot file, when not zero) is a fixed offset from the
 tip frame: ``<tip frame>_marker`` on /tf_static.
@@ -16,8 +18,12 @@ from continuum_statics.core.rotations import rotation_to_quaternion
 from continuum_statics.nodes.marker_geometry import nearest_nodes, section_layout
 
 
-def frames(robot, tip_frame_id='', disks=False):
-    """Return (child frame ids, their arc lengths in m), the tip first."""
+def frames(robot, tip_frame_id='', disks=False, prefix=''):
+    """Return (child frame ids, their arc lengths in m), the tip first.
+
+    ``prefix`` (``frame_prefix``, e.g. ``arm1/``) goes before every frame id: two arms from one
+    robot file publish frames of their own.
+    """
     tip = tip_frame_id or '%s_tip' % robot.name
     names, arc_lengths = [tip], [float(robot.length)]
     _, section_ends = section_layout(robot)
@@ -28,7 +34,7 @@ def frames(robot, tip_frame_id='', disks=False):
         for i, s in enumerate(robot.guides):
             names.append('%s_disk_%d' % (robot.name, i))
             arc_lengths.append(float(s))
-    return tuple(names), np.asarray(arc_lengths)
+    return tuple(prefix + name for name in names), np.asarray(arc_lengths)
 
 
 def marker_frame(tip_frame):

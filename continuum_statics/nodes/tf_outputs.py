@@ -7,7 +7,7 @@ from continuum_statics.nodes.qos import LATCHED_QOS, TF_QOS
 from continuum_statics.nodes.tf_frames import FramePoses, frames, marker_frame
 
 
-def tf_outputs(node, robot, tip_frame_id='', disks=False):
+def tf_outputs(node, robot, tip_frame_id='', disks=False, prefix=''):
     """Return (the /tf publisher, its encoder, the frame poses), or None without tf2_msgs.
 
     Publishes the tracker's marker frame on /tf_static (latched) at once when the robot file
@@ -19,7 +19,7 @@ def tf_outputs(node, robot, tip_frame_id='', disks=False):
         node.get_logger().warning('tf2_msgs is not installed: no /tf (make venv builds it; '
                                   'on a robot computer rosdep installs it)')
         return None
-    names, arc_lengths = frames(robot, tip_frame_id, disks)
+    names, arc_lengths = frames(robot, tip_frame_id, disks, prefix)
     marker = np.asarray(robot.tip_marker, dtype=float)
     if marker.any():  # the tracker's marker: fixed on the tip frame, /tf_static (latched)
         static = TransformStamped(child_frame_id=marker_frame(names[0]))

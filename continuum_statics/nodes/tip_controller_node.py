@@ -46,6 +46,7 @@ from std_msgs.msg import Bool, Header
 from visualization_msgs.msg import MarkerArray
 
 from continuum_statics.control.health import ControllerHealth
+from continuum_statics.control.stamps import StampRule
 from continuum_statics.control.tip_control import TipControl
 from continuum_statics.core.rotations import quaternion_to_rotation
 from continuum_statics.core.warmup import warm_up
@@ -75,7 +76,7 @@ from continuum_statics.nodes.ros_conversions import (
     twist_vectors,
 )
 from continuum_statics.nodes.timers import steady_timer
-from continuum_statics.nodes.waits import Waits
+from continuum_statics.nodes.waits import InFlight, Waits
 
 #: Reachable tips drawn as RViz click targets (workspace_markers).
 WORKSPACE_SAMPLES = 400
@@ -107,10 +108,12 @@ class TipControllerNode(Node):
         self._control_group = MutuallyExclusiveCallbackGroup()
         self.goal_group = ReentrantCallbackGroup()
         self._waits = Waits(self, WAIT_PERIOD, MutuallyExclusiveCallbackGroup())
+        self.goals_in_flight = InFlight()  # goals still to answer (the runner waits at shutdown)
         self.control = TipControl(self.robot, self._params, self.get_logger(),
                                   self._waits.until)
         self.control.on_goal_started = self._publish_active_goal
         self.health = ControllerHealth(self.control)
+        self._stamps = StampRule(self._params['max_stamp_offset'])
         self._cable_states = CableStatesReader(self.cable_names)
         self._command_msg = JointState()
         self._command_pub = self.create_publisher(JointState, 'cable_commands', COMMAND_QOS)
@@ -153,7 +156,8 @@ class TipControllerNode(Node):
                             callback_group=self.goal_group)
         action = load_interface()
         self._action = None if action is None else MoveTipServer(
-            self, self.control, self.base_frame_id, action, self.goal_group)
+            self, self.control, self.base_frame_id, action, self.goal_group,
+            self.goals_in_flight)
         if action is None:
             self.get_logger().warning('continuum_statics_interfaces is not built: no move_tip '
                                       'action (scripts/build_interfaces.sh, or colcon build)')
@@ -195,7 +199,12 @@ class TipControllerNode(Node):
         except ValueError as error:
             self.control.reject('tip_pose_measured', error)
             return
-        self.control.on_tip_pose_measured(position, stamp)
+        # a stamp far from the clock (1970) or backwards: arrival, warned and counted
+        stamp, age, reason = self._stamps.judge_age('tip_pose_measured', stamp,
+                                                    self.get_clock().now().nanoseconds)
+        if reason:
+            self.control.reject('stamp', reason)
+        self.control.on_tip_pose_measured(position, stamp, age)
 
     def _on_backbone(self, data):
         # Only the stamp is read here (decoding every Path costs ~0.2 ms); the whole message
@@ -235,6 +244,10 @@ class TipControllerNode(Node):
         return goal_direction(pose_stamped, 'goal_orientation is direction')
 
     async def _on_tip_goal(self, request, response):
+        with self.goals_in_flight:
+            return await self._answer_tip_goal(request, response)
+
+    async def _answer_tip_goal(self, request, response):
         header = Header(frame_id=self.base_frame_id, stamp=self.get_clock().now().to_msg())
         response.plan = Path(header=header)
         control = self.control

@@ -15,7 +15,15 @@ runs :meth:`Robot.estimate_tip_wrench` (warm-started from the previous estimate)
 A robot whose cable_states carry no tensions and which has no tracker gives the estimator nothing
 that sees a load: it says so on /diagnostics (WARN) and publishes no estimate. Nothing
 non-finite is published; a failed estimate keeps the last good one and is counted.
+
+What is published is decided by :class:`~continuum_statics.control.load_watch.LoadWatch`: a
+measurement the model cannot explain (tensions beyond their limits, the chi-square gate, a
+capped solve) is set aside with its reason on /diagnostics, never published as a load; an
+unchanged measurement gives the same estimate; while the cables move the last estimate at rest
+holds; contact needs ``contact_min_time``. Stamps follow :mod:`continuum_statics.control.
+stamps` (``max_stamp_offset``); a callback that fails is counted and the node goes on.
 """
+import dataclasses
 import sys
 import time
 
@@ -25,7 +33,9 @@ from rclpy.node import Node
 from sensor_msgs.msg import JointState
 from std_msgs.msg import Bool
 
-from continuum_statics.control.contact import ContactDetector, force_along
+from continuum_statics.control.contact import force_along
+from continuum_statics.control.load_watch import Inputs, LoadWatch, Verdict
+from continuum_statics.control.stamps import StampRule
 from continuum_statics.core.load_estimation import plausible_tip_load
 from continuum_statics.core.rotations import quaternion_to_rotation
 from continuum_statics.core.warmup import warm_up
@@ -34,8 +44,11 @@ from continuum_statics.nodes.joint_state_parser import CableStatesReader
 from continuum_statics.nodes.node_params import ParameterTable, load_robot_file
 from continuum_statics.nodes.parameter_tables import tip_load_estimator_parameters
 from continuum_statics.nodes.qos import LATCHED_QOS, LATEST_SENSOR_QOS
-from continuum_statics.nodes.ros_conversions import check_frame, stamp_or_now
+from continuum_statics.nodes.ros_conversions import check_frame, ns_to_stamp
+from continuum_statics.nodes.ros_conversions import stamp_ns as stamp_ns_of
 from continuum_statics.nodes.timers import steady_timer
+
+NS = 1_000_000_000
 
 
 class TipLoadEstimatorNode(Node):
@@ -53,12 +66,13 @@ class TipLoadEstimatorNode(Node):
         self.cable_names = tuple(self.robot.cable_names)
         self.base_frame_id = self.robot.base_frame_id
         self._cable_states = CableStatesReader(self.cable_names)
-        self._cables = None  # (lengths, tensions or None, sec, nanosec, monotonic s)
-        self._tip = None  # (position, rotation, monotonic s) of tip_pose_measured
+        self._inputs = Inputs()  # the newest measurements
+        self._stamps = StampRule(self._params['max_stamp_offset'])
+        self._stamp_ns = 0  # of the newest cable_states (judged)
         self._fresh = False  # a measurement arrived since the last estimate
-        self._estimate = None  # the last good WrenchEstimate (warm start)
-        self._published = None  # (force, sigma) last published
-        self._contact = ContactDetector(self._contact_threshold())
+        self._published = None  # the last published WrenchEstimate
+        self._watch = LoadWatch(self.robot, self._contact_threshold(),
+                                self._params['contact_min_time'])
         self._problems = diag.Problems(self.get_logger().warning)
         self._failures = 0
         self._times = diag.TimingWindow()
@@ -77,7 +91,7 @@ class TipLoadEstimatorNode(Node):
         self.get_logger().info('tip_load_estimator: robot %r, %d cables, up to %g Hz, contact '
                                'above %.3g N' % (self.robot.name, len(self.cable_names),
                                                  self._params['rate'],
-                                                 self._contact.threshold))
+                                                 self._watch.contact.threshold))
 
     # -- parameters and inputs -------------------------------------------------------------
     def _contact_threshold(self):
@@ -86,7 +100,11 @@ class TipLoadEstimatorNode(Node):
 
     def _on_parameter_change(self, name, value):
         if name == 'contact_threshold':
-            self._contact.threshold = value or plausible_tip_load(self.robot)[0] / 10.0
+            self._watch.contact.threshold = value or plausible_tip_load(self.robot)[0] / 10.0
+        elif name == 'contact_min_time':
+            self._watch.contact.min_time = value
+        elif name == 'max_stamp_offset':
+            self._stamps.max_offset = value
 
     def _noise(self):
         params = self._params
@@ -105,8 +123,21 @@ class TipLoadEstimatorNode(Node):
         tensions, problem = self._cable_states.tensions(view)
         if problem:
             self._problems.reject('cable_states', problem)
-        self._cables = (lengths, tensions, view.sec, view.nanosec, time.monotonic())
+        self._stamp_ns, taken = self._judged('cable_states', view.sec * NS + view.nanosec)
+        self._inputs = dataclasses.replace(self._inputs, lengths=lengths, tensions=tensions,
+                                           cables_received=taken)
         self._fresh = True
+
+    def _judged(self, stream, stamp_ns):
+        """Return (the stamp to use, ns; when it was taken, monotonic s: freshness).
+
+        The message's stamp, or its arrival when the stamp is not trusted (warned, counted).
+        """
+        stamp_ns, age, reason = self._stamps.judge_age(stream, stamp_ns,
+                                                       self.get_clock().now().nanoseconds)
+        if reason:
+            self._problems.reject('stamp', reason)
+        return stamp_ns, time.monotonic() - age
 
     def _on_tip_pose(self, msg):
         try:
@@ -122,64 +153,48 @@ class TipLoadEstimatorNode(Node):
         rotation = None
         if self._params['use_tip_orientation'] and abs(np.linalg.norm(quaternion) - 1.0) < 1e-3:
             rotation = quaternion_to_rotation(quaternion)
-        self._tip = (position, rotation, time.monotonic())
+        _, taken = self._judged('tip_pose_measured', stamp_ns_of(msg.header.stamp))
+        self._inputs = dataclasses.replace(self._inputs, tip_position=position,
+                                           tip_rotation=rotation, tip_received=taken)
         self._fresh = True
 
-    # -- estimation --------------------------------------------------------------------------
-    def _measurements(self, now):
-        """Keyword arguments of estimate_tip_wrench from the fresh inputs, or a reason."""
-        params, kwargs = self._params, {}
-        cables = self._cables
-        if cables is not None and now - cables[4] <= params['input_timeout']:
-            kwargs['lengths'] = cables[0]
-            if cables[1] is not None:
-                kwargs['tensions'] = cables[1]
-        tip = self._tip
-        if tip is not None and params['use_tip_pose'] and now - tip[2] <= params['input_timeout']:
-            kwargs['tip_position'] = tip[0]
-            if tip[1] is not None:
-                kwargs['tip_rotation'] = tip[1]
-        if 'tensions' not in kwargs and 'tip_position' not in kwargs and \
-                ('lengths' not in kwargs or self.robot.tendons.is_ideal or
-                 'tip_position' not in kwargs):
-            if not self.cable_names:
-                return None, 'no tip_pose_measured: a rod without cables is sensed at its tip'
-            return None, ('no measurement that sees a tip load: cable_states carries no '
-                          'tensions (effort) and no tip_pose_measured arrives')
-        return kwargs, ''
-
+    # -- estimation: the decisions are the LoadWatch's -------------------------------------
     def _on_timer(self):
         if not self._fresh:
             return
         self._fresh = False
         now = time.monotonic()
-        kwargs, self._no_input = self._measurements(now)
+        try:  # one bad measurement or failed solve never stops the node
+            self._estimate_once(now)
+        except Exception as error:
+            self._failures += 1
+            self._problems.reject('estimate', 'internal error (the last estimate is kept): %r'
+                                  % (error,))
+
+    def _estimate_once(self, now):
+        params = self._params
+        kwargs, self._no_input = self._watch.measurements(
+            self._inputs, now, params['input_timeout'], params['use_tip_pose'])
         if kwargs is None:
             return
         start = time.perf_counter()
-        try:
-            estimate = self.robot.estimate_tip_wrench(
-                noise=self._noise(), moment=self._params['estimate_moment'],
-                warm_start=self._estimate, **kwargs)
-        except ValueError as error:
+        outcome = self._watch.step(kwargs, self._noise(), now, self._solve)
+        if outcome.verdict is Verdict.SET_ASIDE:
             self._failures += 1
-            self._problems.reject('estimate', error)
+            self._problems.reject('estimate', outcome.reason)
             return
-        self._times.add(time.perf_counter() - start)
-        if not (np.isfinite(estimate.wrench).all() and np.isfinite(estimate.covariance).all()):
-            self._failures += 1
-            self._problems.reject('estimate', 'non-finite estimate (kept the last good one)')
-            return
-        if not estimate.converged:
-            self._problems.add('estimate', estimate.message or 'not converged')
-        self._estimate = estimate
-        self._publish(estimate)
+        if outcome.verdict is Verdict.PUBLISH:
+            self._times.add(time.perf_counter() - start)
+        self._publish(outcome.estimate, outcome.contact_changed)
 
-    def _publish(self, estimate):
+    def _solve(self, warm_start, **kwargs):
+        return self.robot.estimate_tip_wrench(noise=self._noise(),
+                                              moment=self._params['estimate_moment'],
+                                              warm_start=warm_start, **kwargs)
+
+    def _publish(self, estimate, contact_changed):
         msg = WrenchStamped()
-        cables = self._cables
-        msg.header.stamp.sec, msg.header.stamp.nanosec = stamp_or_now(
-            *((0, 0) if cables is None else cables[2:4]), self.get_clock())
+        ns_to_stamp(self._stamp_ns, msg.header.stamp)
         msg.header.frame_id = self.base_frame_id
         force, moment = estimate.force, estimate.moment
         msg.wrench.force.x, msg.wrench.force.y, msg.wrench.force.z = (float(v) for v in force)
@@ -188,15 +203,21 @@ class TipLoadEstimatorNode(Node):
         self._wrench_pub.publish(msg)
         self._rate.tick()
         self._published = estimate
-        if self._contact.update(force, estimate.covariance):
-            self._contact_pub.publish(Bool(data=self._contact.in_contact))
+        if contact_changed:
+            contact = self._watch.contact
+            self._contact_pub.publish(Bool(data=contact.in_contact))
             magnitude, sigma = force_along(force, estimate.covariance)
-            if self._contact.in_contact:
+            if contact.in_contact:
                 self.get_logger().warning('contact on the tip: %.3g N (sigma %.2g N) above '
                                           'contact_threshold %.3g N' % (
-                                              magnitude, sigma, self._contact.threshold))
+                                              magnitude, sigma, contact.threshold))
             else:
                 self.get_logger().info('contact ended: %.3g N' % magnitude)
+
+    def on_node_failure(self, text):
+        """Count a restart by the runner after a callback raised (on diagnostics)."""
+        self._failures += 1
+        self._problems.add('node', text)
 
     # -- diagnostics ---------------------------------------------------------------------------
     def _publish_diagnostics(self):
@@ -208,8 +229,8 @@ class TipLoadEstimatorNode(Node):
                   'estimate_rate_hz': rate, 'estimates': count,
                   'estimate_time_median_ms': median, 'estimate_time_max_ms': maximum,
                   'failures_total': self._failures,
-                  'contact_threshold_n': self._contact.threshold,
-                  'in_contact': self._contact.in_contact}
+                  'contact_threshold_n': self._watch.contact.threshold,
+                  'in_contact': self._watch.contact.in_contact}
         if self._no_input:
             level, message = diag.WARN, self._no_input
         elif estimate is None:
@@ -228,7 +249,7 @@ class TipLoadEstimatorNode(Node):
             if self._params['estimate_moment']:
                 values['moment_nm'] = ' '.join('%.4g' % v for v in estimate.moment)
                 values['moment_sigma_nm'] = ' '.join('%.3g' % v for v in sigma[3:])
-            if self._contact.in_contact:
+            if self._watch.contact.in_contact:
                 magnitude, _ = force_along(estimate.force, estimate.covariance)
                 level, message = diag.WARN, 'contact on the tip: %.3g N' % magnitude
             elif len(estimate.unseen):
@@ -236,6 +257,7 @@ class TipLoadEstimatorNode(Node):
         if level == diag.OK and self._problems.recent(2.0):
             level, message = diag.WARN, 'rejected ' + self._problems.last_reason
         values.update(self._problems.values())
+        values.update(self._stamps.values())
         self._diagnostics.publish(diag.diagnostic_array(
             self.get_clock().now().to_msg(), self.get_fully_qualified_name().lstrip('/'),
             self.robot.name, level, message, values))

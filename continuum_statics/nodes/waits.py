@@ -73,3 +73,28 @@ class Waits:
                 self._timer.cancel()
         for condition, _, future in done:
             future.set_result(bool(condition()))
+
+
+class InFlight:
+    """How many goal callbacks (action executes, service calls) have not answered yet.
+
+    ``with in_flight:`` around a goal's body; at shutdown the runner keeps the executors running
+    until it reads zero, so that every released goal sends its result.
+    """
+
+    def __init__(self):
+        self._count = 0
+        self._lock = threading.Lock()
+
+    def __enter__(self):
+        with self._lock:
+            self._count += 1
+        return self
+
+    def __exit__(self, *_):
+        with self._lock:
+            self._count -= 1
+
+    def __call__(self):
+        """Return the number of goals not answered yet."""
+        return self._count

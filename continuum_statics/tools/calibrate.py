@@ -41,6 +41,17 @@ def is_recorded_run(path, column_map):
     return False
 
 
+def _positive_int(text):
+    """Argparse type: an integer >= 1 (0 evaluations cannot fit anything)."""
+    try:
+        value = int(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError('%r is not an integer' % text)
+    if value < 1:
+        raise argparse.ArgumentTypeError('must be at least 1, got %d' % value)
+    return value
+
+
 def main(argv=None):
     """Run the calibration; returns the exit code."""
     parser = argparse.ArgumentParser(
@@ -65,7 +76,7 @@ def main(argv=None):
                         help='recorded runs: held-out run to report the errors on (never fitted)')
     parser.add_argument('--tip-topic', default='tip_pose_measured',
                         help='recorded runs in a bag: the measured tip topic (PoseStamped)')
-    parser.add_argument('--max-evaluations', type=int, default=40,
+    parser.add_argument('--max-evaluations', type=_positive_int, default=40,
                         help='recorded runs: most model evaluations of the fit (default 40)')
     parser.add_argument('--select', nargs='+', metavar='PARAM', default=(),
                         help='recorded runs: candidate fit names added to --fit only where they '
@@ -117,10 +128,19 @@ def _run_report(summary):
     lines = ['fitted (%s, %d evaluations, %.0f s):' % (
         summary['optimizer']['message'], summary['optimizer']['evaluations'],
         summary['seconds'])]
+    undetermined = []
     for name, value in summary['fitted'].items():
-        lines.append('  %-17s %s %s' % (name, ' '.join(
-            '%.5g' % v for v in ([value['after']] if np.isscalar(value['after'])
-                                 else value['after'])), value['unit']))
+        after, sigma = (np.atleast_1d(np.asarray(value.get(key, np.nan), dtype=float))
+                        for key in ('after', 'std'))
+        lines.append('  %-17s %s %s (1-sigma %s)' % (
+            name, ' '.join('%.5g' % v for v in after), value['unit'],
+            ' '.join('%.2g' % v for v in sigma)))
+        # a value whose 1-sigma reaches its own size: the data do not determine it
+        if np.any(~(sigma < np.abs(after))):
+            undetermined.append(name)
+    if undetermined:
+        lines.append('note: the data do not determine %s (1-sigma >= the value): the written '
+                     'file carries them, check before using it' % ', '.join(undetermined))
     lines.append('tip RMS: file as given %.2f mm -> fitted %.2f mm (%.2f mm mean-offset '
                  'aligned), max %.2f mm; %d rows did not converge' % (
                      summary['rms_before'] * 1e3, summary['rms_after'] * 1e3,

@@ -60,6 +60,9 @@ def solve_main(argv=None):
                     name, len(robot.cable_names), ', '.join(robot.cable_names) or 'none',
                     len(values)))
         if args.estimate_load:
+            if any(args.tip_force) or any(args.tip_moment) or args.plot:
+                raise ValueError('--tip-force, --tip-moment and --plot do not go with '
+                                 '--estimate-load: the tip load is what it estimates')
             return _estimate_load(args, robot)
         if args.tip_position is not None or args.moment or args.noise:
             raise ValueError('--tip-position, --moment and --noise go with --estimate-load')
@@ -115,10 +118,22 @@ def solve_main(argv=None):
     return 0
 
 
+def _noise_value(kind, value):
+    """One ``--noise KIND SIGMA``: a number, or P% for tension."""
+    if value.strip().endswith('%') and kind == 'tension':
+        return value
+    try:
+        return float(value)
+    except ValueError:
+        raise ValueError('--noise %s %s: SIGMA must be a number in %s (a percentage P%% only '
+                         'for tension)' % (kind, value, {'length': 'm', 'tension': 'N',
+                                                          'tip_position': 'm',
+                                                          'tip_angle': 'rad'}.get(kind, 'SI')))
+
+
 def _estimate_load(args, robot):
     """``--estimate-load``: print the tip wrench, its sigma and what the measurements miss."""
-    noise = {kind: (value if value.endswith('%') else float(value))
-             for kind, value in args.noise}
+    noise = {kind: _noise_value(kind, value) for kind, value in args.noise}
     start = time.perf_counter()
     estimate = robot.estimate_tip_wrench(lengths=args.cable_lengths, tensions=args.tensions,
                                          tip_position=args.tip_position, noise=noise,

@@ -1,0 +1,228 @@
+"""Issue 38 over DDS: the tip_load_estimator sets aside what the model cannot explain.
+
+It keeps running, stamps its output honestly and declares no contact while the tip moves.
+
+Before the fix: tensions 1000x too large (a bridge reporting mN) were published as a load of
+newtons with converged=True (and on the 3-section robot stopped the node); a cable_states stamp
+of 1970 was copied onto tip_wrench_estimate without a warning; twists without a load declared
+contact (5 episodes in 22 s on the three-section real-tendon robot).
+"""
+import time
+
+from conftest import REPO
+from nodes_helpers import (
+    LATCHED,
+    RELIABLE,
+    Collector,
+    call,
+    diagnostic_values,
+    publish_until,
+    wait_until,
+)
+import numpy as np
+import pytest
+
+from continuum_statics import load_robot
+
+rclpy = pytest.importorskip('rclpy')
+from diagnostic_msgs.msg import DiagnosticArray  # noqa: E402
+from geometry_msgs.msg import PoseStamped, TwistStamped, WrenchStamped  # noqa: E402
+from nav_msgs.srv import GetPlan  # noqa: E402
+from rclpy.qos import qos_profile_sensor_data  # noqa: E402
+from sensor_msgs.msg import JointState  # noqa: E402
+from std_msgs.msg import Bool  # noqa: E402
+
+from continuum_statics.nodes.cable_driver_node import CableDriverNode  # noqa: E402
+from continuum_statics.nodes.statics_node import StaticsNode  # noqa: E402
+from continuum_statics.nodes.tip_controller_node import TipControllerNode  # noqa: E402
+from continuum_statics.nodes.tip_load_estimator_node import TipLoadEstimatorNode  # noqa: E402
+from continuum_statics.tools.goal_client import GOAL_BENDINGS  # noqa: E402
+
+REAL_FILE = REPO / 'config' / 'tendon_robot_real_tendons.yaml'
+REAL = load_robot(REAL_FILE)
+LOAD = np.array([0.12, -0.08, 0.0])
+
+
+def cable_states(tensions, sec=0):
+    msg = JointState(name=list(REAL.cable_names),
+                     position=[float(v) for v in REAL.straight_cable_lengths],
+                     effort=[float(t) for t in tensions])
+    msg.header.stamp.sec = sec
+    return msg
+
+
+def force_of(msg):
+    f = msg.wrench.force
+    return np.array([f.x, f.y, f.z])
+
+
+def estimator_rig(harness):
+    """Return (the node, its estimates, a cable_states publisher, its diagnostics values())."""
+    node = harness.add(TipLoadEstimatorNode, robot_file=str(REAL_FILE))
+    client = harness.client()
+    estimates = Collector(client, WrenchStamped, 'tip_wrench_estimate', 10)
+    diagnostics = Collector(client, DiagnosticArray, '/diagnostics', 10)
+    states = client.create_publisher(JointState, 'cable_states', qos_profile_sensor_data)
+
+    def values():
+        found = diagnostic_values(diagnostics, '/tip_load_estimator')
+        return found[0] if found else {}
+
+    return node, estimates, states, values
+
+
+@pytest.mark.ros
+def test_millinewton_tensions_are_set_aside_and_good_ones_give_the_load_again(harness):
+    _, estimates, states, values = estimator_rig(harness)
+    tensions = REAL.solve_lengths(REAL.straight_cable_lengths, LOAD).tensions
+
+    good, scaled = cable_states(tensions), cable_states(tensions * 1000.0)
+    publish_until(states, good, lambda: len(estimates) >= 5, 20.0, 'estimates of good input')
+    publish_until(states, scaled, lambda: int(values().get('rejected_estimate', 0)) >= 20,
+                  20.0, 'mN tensions set aside, counted on /diagnostics')
+    assert 'above its limit' in values()['last_rejection']
+    # nothing of those published as a load: every estimate so far is the true one
+    for msg in estimates.messages:
+        assert np.all(np.abs(force_of(msg)[:2] - LOAD[:2]) < 0.05), force_of(msg)
+    count = len(estimates)
+    publish_until(states, good, lambda: len(estimates) > count + 5, 20.0, 'estimates again')
+    np.testing.assert_allclose(force_of(estimates.last)[:2], LOAD[:2], atol=0.05)
+
+
+@pytest.mark.ros
+def test_a_stamp_of_1970_is_replaced_by_arrival_with_a_count(harness):
+    node, estimates, states, values = estimator_rig(harness)
+    tensions = REAL.solve_lengths(REAL.straight_cable_lengths, LOAD).tensions
+
+    publish_until(states, cable_states(tensions, sec=1), lambda: len(estimates) >= 3
+                  and int(values().get('stamps_replaced_cable_states', 0)) >= 1, 20.0,
+                  'estimates and the replaced stamps counted')
+    now = node.get_clock().now().nanoseconds / 1e9
+    stamp = estimates.last.header.stamp
+    assert abs(stamp.sec + stamp.nanosec * 1e-9 - now) < 10.0  # arrival, not 1970
+    assert 'from this node' in values()['last_rejection']
+
+
+THREE_REAL = str(REPO / 'config' / 'three_section_robot_real_tendons.yaml')
+THREE = load_robot(THREE_REAL)
+#: s of twists: the issue saw 5 false contact episodes in 22 s on this robot, without a load
+TWIST_TIME = 20.0
+SPEED = 0.03  # m/s of the tip: a brisk joystick
+
+
+@pytest.mark.ros
+def test_twists_without_a_load_declare_no_contact(harness):
+
+
+    common = {'robot_file': THREE_REAL}
+    harness.add(CableDriverNode, **common)
+    harness.add(StaticsNode, marker_rate=0.0, **common)
+    harness.add(TipControllerNode, twist_timeout=0.3, **common)
+    harness.add(TipLoadEstimatorNode, **common)
+    client = harness.client()
+    contact = Collector(client, Bool, 'tip_contact', LATCHED)
+    estimates = Collector(client, WrenchStamped, 'tip_wrench_estimate', 10)
+    twists = client.create_publisher(TwistStamped, 'tip_twist', RELIABLE)
+    wait_until(lambda: len(estimates) >= 3, 30.0, 'estimates')
+    # a bent pose first: teleoperation from the straight, singular pose does not move
+    service = client.create_client(GetPlan, 'tip_goal')
+    assert service.wait_for_service(timeout_sec=10.0)
+    request = GetPlan.Request(tolerance=2e-3)
+    request.goal.header.frame_id = 'base_link'
+    p = request.goal.pose.position
+    p.x, p.y, p.z = (float(v) for v in THREE.solve_ivp([2.0, 1.0, 0.0]).tip_position)
+    call(service, request, 60.0)
+    tips = Collector(client, PoseStamped, 'tip_pose', LATCHED)
+    msg = TwistStamped()
+    msg.header.frame_id = 'base_link'
+    began = time.monotonic()
+    rng = np.random.default_rng(38)
+    while time.monotonic() - began < TWIST_TIME:
+        direction = rng.normal(size=3)
+        velocity = SPEED * direction / np.linalg.norm(direction)  # a new one every 2 s
+        msg.twist.linear.x, msg.twist.linear.y, msg.twist.linear.z = (float(v)
+                                                                     for v in velocity)
+        leg = time.monotonic()
+        while time.monotonic() - leg < 2.0:
+            twists.publish(msg)
+            time.sleep(0.02)
+    episodes = sum(1 for a, b in zip(contact.messages, contact.messages[1:])
+                   if b.data and not a.data) + int(bool(contact.messages)
+                                                   and contact.messages[0].data)
+    forces = [np.linalg.norm(force_of(m)) for m in estimates.messages]
+    path = np.array([[m.pose.position.x, m.pose.position.y, m.pose.position.z]
+                     for m in tips.messages])
+    print('the tip moved %.1f mm (extent)' % (1e3 * np.ptp(path, axis=0).max()))
+    print('contact episodes in %g s of twists: %d; estimates %d, largest |F| %.3g N'
+          % (TWIST_TIME, episodes, len(estimates), max(forces)))
+    assert episodes == 0
+
+
+@pytest.mark.ros
+def test_the_demo_goals_with_the_estimated_load_land_where_they_say(harness):
+    """The README's set-up: the hidden load, tip_wrench_source estimate, the demo's goals twice.
+
+    Before: the estimate jumped to newtons and stayed while the cables held still; goals were
+    "reached" 9 mm from the goal, or rejected / aborted blaming the tracker (there was none).
+    """
+    common = {'robot_file': str(REAL_FILE)}
+    estimate = {'tip_wrench_source': 'estimate'}
+    driver = harness.add(CableDriverNode, sim_tip_wrench=list(LOAD) + [0.0, 0.0, 0.0],
+                         **common)
+    harness.add(TipLoadEstimatorNode, **common)
+    harness.add(StaticsNode, marker_rate=0.0, **common, **estimate)
+    controller = harness.add(TipControllerNode, **common, **estimate)
+    client = harness.client()
+    estimates = Collector(client, WrenchStamped, 'tip_wrench_estimate', 10)
+    service = client.create_client(GetPlan, 'tip_goal')
+    assert service.wait_for_service(timeout_sec=10.0)
+    wait_until(lambda: len(estimates) >= 3, 30.0, 'estimates')
+    errors, rest, outcomes = [], [], []
+    for ux, uy in GOAL_BENDINGS[:5] * 2:
+        goal = REAL.solve_ivp([ux, uy, 0.0]).tip_position
+        request = GetPlan.Request(tolerance=1e-3)
+        request.goal.header.frame_id = REAL.base_frame_id
+        p = request.goal.pose.position
+        p.x, p.y, p.z = (float(v) for v in goal)
+        reached = bool(call(service, request, 60.0).plan.poses)
+        # where the simulated robot really is: its own equilibrium under the hidden load (with
+        # its friction history; a cold solve of its lengths is millimetres off)
+        error = np.linalg.norm(driver.backend._statics.shape.tip_position - goal)
+        errors.append((reached, error))
+        outcomes.append(controller.control.last_outcome)
+        rest.append(force_of(estimates.last))
+    print('goals (reached, true tip error mm): %s' % [(r, round(1e3 * e, 2)) for r, e in errors])
+    print('estimates at rest: %s' % np.round(rest, 3).tolist())
+    for (reached, error), outcome in zip(errors, outcomes):
+        if reached:  # the tolerance, 1 mm, plus the model's friction resolution (the statics
+            # and the simulator turn a cable's friction at different travels after a reversal:
+            # up to 2.4 mm seen); a third of the 9 mm the issue saw
+            assert error <= 3e-3, outcome
+        else:  # no tracker runs, every goal is reachable: never blamed on either
+            assert 'disagree' not in outcome and 'unreachable' not in outcome, outcome
+    # most goals land (a goal under friction may run out of corrections: said so)
+    assert sum(reached for reached, _ in errors) >= 7, outcomes
+    for force in rest:  # the lateral load is seen; the push along the rod is not (held at 0)
+        assert np.all(np.abs(force[:2] - LOAD[:2]) < 0.05), force
+
+
+@pytest.mark.ros
+def test_one_faulty_load_cell_is_set_aside_and_never_toggles_contact(harness):
+    # issue 38: one load cell at 10 N (inside its limits) made the estimate alternate 0 <-> 13 N
+    # on the same measurement and tip_contact toggle 45-65 times in 4 s
+    _, estimates, states, values = estimator_rig(harness)
+    contact = Collector(harness.client('contact_listener'), Bool, 'tip_contact', LATCHED)
+    tensions = REAL.solve_lengths(REAL.straight_cable_lengths, LOAD).tensions
+    publish_until(states, cable_states(tensions), lambda: len(estimates) >= 3, 20.0,
+                  'estimates of good input')
+    faulty = tensions.copy()
+    faulty[1] = 10.0
+    count = len(estimates)
+    began = time.monotonic()
+    publish_until(states, cable_states(faulty), lambda: time.monotonic() - began > 4.0
+                  and int(values().get('rejected_estimate', 0)) >= 3, 20.0,
+                  '4 s of the faulty load cell, set aside')
+    assert 'cannot explain' in values()['last_rejection']
+    for msg in estimates.messages[count:]:  # what was published is still the true load
+        assert np.all(np.abs(force_of(msg)[:2] - LOAD[:2]) < 0.05), force_of(msg)
+    assert all(msg.data is False for msg in contact.messages)
