@@ -201,3 +201,29 @@ def test_the_run_report_prints_each_1_sigma_and_names_what_the_data_do_not_deter
     assert 'disk_mass         0.002 0.003 kg (1-sigma 21 0.001)' in report, report
     assert 'the data do not determine disk_mass (1-sigma >= the value)' in report
     assert 'do not determine youngs_modulus' not in report
+
+
+def test_the_run_report_notes_values_that_act_only_with_another():
+    # issue 38: stick_length without friction and gravity (the weight, with the density) were
+    # written with no note
+    from continuum_statics.tools.calibrate import _run_report
+
+    def report(fitted):
+        return _run_report({'optimizer': {'message': 'ok', 'evaluations': 3}, 'seconds': 1.0,
+                            'fitted': fitted, 'rms_before': 1e-3, 'rms_after': 5e-4,
+                            'rms_aligned_after': 4e-4, 'max_after': 1e-3,
+                            'unconverged_rows': 0, 'output': None})
+
+    stick = {'after': [0.002], 'std': [1e-4], 'unit': 'm'}
+    assert 'which was not fitted' in report({'stick_length': stick})
+    assert 'fitted to 0: its value is not determined' in report({
+        'stick_length': stick, 'friction': {'after': [0.0], 'std': [0.01], 'unit': '1'}})
+    with_friction = report({'stick_length': stick,
+                            'friction': {'after': [0.05], 'std': [0.01], 'unit': '1'}})
+    assert 'stick_length acts only' not in with_friction
+    gravity = report({'gravity': {'after': [0.0, 0.0, -5.0], 'std': [0.1] * 3,
+                                  'unit': 'm/s^2'}})
+    assert 'a gravity fit moves the weight' in gravity
+    assert 'gravity acts only' not in report({'youngs_modulus': {'after': 5e10, 'std': 1e8,
+                                                                 'unit': 'Pa'}})
+

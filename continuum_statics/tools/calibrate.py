@@ -123,6 +123,23 @@ def main(argv=None):
     return 0
 
 
+def _coupled_notes(fitted):
+    """Return notes on fitted values that act only together with another (issue 38)."""
+    notes = []
+    if 'stick_length' in fitted:
+        if 'friction' not in fitted:
+            notes.append("stick_length acts only through friction, which was not fitted: it "
+                         "is determined only where the file's friction is not 0")
+        elif not np.any(np.abs(np.atleast_1d(fitted['friction']['after'])) > 0.0):
+            notes.append('stick_length acts only through friction, which was fitted to 0: its '
+                         'value is not determined by the data')
+    if 'gravity' in fitted:
+        notes.append("gravity acts only through the rod's and disks' weight (density times "
+                     "g, eqs. 3-4): a gravity fit moves the weight, not g and the density "
+                     "apart; check both in the written file against the rod you have")
+    return notes
+
+
 def _run_report(summary):
     """Plain-text report of a recorded-run calibration."""
     lines = ['fitted (%s, %d evaluations, %.0f s):' % (
@@ -141,6 +158,7 @@ def _run_report(summary):
     if undetermined:
         lines.append('note: the data do not determine %s (1-sigma >= the value): the written '
                      'file carries them, check before using it' % ', '.join(undetermined))
+    lines.extend('note: ' + note for note in _coupled_notes(summary['fitted']))
     lines.append('tip RMS: file as given %.2f mm -> fitted %.2f mm (%.2f mm mean-offset '
                  'aligned), max %.2f mm; %d rows did not converge' % (
                      summary['rms_before'] * 1e3, summary['rms_after'] * 1e3,
