@@ -195,8 +195,10 @@ class GoalRun:
                 np.max(np.abs(measured - commanded))) <= OFF_COMMAND:
             # the cables are where the last command put them
             return Start(command_state, None, commanded)
+        # a goal starts from the measured shape itself, solved to the end (not a node's
+        # bounded per-cycle step)
         start = self.robot.estimate_shape(measured, tip_force=load[:3], tip_moment=load[3:],
-                                          warm_start=warm)
+                                          warm_start=warm, exact=True)
         # onto the commands of that shape: slack cables taken up, antagonists at min_tension
         try:
             recover = self.command(start)
