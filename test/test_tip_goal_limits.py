@@ -81,3 +81,20 @@ def test_noisy_lengths_give_a_bounded_best_fit(noise):
         previous = est
     # the tip error stays of the order of the noise scaled by the lever arm L / offset
     assert np.median(errors) < noise * robot.length / 0.01
+
+
+def test_a_routed_robot_says_which_tips_its_goals_cannot_reach():
+    # issue 38 item 9: the helical robot answered tips of its own equilibria "outside the
+    # reachable set"; they are tips of co-contracting tensions (two of three straight cables
+    # here), which the least-norm tensions of the tip goal's unknowns do not take
+
+    helical = load_robot(REPO / 'config' / 'helical_robot.yaml')
+    assert not helical.routing.straight
+    goal = helical.solve_tensions([0.8, 0.0, 0.8, 0.0]).tip_position
+    sol = helical.solve_tip_goal(goal, tolerance=1e-4)
+    assert sol.converged or 'co-contraction reaches' in sol.message
+    assert _inside(helical, sol.cable_lengths)
+    straight = ROBOTS['tendon_robot.yaml']
+    far = straight.solve_tip_goal([0.2, 0.0, 0.1], tolerance=1e-4)
+    assert not far.converged and 'outside the reachable set' in far.message
+

@@ -208,8 +208,14 @@ class _Problem:
                 error, self.tolerance)
             if limited:
                 text += '; cable(s) at length limit: ' + ', '.join(limited)
-            elif not notes:
+            elif not notes and robot.routing.straight:
                 text += '; nearest reachable tip (goal outside the reachable set)'
+            elif not notes:
+                # routed cables: the unknowns are section moments carried by least-norm
+                # tensions, so a tip only another tension mix reaches (co-contraction, a helix
+                # pulled with its neighbours) is outside this set though the robot reaches it
+                text += ('; nearest tip of least-norm tensions (routed cables: a tip that only '
+                         'co-contraction reaches is outside this set)')
             notes.insert(0, text)
         return TipGoalSolution(shape=shape, u0=shape.u0, cable_lengths=lengths,
                                converged=converged, error=error, iterations=iterations,
