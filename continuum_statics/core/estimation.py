@@ -116,6 +116,13 @@ class ShapeEstimate:
     :ivar capped: an estimate left unfinished by its per-call bound (:class:`Tracking`): it
         spent its budget, or it made the model's own Jacobians after a failed secant step; the
         best state reached, and the next call, warm-started from it, goes on
+    :ivar position_covariance: (N, 3, 3) m^2 of each backbone point at ``shape.s``, or None
+        (the robot file has no ``model_uncertainty``): :mod:`state_estimation`
+    :ivar tip_covariance: (6, 6) of the tip's position (m) and rotation (rad), base frame, or None
+    :ivar unmodelled: the unmodelled loads explained so far (:class:`state_estimation.Unmodelled`)
+    :ivar sensors: {name: :class:`sensors.SensorVerdict`} of the readings given
+    :ivar sensitivity: the load columns (:class:`state_estimation.Sensitivity`), kept for the
+        next call
     """
 
     shape: Shape
@@ -130,6 +137,11 @@ class ShapeEstimate:
     tendons: object = None
     capped: bool = False
     slack_attempt: object = None
+    position_covariance: np.ndarray = None
+    tip_covariance: np.ndarray = None
+    unmodelled: object = None
+    sensors: dict = None
+    sensitivity: object = None
 
     @property
     def tensions(self):

@@ -14,7 +14,14 @@ import math
 
 import numpy as np
 
-from continuum_statics.core import bvp, estimation, length_statics, load_estimation, tip_goal
+from continuum_statics.core import (
+    bvp,
+    estimation,
+    length_statics,
+    load_estimation,
+    state_estimation,
+    tip_goal,
+)
 from continuum_statics.core.inputs import as_vector
 from continuum_statics.core.kernel import DISTRIBUTED, POINT_MOMENT, pack_params
 from continuum_statics.core.layout import (
@@ -29,6 +36,7 @@ from continuum_statics.core.model import Model
 from continuum_statics.core.robot_file import read_robot_description
 from continuum_statics.core.rotations import quaternion_to_rotation
 from continuum_statics.core.routing import Routing
+from continuum_statics.core.sensors import default_model_uncertainty
 from continuum_statics.core.shape import Shape
 from continuum_statics.core.tendons import Tendons
 
@@ -142,6 +150,13 @@ class Robot:
         self.model_code = DISTRIBUTED if self.cable_model == 'distributed' else POINT_MOMENT
         self.solver = description.solver
         self.tendons = description.tendons or Tendons.default(len(self.cable_names))
+        # sensors besides the cables and the model's own error (state_estimation); sensors
+        # without a stated model error correct the defaults', which calibrate replaces
+        self.sensors = description.sensors
+        self.model_uncertainty = description.model_uncertainty
+        if self.sensors and self.model_uncertainty is None:
+            self.model_uncertainty = default_model_uncertainty(rod.bending_stiffness[0],
+                                                               rod.length)
         # the point a tip tracker follows, in the tip frame (m): calibration and tip_pose_measured
         self.tip_marker = (np.zeros(3) if description.tip_marker is None
                            else np.array(description.tip_marker, dtype=float))
@@ -248,6 +263,10 @@ class Robot:
         """Copy of this robot with some solver settings replaced (e.g. ``steps=200``)."""
         solver = dataclasses.replace(self.solver, **settings)
         return Robot(dataclasses.replace(self.description, solver=solver))
+
+    def with_model_uncertainty(self, uncertainty) -> 'Robot':
+        """Copy of this robot with another :class:`sensors.ModelUncertainty` (None: none)."""
+        return Robot(dataclasses.replace(self.description, model_uncertainty=uncertainty))
 
     # -- state and loads ---------------------------------------------------------------------
     def passive_state(self, u0=(0.0, 0.0, 0.0)) -> np.ndarray:
@@ -415,7 +434,8 @@ class Robot:
     # -- inverse problems ------------------------------------------------------------------
     def estimate_shape(self, cable_lengths, tip_force=(0.0, 0.0, 0.0),
                        tip_moment=(0.0, 0.0, 0.0), tensions=None, warm_start=None,
-                       u0_guess=None, tracking=None, exact=False) -> estimation.ShapeEstimate:
+                       u0_guess=None, tracking=None, exact=False, sensors=None,
+                       stamp=None) -> estimation.ShapeEstimate:
         """Shape from measured cable lengths (m) and a tip load (N, N m); :mod:`estimation`.
 
         Warm-started (``warm_start`` the previous estimate), a call does bounded work, as the
@@ -423,6 +443,12 @@ class Robot:
         estimate is ``capped`` and the next call, warm-started from it, goes on. A cold call
         (no ``warm_start``) and ``exact=True`` are solved to the solver's tolerances, whatever
         that costs (on noisy lengths 2-5x the median and up to 10x the slowest tracked call).
+
+        With the robot file's ``model_uncertainty`` (or ``sensors``: {name:
+        :class:`sensors.SensorReading`} of the file's sensors, base frame; a missing name is not
+        seen this time) the estimate is the fused one of :mod:`state_estimation`, with
+        ``position_covariance`` and ``tip_covariance``; ``stamp`` (s) times the unmodelled
+        loads' decay since ``warm_start``.
         """
         jacobians = getattr(warm_start, 'jacobians', None)
         if jacobians is not None and jacobians[0].shape != (len(self.cable_names),
@@ -432,6 +458,10 @@ class Robot:
             tracking = None
         elif tracking is None and warm_start is not None:
             tracking = estimation.DEFAULT_TRACKING
+        if self.model_uncertainty is not None or sensors:
+            return state_estimation.estimate_state(
+                self, cable_lengths, tip_force, tip_moment, tensions, sensors, stamp,
+                _warm_or_guess(self, warm_start, u0_guess), jacobians, warm_start, tracking)
         return estimation.estimate_shape(self, cable_lengths, tip_force, tip_moment, tensions,
                                          _warm_or_guess(self, warm_start, u0_guess), jacobians,
                                          warm_start, tracking)

@@ -10,6 +10,7 @@ import numpy as np
 import yaml
 
 from continuum_statics.core.routing import GuideOffsets, Helix, Straight
+from continuum_statics.core.sensors import ModelUncertainty, parse_model_uncertainty, parse_sensors
 from continuum_statics.core.tendons import TENDON_KEYS, Tendons
 
 #: Plausible backbone materials: Young's modulus (Pa) and density (kg/m^3).
@@ -148,6 +149,8 @@ class RobotDescription:
     tendons: Tendons = None
     tip_marker: np.ndarray = None
     cable_routes: tuple = ()
+    sensors: tuple = ()
+    model_uncertainty: ModelUncertainty = None
 
     def routes(self):
         """One route per cable (:mod:`~continuum_statics.core.routing`), straight by default."""
@@ -168,7 +171,7 @@ MAX_DISK_MASS = 1.0
 #: Plausible factors on the rod's bending stiffness a section's disks give.
 BENDING_SCALE_RANGE = (0.1, 100.0)
 _TOP_KEYS = {'name', 'description', 'rod', 'base', 'gravity', 'cables', 'guides', 'solver',
-             'sections', 'cable_model', 'tendons', 'tip_marker'}
+             'sections', 'cable_model', 'tendons', 'tip_marker', 'sensors', 'model_uncertainty'}
 
 
 def _frozen(array):
@@ -606,6 +609,7 @@ def parse_robot_description(data, source='robot file'):
         raise ValueError('cable_model must be one of %s, got %r'
                          % (', '.join(CABLE_MODELS), model))
     guides = np.concatenate([section.guides for section in sections]) if sections else []
+    tip_marker = _vector(data.get('tip_marker', [0.0, 0.0, 0.0]), 3, 'tip_marker')
     return RobotDescription(
         name=str(data.get('name', 'continuum_robot')), rod=rod, base_frame_id=frame_id,
         base_position=_frozen(position), base_orientation=_frozen(orientation),
@@ -615,7 +619,9 @@ def parse_robot_description(data, source='robot file'):
         warnings=_plausibility(rod, offsets, sections) + _tendon_warnings(tendon_rows, names),
         tendons=_tendons(tendon_rows),
         cable_routes=tuple(routes) if any(route is not None for route in routes) else (),
-        tip_marker=_frozen(_vector(data.get('tip_marker', [0.0, 0.0, 0.0]), 3, 'tip_marker')))
+        tip_marker=_frozen(tip_marker),
+        sensors=parse_sensors(data.get('sensors'), rod.length, guides, tip_marker),
+        model_uncertainty=parse_model_uncertainty(data.get('model_uncertainty')))
 
 
 def read_robot_description(path):

@@ -1,0 +1,350 @@
+"""State estimation: the shape from every measurement the robot has, with its uncertainty (no ROS).
+
+The model's estimate (:mod:`estimation`: cable lengths, tensions and the tip load in, the
+equilibrium out) misses what the model does not know. That error is carried as *unmodelled
+loads* d = [tip force (3, N); tip moment (3, N m); a length error per cable (n, m)], base
+frame, with the robot file's ``model_uncertainty`` as their prior N(0, P0). Between two stamps
+they follow an Ornstein-Uhlenbeck process with the calibrated correlation time tau:
+
+    mean <- a mean,  P <- a^2 P + (1 - a^2) P0,  a = exp(-dt / tau)
+
+so a correction a sensor made fades, and its variance grows back to P0, while the sensor is
+gone. A fourth group, ``base_position``, is an offset of the
+whole backbone (the base's registration drifting, and what the loads leave unexplained that is
+the same everywhere). The shape under d is, to first order about the model's estimate (d = 0),
+
+    r(s; d) = r(s) + G_r(s) d,  theta(s; d) = G_theta(s) d   (a small rotation of R(s))
+
+with G's columns the secants of the estimator itself over one prior sigma of each load (the
+inputs moved: lengths - d_L, tip load + d_f, d_m). A sensor at arc length s_k with offset o_k in
+the rod's frame reads y_k = r(s_k) + R(s_k) o_k (and R(s_k) for a pose sensor) plus noise
+R_k = diag(sigma^2). The maximum a posteriori d of the linearised problem, and its covariance,
+are the Kalman update (the Gauss-Newton step of Rucker & Webster's probabilistic estimator,
+IEEE T-RO 2011, on these unknowns):
+
+    S = H P H^T + R,  K = P H^T S^-1,  mean+ = mean + K nu,  P+ = (I - K H) P
+
+with nu = y - h(mean) the innovation. Each reading is first judged on its own: its normalised
+innovation squared nu^T S^-1 nu against the chi-square gate of its degrees of freedom
+(:data:`~continuum_statics.core.load_estimation.CHI2_GATE_PROBABILITY`); a reading that fails it
+is set aside with the reason (:class:`~continuum_statics.core.sensors.SensorVerdict`). The
+published covariance of each backbone point is G_r P+ G_r^T.
+
+Cost: the model's estimate plus, per call, one column of G (a warm-started estimate); every
+column when nothing is cached or, for an estimate solved to the end, once the tip moved more
+than :data:`REFRESH_DISTANCE` of the rod's length.
+"""
+import dataclasses
+from dataclasses import dataclass
+import math
+
+import numpy as np
+from scipy.stats import chi2 as chi2_distribution
+
+from continuum_statics.core import estimation
+from continuum_statics.core.layout import POSITION, ROTATION
+from continuum_statics.core.load_estimation import CHI2_GATE_PROBABILITY
+from continuum_statics.core.sensors import SensorVerdict, as_reading
+
+#: The tip may move this fraction of the rod's length from where the load columns were made
+#: before an estimate solved to the end makes them all again (a tracking call refreshes one
+#: column per call instead: bounded work).
+REFRESH_DISTANCE = 0.02
+#: Unmodelled-load groups, in the order of d: name, size (None: one per cable), unit.
+GROUPS = (('tip_force', 3, 'N'), ('section_moment', 3, 'N m'), ('cable_length', None, 'm'),
+          ('base_position', 3, 'm'))
+#: Groups whose columns are known without a solve: an offset of the whole backbone.
+_RIGID = ('base_position',)
+
+
+@dataclass(frozen=True, eq=False)
+class Unmodelled:
+    """The unmodelled loads explained so far: their mean and covariance at a stamp.
+
+    :ivar names: (k,) what each entry is, e.g. 'tip_force.x', 'cable_length.servo_1'
+    :ivar mean: (k,) N, N m or m
+    :ivar covariance: (k, k)
+    :ivar stamp: s, or None
+    """
+
+    names: tuple
+    mean: np.ndarray
+    covariance: np.ndarray
+    stamp: float = None
+
+    @property
+    def sigma(self):
+        """(k,) standard deviations."""
+        return np.sqrt(np.diag(self.covariance))
+
+    def as_dict(self):
+        """{name: (mean, sigma)} for reports."""
+        return {name: (float(m), float(s)) for name, m, s in zip(self.names, self.mean,
+                                                                 self.sigma)}
+
+
+@dataclass(frozen=True, eq=False)
+class Sensitivity:
+    """The estimate's first-order response to the unmodelled loads (kept between calls).
+
+    :ivar positions: (N, 3, k) d r(s_i) / d d at every node
+    :ivar angles: (N, 3, k) d theta(s_i) / d d (small rotations, base frame)
+    :ivar tips: (k, 3) the tip position each column was made at (m)
+    :ivar next_column: the column a tracking call refreshes next
+    """
+
+    positions: np.ndarray
+    angles: np.ndarray
+    tips: np.ndarray
+    next_column: int = 0
+
+
+def prior_scales(robot):
+    """Return (names, sigma (k,)) of the unmodelled loads with a nonzero prior."""
+    uncertainty = robot.model_uncertainty
+    names, sigmas = [], []
+    for group, size, _ in GROUPS:
+        sigma = getattr(uncertainty, group)
+        if sigma <= 0.0:
+            continue
+        labels = robot.cable_names if size is None else ('x', 'y', 'z')
+        names.extend('%s.%s' % (group, label) for label in labels)
+        sigmas.extend([sigma] * len(labels))
+    return tuple(names), np.array(sigmas)
+
+
+def propagate(robot, carried, stamp):
+    """Return the unmodelled loads at ``stamp`` from the last estimate's (Ornstein-Uhlenbeck)."""
+    names, sigma = prior_scales(robot)
+    prior = np.diag(sigma ** 2)
+    if carried is None or carried.names != names:
+        return Unmodelled(names, np.zeros(len(names)), prior, stamp)
+    if stamp is None or carried.stamp is None:
+        return Unmodelled(names, carried.mean, carried.covariance,
+                          carried.stamp if stamp is None else stamp)
+    # an older stamp is not a step back in time
+    mean, covariance = decayed(carried.mean, carried.covariance, prior,
+                               max(stamp - carried.stamp, 0.0),
+                               robot.model_uncertainty.correlation_time)
+    return Unmodelled(names, mean, covariance, stamp)
+
+
+def decayed(mean, covariance, prior, elapsed, correlation_time):
+    """Return (mean, covariance) ``elapsed`` s later (Ornstein-Uhlenbeck towards N(0, prior))."""
+    a = math.exp(-elapsed / correlation_time)
+    return a * mean, a * a * covariance + (1.0 - a * a) * prior
+
+
+def fused(mean, covariance, jac, innovation, noise):
+    """Return (mean, covariance) after the Kalman update with rows ``jac`` (the module's)."""
+    spread = jac @ covariance @ jac.T + noise
+    gain = np.linalg.solve(spread, jac @ covariance).T
+    # Joseph form: stays symmetric positive semi-definite in floating point
+    keep = np.eye(len(mean)) - gain @ jac
+    covariance = keep @ covariance @ keep.T + gain @ noise @ gain.T
+    return mean + gain @ innovation, 0.5 * (covariance + covariance.T)
+
+
+def estimate_state(robot, lengths, tip_force, tip_moment, tensions, sensors, stamp, start,
+                   jacobians, previous, tracking):
+    """Return the fused estimate (an :class:`estimation.ShapeEstimate` with covariances).
+
+    Arguments as :func:`estimation.estimate_shape`, plus ``sensors`` ({name: reading}) and
+    ``stamp`` (s). ``previous`` carries the unmodelled loads and the load columns.
+    """
+    readings = _readings(robot, sensors)
+    model = estimation.estimate_shape(robot, lengths, tip_force, tip_moment, tensions, start,
+                                      jacobians, previous, tracking)
+    prior = propagate(robot, getattr(previous, 'unmodelled', None), stamp)
+    if not len(prior.mean):
+        verdicts = {name: SensorVerdict(False, math.nan, 'the robot file gives no '
+                                        'model_uncertainty to correct') for name in readings}
+        return dataclasses.replace(model, unmodelled=prior, sensors=verdicts)
+    sensitivity = _sensitivity(robot, model, lengths, tip_force, tip_moment, tensions,
+                               getattr(previous, 'sensitivity', None), prior, tracking)
+    posterior, verdicts = _update(robot, model.shape, sensitivity, prior, readings, stamp)
+    shape = _corrected(model.shape, sensitivity, posterior.mean)
+    g = sensitivity.positions
+    position_covariance = np.einsum('nak,kl,nbl->nab', g, posterior.covariance, g)
+    tip = np.concatenate([g[-1], sensitivity.angles[-1]])
+    return dataclasses.replace(model, shape=shape, position_covariance=position_covariance,
+                               tip_covariance=tip @ posterior.covariance @ tip.T,
+                               unmodelled=posterior, sensors=verdicts, sensitivity=sensitivity)
+
+
+def _readings(robot, sensors):
+    """Check ``sensors`` ({name: reading}) against the robot file's; return {Sensor: reading}."""
+    if not sensors:
+        return {}
+    known = {sensor.name: sensor for sensor in robot.sensors}
+    readings = {}
+    for name, reading in dict(sensors).items():
+        if name not in known:
+            raise ValueError('sensor %r is not in the robot file (its sensors: %s)'
+                             % (name, ', '.join(known) or 'none'))
+        if reading is not None:
+            readings[known[name]] = as_reading(known[name], reading)
+    return readings
+
+
+def _sensitivity(robot, model, lengths, tip_force, tip_moment, tensions, carried, prior,
+                 tracking):
+    """Return the load columns at this estimate: all of them, or the next one (tracking)."""
+    tip = model.shape.tip_position
+    size = len(prior.mean)
+    fresh = carried is None or carried.positions.shape[2] != size or carried.positions.shape[
+        0] != len(model.shape.s)
+    bounded = tracking is not None and bool(tracking.max_model_runs)
+    if not fresh and not bounded:
+        fresh = np.max(np.linalg.norm(carried.tips - tip, axis=1)) > (REFRESH_DISTANCE
+                                                                      * robot.length)
+    if fresh:
+        n = len(model.shape.s)
+        carried = Sensitivity(np.zeros((n, 3, size)), np.zeros((n, 3, size)),
+                              np.zeros((size, 3)))
+        columns = range(size)
+    elif bounded:
+        columns = [carried.next_column]
+    else:
+        return carried
+    positions, angles, tips = (carried.positions.copy(), carried.angles.copy(),
+                               carried.tips.copy())
+    names, sigma = prior_scales(robot)
+    for j in columns:
+        if names[j].split('.')[0] in _RIGID:
+            positions[:, :, j] = 0.0
+            positions[:, 'xyz'.index(names[j][-1]), j] = 1.0
+            tips[j] = tip
+            continue
+        step = np.zeros(size)
+        step[j] = sigma[j]
+        moved = _moved(robot, model, lengths, tip_force, tip_moment, tensions, step)
+        positions[:, :, j] = (moved.positions - model.shape.positions) / sigma[j]
+        angles[:, :, j] = _small_rotations(moved.rotations, model.shape.rotations) / sigma[j]
+        tips[j] = tip
+    return Sensitivity(positions, angles, tips, (columns[-1] + 1) % size)
+
+
+def _moved(robot, model, lengths, tip_force, tip_moment, tensions, load):
+    """Return the estimate's shape with the unmodelled loads ``load`` added to its inputs."""
+    force, moment, cable = _split(robot, load)
+    return estimation.estimate_shape(
+        robot, np.asarray(lengths, dtype=float) - cable, np.asarray(tip_force) + force,
+        np.asarray(tip_moment) + moment, tensions, model.shape.state, model.jacobians, model,
+        None).shape
+
+
+def _split(robot, load):
+    """Return (tip force (3,), tip moment (3,), cable length errors (n,)) of a load vector."""
+    parts, at = [], 0
+    for group, size, _ in GROUPS[:3]:
+        size = len(robot.cable_names) if size is None else size
+        if getattr(robot.model_uncertainty, group) > 0.0:
+            parts.append(load[at:at + size])
+            at += size
+        else:
+            parts.append(np.zeros(size))
+    return parts
+
+
+def _small_rotations(rotations, reference):
+    """Return (N, 3) base-frame rotation vectors taking ``reference`` to ``rotations``."""
+    delta = np.einsum('nij,nkj->nik', rotations, reference)
+    return 0.5 * np.stack([delta[:, 2, 1] - delta[:, 1, 2], delta[:, 0, 2] - delta[:, 2, 0],
+                           delta[:, 1, 0] - delta[:, 0, 1]], axis=1)
+
+
+def _sensor_rows(shape, sensitivity, sensor):
+    """Return (prediction (3 or 6,), H (3 or 6, k)) of ``sensor`` at ``shape`` (d = 0)."""
+    s = shape.s
+    upper = int(np.clip(np.searchsorted(s, sensor.s, side='right'), 1, len(s) - 1))
+    lower = upper - 1
+    span = s[upper] - s[lower]
+    w = (sensor.s - s[lower]) / span if span > 0.0 else 0.0
+    w = min(max(w, 0.0), 1.0)
+    near = upper if w >= 0.5 else lower
+    rotation = shape.rotations[near]
+    arm = rotation @ sensor.offset
+    point = (1.0 - w) * shape.positions[lower] + w * shape.positions[upper] + arm
+    angles = sensitivity.angles[near]
+    # d(R o) = theta x (R o) = -[R o]x theta
+    jac = ((1.0 - w) * sensitivity.positions[lower] + w * sensitivity.positions[upper]
+           - _skew(arm) @ angles)
+    if sensor.kind != 'pose':
+        return point, jac, rotation
+    return point, np.vstack([jac, angles]), rotation
+
+
+def _skew(v):
+    return np.array([[0.0, -v[2], v[1]], [v[2], 0.0, -v[0]], [-v[1], v[0], 0.0]])
+
+
+def _update(robot, shape, sensitivity, prior, readings, stamp):
+    """Judge each reading against the prior, fuse those that pass; return (posterior, verdicts)."""
+    mean, covariance = prior.mean, prior.covariance
+    verdicts, rows, residuals, noises = {}, [], [], []
+    for sensor, reading in readings.items():
+        predicted, jac, rotation = _sensor_rows(shape, sensitivity, sensor)
+        innovation = reading.position - predicted - jac[:3] @ mean
+        sigmas = [sensor.position_sigma] * 3
+        if sensor.kind == 'pose' and reading.rotation is not None:
+            angle = _small_rotations(reading.rotation[None], rotation[None])[0]
+            innovation = np.concatenate([innovation, angle - jac[3:] @ mean])
+            sigmas += [sensor.angle_sigma] * 3
+        else:
+            jac = jac[:3]
+        noise = np.diag(np.square(sigmas))
+        if reading.stamp is not None and stamp is not None and stamp > reading.stamp:
+            # an older reading: the unmodelled loads may have moved since it was taken
+            a = math.exp(-(stamp - reading.stamp) / robot.model_uncertainty.correlation_time)
+            noise = noise + (1.0 - a * a) * jac @ np.diag(np.diag(covariance)) @ jac.T
+        spread = jac @ covariance @ jac.T + noise
+        chi2 = float(innovation @ np.linalg.solve(spread, innovation))
+        gate = float(chi2_distribution.ppf(1.0 - CHI2_GATE_PROBABILITY, len(innovation)))
+        if not chi2 <= gate:
+            verdicts[sensor.name] = SensorVerdict(False, chi2, (
+                'innovation chi2 %.1f above the gate %.1f (%.1f mm from the estimate)'
+                % (chi2, gate, 1e3 * float(np.linalg.norm(innovation[:3])))))
+            continue
+        verdicts[sensor.name] = SensorVerdict(True, chi2)
+        rows.append(jac)
+        residuals.append(innovation)
+        noises.append(noise)
+    if not rows:
+        return prior, verdicts
+    mean, covariance = fused(mean, covariance, np.vstack(rows), np.concatenate(residuals),
+                             _block_diagonal(noises))
+    return dataclasses.replace(prior, mean=mean, covariance=covariance), verdicts
+
+
+def _block_diagonal(blocks):
+    size = sum(len(block) for block in blocks)
+    out, at = np.zeros((size, size)), 0
+    for block in blocks:
+        out[at:at + len(block), at:at + len(block)] = block
+        at += len(block)
+    return out
+
+
+def _corrected(shape, sensitivity, mean):
+    """Return ``shape`` moved by the unmodelled loads ``mean`` (first order; same solver state)."""
+    states = shape.states.copy()
+    positions = shape.positions + sensitivity.positions @ mean
+    angles = sensitivity.angles @ mean
+    rotations = _rotation_matrices(angles) @ shape.rotations
+    states[:, POSITION] = positions
+    states[:, ROTATION] = rotations.reshape(len(states), 9)
+    return type(shape)(shape.s, states, shape.u0, shape.tip_force, shape.c, shape.d,
+                       shape.state, shape.fixed_tensions)
+
+
+def _rotation_matrices(vectors):
+    """(N, 3, 3) rotations of rotation vectors (N, 3) (Rodrigues)."""
+    angle = np.linalg.norm(vectors, axis=1)
+    safe = np.where(angle > 0.0, angle, 1.0)
+    axis = vectors / safe[:, None]
+    k = np.zeros((len(vectors), 3, 3))
+    k[:, 0, 1], k[:, 0, 2], k[:, 1, 2] = -axis[:, 2], axis[:, 1], -axis[:, 0]
+    k = k - k.transpose(0, 2, 1)
+    sin, cos = np.sin(angle)[:, None, None], np.cos(angle)[:, None, None]
+    return np.eye(3) + sin * k + (1.0 - cos) * (k @ k)
