@@ -5,13 +5,14 @@ drift, the tracker's own noise). :mod:`continuum_statics.core.state_estimation` 
 error as unmodelled loads d with prior N(0, P0), P0 = diag(sigma_group^2). This module measures
 sigma_group and the correlation time from the run's residuals:
 
-- sigma (type-II maximum likelihood): each row's residual e_i = measured - model marker point
-  is, to first order, H_i d + noise with H_i the marker rows of the load columns at that row,
-  so e_i ~ N(0, H_i P0 H_i^T + sigma_y^2 I). The log likelihood summed over rows is maximised
-  over log sigma of each group (tip force, tip moment, cable length); sigma_y is the tracker's
-  noise, given.
-- correlation time tau: the residuals' autocorrelation rho(dt) over pairs of rows dt apart,
-  fitted by exp(-dt / tau) (least squares on the pairs within the first lags).
+each row's residual e_i = measured - model marker point is, to first order, H_i d + noise,
+with H_i the marker rows of the load columns at that row. The run is replayed through the same
+filter as the estimator's, with the tracker seen on some rows and occluded on others
+(:data:`OCCLUSION_PATTERNS`: what a lab's tracker does), and sigma per group and tau maximise
+the likelihood of what the filter predicts on the occluded rows (error and covariance both:
+too small a covariance is penalised as much as too large). sigma_y, the tracker's noise, is
+given (the robot file's tip sensor, else :data:`TRACKER_NOISE`). Only the calibration run is
+used: held-out runs judge the result.
 """
 import math
 
@@ -19,14 +20,12 @@ import numpy as np
 from scipy.optimize import minimize
 
 from continuum_statics.core.sensors import ModelUncertainty, default_model_uncertainty
-from continuum_statics.core.state_estimation import GROUPS
+from continuum_statics.core.state_estimation import GROUPS, decayed, fused
 
-#: Row pairs up to this many rows apart measure the residuals' correlation in time.
-CORRELATION_LAGS = 10
+#: Occlusion patterns of the fit: (rows seen, rows occluded), repeated over the run.
+OCCLUSION_PATTERNS = ((1, 1), (5, 5), (20, 40))
 #: The tracker's noise (m) assumed when the robot file names no tip sensor.
 TRACKER_NOISE = 5e-4
-#: Where each group's sigma starts, as a fraction of the stand-in the robot gives.
-_START = 1.0
 
 
 def residual_rows(robot, run):
@@ -56,26 +55,73 @@ def _skew(v):
     return np.array([[0.0, -v[2], v[1]], [v[2], 0.0, -v[0]], [-v[1], v[0], 0.0]])
 
 
-def fit_sigmas(robot, residuals, columns, tracker_noise):
-    """Return {group: sigma} maximising the residuals' likelihood (see the module)."""
-    groups = _group_index(robot)
-    valid = np.all(np.isfinite(residuals), axis=1)
-    residuals, columns = residuals[valid], columns[valid]
-    start = np.array([math.log(_START * getattr(robot.model_uncertainty, name))
-                      for name, _ in groups])
+def fit(robot, run, residuals, columns, tracker_noise, patterns=None):
+    """Return ({group: sigma}, tau) maximising the predictive likelihood of occluded rows.
 
-    def negative_log_likelihood(log_sigma):
-        sigma = np.concatenate([np.full(len(index), math.exp(value))
-                                for (_, index), value in zip(groups, log_sigma)])
-        scaled = columns * sigma
-        spread = scaled @ scaled.transpose(0, 2, 1) + tracker_noise ** 2 * np.eye(3)
-        sign, logdet = np.linalg.slogdet(spread)
-        solved = np.linalg.solve(spread, residuals[:, :, None])[:, :, 0]
-        return 0.5 * float(np.sum(logdet) + np.sum(residuals * solved))
+    The replay of :func:`replay_filter` under each occlusion pattern of ``patterns`` (default
+    :data:`OCCLUSION_PATTERNS`): the sum over the rows the tracker does not see of
+    log N(e_i; H_i mean_i, H_i P_i H_i^T + sigma_y^2 I), maximised over log sigma per group and
+    log tau (Nelder-Mead). The rows it sees update the unmodelled loads, as on the robot.
+    """
+    groups = _group_index(robot)
+    start = np.array([math.log(getattr(robot.model_uncertainty, name)) for name, _ in groups]
+                     + [math.log(robot.model_uncertainty.correlation_time)])
+    masks = [seen_mask(len(run), seen, hidden) for seen, hidden in patterns or OCCLUSION_PATTERNS]
+
+    def negative_log_likelihood(x):
+        sigma = _sigma_vector(groups, np.exp(x[:-1]))
+        total = 0.0
+        for seen in masks:
+            innovations, spreads = replay_filter(run.times, residuals, columns, sigma,
+                                                 math.exp(x[-1]), tracker_noise, seen)
+            hidden = ~seen & np.all(np.isfinite(residuals), axis=1)
+            solved = np.linalg.solve(spreads[hidden], innovations[hidden][:, :, None])[:, :, 0]
+            total += 0.5 * float(np.sum(np.linalg.slogdet(spreads[hidden])[1])
+                                 + np.sum(innovations[hidden] * solved))
+        return total
 
     result = minimize(negative_log_likelihood, start, method='Nelder-Mead',
-                      options={'xatol': 1e-3, 'fatol': 1e-3, 'maxiter': 400})
-    return {name: math.exp(value) for (name, _), value in zip(groups, result.x)}
+                      options={'xatol': 1e-3, 'fatol': 1e-2, 'maxiter': 120 * len(start)})
+    return ({name: math.exp(value) for (name, _), value in zip(groups, result.x[:-1])},
+            math.exp(result.x[-1]))
+
+
+def seen_mask(rows, seen, hidden):
+    """Return (rows,) bool: blocks of ``seen`` rows the tracker sees, then ``hidden`` not."""
+    return (np.arange(rows) % (seen + hidden)) < seen
+
+
+def replay_filter(times, residuals, columns, sigma, tau, tracker_noise, seen):
+    """Replay the unmodelled loads' filter in the tracker's coordinates (no solves).
+
+    ``residuals`` (n, 3): measured minus the model's marker point; ``columns`` (n, 3, k): the
+    marker rows of the load columns; ``sigma`` (k,) the prior; ``seen`` (n,) rows the tracker
+    is used on. Returns each row's innovation (n, 3) before its update and its covariance
+    (n, 3, 3) (the prediction error of an occluded row and what the estimate says of it). The
+    same :func:`state_estimation.decayed` / :func:`state_estimation.fused` as the estimator.
+    """
+    prior = np.diag(sigma ** 2)
+    noise = tracker_noise ** 2 * np.eye(3)
+    mean, covariance = np.zeros(len(sigma)), prior
+    innovations = np.zeros_like(residuals)
+    spreads = np.tile(np.eye(3), (len(residuals), 1, 1))
+    last = None
+    for i, (residual, jac) in enumerate(zip(residuals, columns)):
+        if last is not None:
+            mean, covariance = decayed(mean, covariance, prior, max(times[i] - last, 0.0), tau)
+        last = times[i]
+        if not np.all(np.isfinite(residual)):
+            continue
+        innovations[i] = residual - jac @ mean
+        spreads[i] = jac @ covariance @ jac.T + noise
+        if seen[i]:
+            mean, covariance = fused(mean, covariance, jac, innovations[i], noise)
+    return innovations, spreads
+
+
+def _sigma_vector(groups, sigmas):
+    return np.concatenate([np.full(len(index), value) for (_, index), value in zip(groups,
+                                                                                   sigmas)])
 
 
 def _group_index(robot):
@@ -89,37 +135,13 @@ def _group_index(robot):
     return groups
 
 
-def correlation_time(times, residuals, lags=CORRELATION_LAGS):
-    """Return tau (s) of the residuals' autocorrelation exp(-dt / tau) over nearby rows."""
-    valid = np.all(np.isfinite(residuals), axis=1)
-    times, residuals = times[valid], residuals[valid] - residuals[valid].mean(axis=0)
-    power = float(np.mean(np.sum(residuals ** 2, axis=1)))
-    gaps, logs = [], []
-    for lag in range(1, lags + 1):
-        products = np.sum(residuals[lag:] * residuals[:-lag], axis=1) / power
-        rho = float(np.mean(products))
-        if rho <= 0.05:  # at the noise floor: further lags say nothing
-            break
-        gaps.append(float(np.mean(times[lag:] - times[:-lag])))
-        logs.append(math.log(rho))
-    if not gaps:
-        return float(np.median(np.diff(times)))  # uncorrelated from one row to the next
-    gaps, logs = np.array(gaps), np.array(logs)
-    # log rho = -dt / tau through the origin (rho(0) = 1), least squares
-    return float(-np.sum(gaps * gaps) / np.sum(gaps * logs))
-
-
 def measure(robot, run, tracker_noise=None):
     """Return (:class:`ModelUncertainty`, report dict) of a calibrated robot on a run."""
-    if robot.model_uncertainty is None:
-        robot = robot.with_model_uncertainty(default_model_uncertainty(robot.c[0], robot.length))
     if tracker_noise is None:
         tips = [sensor for sensor in robot.sensors if sensor.at_tip]
         tracker_noise = tips[0].position_sigma if tips else TRACKER_NOISE
+    robot = robot.with_model_uncertainty(default_model_uncertainty(robot.c[0], robot.length))
     residuals, columns = residual_rows(robot, run)
-    sigmas = fit_sigmas(robot, residuals, columns, tracker_noise)
-    tau = correlation_time(run.times, residuals)
-    values = {name: 0.0 for name, _, _ in GROUPS}
-    values.update(sigmas)
-    uncertainty = ModelUncertainty(correlation_time=tau, **values)
+    sigmas, tau = fit(robot, run, residuals, columns, tracker_noise)
+    uncertainty = ModelUncertainty(correlation_time=tau, **sigmas)
     return uncertainty, {'tracker_noise': tracker_noise, 'correlation_time': tau, **sigmas}

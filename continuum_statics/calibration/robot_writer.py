@@ -15,12 +15,13 @@ TENDON_NAMES = ('cable_zero', 'stiffness', 'cable_stiffness', 'pretension', 'fri
                 'stick_length')
 
 
-def write_robot_file(output, robot_file, robot, fit, header):
+def write_robot_file(output, robot_file, robot, fit, header, uncertainty=None):
     """Write ``robot_file``'s content with ``robot``'s values and a provenance header.
 
     :param robot: the calibrated :class:`Robot`, in the file's frame
     :param fit: the fitted names (which tendon values and section lengths to write)
     :param header: comment lines (without ``#``) after the date line
+    :param uncertainty: a measured :class:`ModelUncertainty` for ``model_uncertainty``
     """
     with open(robot_file, encoding='utf-8') as stream:
         document = yaml.safe_load(stream)
@@ -51,6 +52,11 @@ def write_robot_file(output, robot_file, robot, fit, header):
             holder['disk_mass'] = _number(section.disk_mass)
     if set(fit) & set(TENDON_NAMES):
         _write_tendons(document, holders, robot)
+    if uncertainty is not None:
+        document['model_uncertainty'] = {
+            key: _number(getattr(uncertainty, key)) for key in (
+                'tip_force', 'section_moment', 'cable_length', 'base_position',
+                'correlation_time')}
     routes = robot.description.routes()
     j = 0
     for holder in holders:

@@ -12,6 +12,7 @@ import numpy as np
 from continuum_statics.calibration import summary as summaries
 from continuum_statics.calibration.error_budget import error_budget
 from continuum_statics.calibration.fit import fit as fit_model
+from continuum_statics.calibration.model_uncertainty import measure as measure_uncertainty
 from continuum_statics.calibration.parameters import DEFAULT_FIT, check_names, quaternion
 from continuum_statics.calibration.recorded_run import check_tip_units, read_recorded_run
 from continuum_statics.calibration.replay import error_statistics, replay
@@ -30,7 +31,7 @@ def read_run(path, robot, column_map, tip_topic='tip_pose_measured'):
 
 def calibrate_run(robot_file, data_file, fit_names, column_map, output=None, validate=None,
                   tip_topic='tip_pose_measured', log=print, max_evaluations=40, report=False,
-                  workers=None, candidates=(), jacobian='implicit'):
+                  workers=None, candidates=(), jacobian='implicit', uncertainty=False):
     """Fit a robot file to a recorded run; write ``output``; return the summary (SI units).
 
     :param validate: a held-out run: its errors are reported, never fitted
@@ -38,6 +39,8 @@ def calibrate_run(robot_file, data_file, fit_names, column_map, output=None, val
     :param candidates: fit names to try on top of ``fit_names``: each is kept when it lowers the
         error cross-validated inside the run (:mod:`.selection`, summary ``selection``)
     :param jacobian: how the fit's Jacobian is made (:data:`fit.JACOBIANS`)
+    :param uncertainty: also measure the fitted model's own error on the run
+        (:mod:`.model_uncertainty`), summary ``model_uncertainty``, written to the file
 
     A fit of more names than the default ones starts where a fit of its default names ends.
     :raises ValueError: unreadable files, unknown parameters, missing columns
@@ -109,7 +112,12 @@ def calibrate_run(robot_file, data_file, fit_names, column_map, output=None, val
         summary['selection'] = selection
     if report:
         summary['error_budget'] = error_budget(run, held_out, model_errors)
+    fitted_robot = model.robot_for(x, frame='tracker')
+    measured = None
+    if uncertainty:
+        log("calibrate: measuring the model's own error on the run (model_uncertainty)")
+        measured, summary['model_uncertainty'] = measure_uncertainty(fitted_robot, run)
     if output is not None:
-        write_robot_file(output, robot_file, model.robot_for(x, frame='tracker'), model.fit,
-                         summaries.header(summary))
+        write_robot_file(output, robot_file, fitted_robot, model.fit, summaries.header(summary),
+                         measured)
     return summary

@@ -231,9 +231,10 @@ def default_model_uncertainty(bending_stiffness, length):
     """Return the stand-in :class:`ModelUncertainty` of a robot file with sensors but none.
 
     A tenth of the loads that visibly bend the rod (E I / L^2 of tip force, E I / L of moment:
-    about 3 % of L at the tip) and 0.5 % of L of cable: until ``calibrate`` measures them
-    from a recorded run (N, N m, m; 10 s).
+    about 3 % of L at the tip), 0.5 % of L of cable and 1 % of L of offset: until
+    ``calibrate`` measures them from a recorded run (N, N m, m; 10 s).
     """
     return ModelUncertainty(tip_force=0.1 * bending_stiffness / length ** 2,
                             section_moment=0.1 * bending_stiffness / length,
-                            cable_length=0.005 * length, correlation_time=10.0)
+                            cable_length=0.005 * length, base_position=0.01 * length,
+                            correlation_time=10.0)

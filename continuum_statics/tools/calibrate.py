@@ -85,6 +85,10 @@ def main(argv=None):
     parser.add_argument('--report', action='store_true',
                         help='recorded runs: add the error budget (repeatability floor, smooth '
                              'baselines of the motor positions, the model) to the report')
+    parser.add_argument('--model-uncertainty', action='store_true',
+                        help="recorded runs: also measure the model's own error on the run "
+                             '(unmodelled loads and their correlation time) and write it as '
+                             'model_uncertainty, for state estimation with sensors')
     parser.add_argument('--json', action='store_true', help='print one JSON object')
     add_column_arguments(parser)
     args = parser.parse_args(list(sys.argv[1:] if argv is None else argv))
@@ -95,7 +99,7 @@ def main(argv=None):
             summary = calibrate_run(
                 args.robot, args.data, args.fit or list(DEFAULT_FIT), column_map, args.output,
                 args.validate, args.tip_topic, log, args.max_evaluations, args.report,
-                candidates=args.select)
+                candidates=args.select, uncertainty=args.model_uncertainty)
             print(json.dumps(summary) if args.json else _run_report(summary))
             return 0
         summary = calibrate_tip_loads(args.robot, args.data, args.fit or ['youngs_modulus'],
@@ -177,6 +181,14 @@ def _run_report(summary):
             ', '.join(selection['kept']) or 'none'))
     if 'error_budget' in summary:
         lines.append(format_budget(summary['error_budget']))
+    if 'model_uncertainty' in summary:
+        u = summary['model_uncertainty']
+        lines.append("model_uncertainty (the model's own error, tracker sigma %.2g m):"
+                     ' tip force %.3g N, tip moment %.3g N m, cable length %.3g mm, base '
+                     'offset %.3g mm, correlation time %.3g s' % (
+                         u['tracker_noise'], u.get('tip_force', 0.0),
+                         u.get('section_moment', 0.0), 1e3 * u.get('cable_length', 0.0),
+                         1e3 * u.get('base_position', 0.0), u['correlation_time']))
     if summary['output']:
         lines.append('wrote %s' % summary['output'])
     return '\n'.join(lines)
