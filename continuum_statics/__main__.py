@@ -19,6 +19,7 @@ commands:
   record    record the robot's topics into a rosbag2 directory (MCAP; Ctrl-C to stop)
   plot      PNG figures of a recording (backbone, tip path, cable lengths, solver)
   calibrate fit robot-file parameters (E, base orientation, ...) to measured tip positions
+  fusion    what each sensor buys: simulated truth, or a recorded run with the tracker occluded
   doctor    check the set-up (domain, nodes, driver, rates, /tf, sensors): what is wrong and
             what to do (--namespace NS)
 """
@@ -59,6 +60,8 @@ def main(argv=None):
         from continuum_statics.tools.plot import main as run
     elif command == 'calibrate':
         from continuum_statics.tools.calibrate import main as run
+    elif command == 'fusion':
+        from continuum_statics.tools.fusion import main as run
     elif command == 'doctor':
         from continuum_statics.tools.doctor import main as run
     else:

@@ -137,11 +137,25 @@ class ShapeEstimate:
     tendons: object = None
     capped: bool = False
     slack_attempt: object = None
-    position_covariance: np.ndarray = None
-    tip_covariance: np.ndarray = None
     unmodelled: object = None
     sensors: dict = None
     sensitivity: object = None
+
+    @functools.cached_property
+    def position_covariance(self):
+        """(N, 3, 3) m^2 of each backbone point at ``shape.s``; None without model_uncertainty."""
+        if self.sensitivity is None:
+            return None
+        g = self.sensitivity.positions
+        return (g @ self.unmodelled.covariance) @ g.transpose(0, 2, 1)
+
+    @functools.cached_property
+    def tip_covariance(self):
+        """(6, 6) of the tip's position (m) and rotation (rad), base frame; or None."""
+        if self.sensitivity is None:
+            return None
+        tip = np.concatenate([self.sensitivity.positions[-1], self.sensitivity.angles[-1]])
+        return tip @ self.unmodelled.covariance @ tip.T
 
     @property
     def tensions(self):

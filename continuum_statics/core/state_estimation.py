@@ -26,16 +26,18 @@ IEEE T-RO 2011, on these unknowns):
 
 with nu = y - h(mean) the innovation. Each reading is first judged on its own: its normalised
 innovation squared nu^T S^-1 nu against the chi-square gate of its degrees of freedom
-(:data:`~continuum_statics.core.load_estimation.CHI2_GATE_PROBABILITY`); a reading that fails it
+(:data:`GATE_PROBABILITY`); a reading that fails it
 is set aside with the reason (:class:`~continuum_statics.core.sensors.SensorVerdict`). The
 published covariance of each backbone point is G_r P+ G_r^T.
 
-Cost: the model's estimate plus, per call, one column of G (a warm-started estimate); every
-column when nothing is cached or, for an estimate solved to the end, once the tip moved more
-than :data:`REFRESH_DISTANCE` of the rod's length.
+Cost: the model's estimate plus, per call, at most one column of G (a warm-started estimate,
+once the tip moved :data:`COLUMN_DISTANCE` of the rod's length from where that column was
+made); every column when nothing is cached or, for an estimate solved to the end, once the tip
+moved more than :data:`REFRESH_DISTANCE`. The covariances are computed when read.
 """
 import dataclasses
 from dataclasses import dataclass
+import functools
 import math
 
 import numpy as np
@@ -43,13 +45,21 @@ from scipy.stats import chi2 as chi2_distribution
 
 from continuum_statics.core import estimation
 from continuum_statics.core.layout import POSITION, ROTATION
-from continuum_statics.core.load_estimation import CHI2_GATE_PROBABILITY
+from continuum_statics.core.rotations import turn_rotations
 from continuum_statics.core.sensors import SensorVerdict, as_reading
 
 #: The tip may move this fraction of the rod's length from where the load columns were made
 #: before an estimate solved to the end makes them all again (a tracking call refreshes one
 #: column per call instead: bounded work).
 REFRESH_DISTANCE = 0.02
+#: A tracking call refreshes the next load column once the tip moved this fraction of the rod's
+#: length from where that column was made (a robot at rest keeps its columns: no solves).
+COLUMN_DISTANCE = 0.01
+#: The chi-square gate on one reading's innovation: the probability that a reading whose noise
+#: and model error are as stated is set aside. Lower than the load estimator's 1e-3 (a model
+#: whose held-out error exceeds its calibration run's must not lose its tracker): 30 mm of bias
+#: against 4 mm of stated error is still chi2 ~ 60, beyond the 3-dof gate of 30.7.
+GATE_PROBABILITY = 1e-6
 #: Unmodelled-load groups, in the order of d: name, size (None: one per cable), unit.
 GROUPS = (('tip_force', 3, 'N'), ('section_moment', 3, 'N m'), ('cable_length', None, 'm'),
           ('base_position', 3, 'm'))
@@ -99,6 +109,7 @@ class Sensitivity:
     next_column: int = 0
 
 
+@functools.lru_cache(maxsize=64)
 def prior_scales(robot):
     """Return (names, sigma (k,)) of the unmodelled loads with a nonzero prior."""
     uncertainty = robot.model_uncertainty
@@ -110,7 +121,9 @@ def prior_scales(robot):
         labels = robot.cable_names if size is None else ('x', 'y', 'z')
         names.extend('%s.%s' % (group, label) for label in labels)
         sigmas.extend([sigma] * len(labels))
-    return tuple(names), np.array(sigmas)
+    sigmas = np.array(sigmas)
+    sigmas.setflags(write=False)
+    return tuple(names), sigmas
 
 
 def propagate(robot, carried, stamp):
@@ -164,12 +177,8 @@ def estimate_state(robot, lengths, tip_force, tip_moment, tensions, sensors, sta
                                getattr(previous, 'sensitivity', None), prior, tracking)
     posterior, verdicts = _update(robot, model.shape, sensitivity, prior, readings, stamp)
     shape = _corrected(model.shape, sensitivity, posterior.mean)
-    g = sensitivity.positions
-    position_covariance = np.einsum('nak,kl,nbl->nab', g, posterior.covariance, g)
-    tip = np.concatenate([g[-1], sensitivity.angles[-1]])
-    return dataclasses.replace(model, shape=shape, position_covariance=position_covariance,
-                               tip_covariance=tip @ posterior.covariance @ tip.T,
-                               unmodelled=posterior, sensors=verdicts, sensitivity=sensitivity)
+    return dataclasses.replace(model, shape=shape, unmodelled=posterior, sensors=verdicts,
+                               sensitivity=sensitivity)
 
 
 def _readings(robot, sensors):
@@ -203,7 +212,8 @@ def _sensitivity(robot, model, lengths, tip_force, tip_moment, tensions, carried
         carried = Sensitivity(np.zeros((n, 3, size)), np.zeros((n, 3, size)),
                               np.zeros((size, 3)))
         columns = range(size)
-    elif bounded:
+    elif bounded and np.linalg.norm(carried.tips[carried.next_column] - tip) > (
+            COLUMN_DISTANCE * robot.length):
         columns = [carried.next_column]
     else:
         return carried
@@ -218,23 +228,28 @@ def _sensitivity(robot, model, lengths, tip_force, tip_moment, tensions, carried
             continue
         step = np.zeros(size)
         step[j] = sigma[j]
-        moved = _moved(robot, model, lengths, tip_force, tip_moment, tensions, step)
+        moved = _moved(robot, model, lengths, tip_force, tip_moment, tensions, step,
+                       tracking if bounded else None)
         positions[:, :, j] = (moved.positions - model.shape.positions) / sigma[j]
         angles[:, :, j] = _small_rotations(moved.rotations, model.shape.rotations) / sigma[j]
         tips[j] = tip
     return Sensitivity(positions, angles, tips, (columns[-1] + 1) % size)
 
 
-def _moved(robot, model, lengths, tip_force, tip_moment, tensions, load):
-    """Return the estimate's shape with the unmodelled loads ``load`` added to its inputs."""
-    force, moment, cable = _split(robot, load)
+def _moved(robot, model, lengths, tip_force, tip_moment, tensions, load, tracking):
+    """Return the estimate's shape with the unmodelled loads ``load`` added to its inputs.
+
+    Warm-started from the estimate itself; ``tracking``: with the node's bound (one sigma of a
+    load moves the shape by far more than the bound's tolerance).
+    """
+    force, moment, cable = split_loads(robot, load)
     return estimation.estimate_shape(
         robot, np.asarray(lengths, dtype=float) - cable, np.asarray(tip_force) + force,
         np.asarray(tip_moment) + moment, tensions, model.shape.state, model.jacobians, model,
-        None).shape
+        tracking).shape
 
 
-def _split(robot, load):
+def split_loads(robot, load):
     """Return (tip force (3,), tip moment (3,), cable length errors (n,)) of a load vector."""
     parts, at = [], 0
     for group, size, _ in GROUPS[:3]:
@@ -300,7 +315,7 @@ def _update(robot, shape, sensitivity, prior, readings, stamp):
             noise = noise + (1.0 - a * a) * jac @ np.diag(np.diag(covariance)) @ jac.T
         spread = jac @ covariance @ jac.T + noise
         chi2 = float(innovation @ np.linalg.solve(spread, innovation))
-        gate = float(chi2_distribution.ppf(1.0 - CHI2_GATE_PROBABILITY, len(innovation)))
+        gate = _gate(len(innovation))
         if not chi2 <= gate:
             verdicts[sensor.name] = SensorVerdict(False, chi2, (
                 'innovation chi2 %.1f above the gate %.1f (%.1f mm from the estimate)'
@@ -317,6 +332,12 @@ def _update(robot, shape, sensitivity, prior, readings, stamp):
     return dataclasses.replace(prior, mean=mean, covariance=covariance), verdicts
 
 
+@functools.lru_cache(maxsize=8)
+def _gate(dof):
+    """Return the chi-square gate of ``dof`` degrees of freedom (scipy's ppf takes ~100 us)."""
+    return float(chi2_distribution.ppf(1.0 - GATE_PROBABILITY, dof))
+
+
 def _block_diagonal(blocks):
     size = sum(len(block) for block in blocks)
     out, at = np.zeros((size, size)), 0
@@ -331,20 +352,8 @@ def _corrected(shape, sensitivity, mean):
     states = shape.states.copy()
     positions = shape.positions + sensitivity.positions @ mean
     angles = sensitivity.angles @ mean
-    rotations = _rotation_matrices(angles) @ shape.rotations
+    rotations = turn_rotations(shape.rotations, angles)
     states[:, POSITION] = positions
     states[:, ROTATION] = rotations.reshape(len(states), 9)
     return type(shape)(shape.s, states, shape.u0, shape.tip_force, shape.c, shape.d,
                        shape.state, shape.fixed_tensions)
-
-
-def _rotation_matrices(vectors):
-    """(N, 3, 3) rotations of rotation vectors (N, 3) (Rodrigues)."""
-    angle = np.linalg.norm(vectors, axis=1)
-    safe = np.where(angle > 0.0, angle, 1.0)
-    axis = vectors / safe[:, None]
-    k = np.zeros((len(vectors), 3, 3))
-    k[:, 0, 1], k[:, 0, 2], k[:, 1, 2] = -axis[:, 2], axis[:, 1], -axis[:, 0]
-    k = k - k.transpose(0, 2, 1)
-    sin, cos = np.sin(angle)[:, None, None], np.cos(angle)[:, None, None]
-    return np.eye(3) + sin * k + (1.0 - cos) * (k @ k)
