@@ -79,7 +79,7 @@ def occlusion_replay(robot, run, seen, hidden, model_points=None):
         if last is not None:
             fade = math.exp(-(stamp - last[1]) / BASELINE_DECAY)
             baseline.append(run.tips[i] - model_points[i] - fade * last[0])
-        spread = (point_covariance(robot, estimate, sensor)
+        spread = (point_covariance(estimate, sensor)
                   + sensor.position_sigma ** 2 * np.eye(3))
         inside += float(error @ np.linalg.solve(spread, error)) <= gate
     durations = np.array(durations) * 1e6

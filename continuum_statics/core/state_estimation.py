@@ -357,3 +357,13 @@ def _corrected(shape, sensitivity, mean):
     states[:, ROTATION] = rotations.reshape(len(states), 9)
     return type(shape)(shape.s, states, shape.u0, shape.tip_force, shape.c, shape.d,
                        shape.state, shape.fixed_tensions)
+
+
+def point_covariance(estimate, sensor):
+    """Return the (3, 3) covariance (m^2) of ``sensor``'s point in a fused ``estimate``.
+
+    The model's part only: add ``sensor.position_sigma ** 2`` to compare with a reading.
+    """
+    _, jac, _ = _sensor_rows(estimate.shape, estimate.sensitivity, sensor)
+    jac = jac[:3]
+    return jac @ estimate.unmodelled.covariance @ jac.T
