@@ -33,6 +33,7 @@ bench: venv
 	.venv/bin/python -m continuum_statics.tools.bench_tendons
 	.venv/bin/python -m continuum_statics.tools.bench_load
 	.venv/bin/python -m continuum_statics.tools.bench_noisy
+	.venv/bin/python -m continuum_statics.tools.bench_fusion
 
 bench-nodes: venv
 	scripts/ros_env.sh --private .venv/bin/python -m continuum_statics bench --nodes
