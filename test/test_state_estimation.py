@@ -214,3 +214,19 @@ def test_calibrate_recovers_a_known_hidden_offset():
     # what the run does not show stays small: the loads explain nothing here
     assert measured.tip_force < 0.3 * robot.c[0] / robot.length ** 2 * 0.1
     assert dataclasses.asdict(measured).keys() >= {'tip_force', 'cable_length'}
+
+
+def test_an_older_reading_counts_for_less():
+    """Fused by stamp: a reading taken 5 s before the estimate's stamp moves it less."""
+    robot = load_robot(SENSOR_ROBOT)
+    lengths = _pulled(robot)
+    model = robot.estimate_shape(lengths, exact=True)
+    tip = model.shape.tip_position + model.shape.tip_rotation @ robot.sensors[0].offset
+    seen = tip + np.array([0.002, 0.0, 0.0])
+    fresh = robot.estimate_shape(lengths, exact=True, stamp=10.0, sensors={
+        'tip_tracker': SensorReading(seen, stamp=10.0)})
+    old = robot.estimate_shape(lengths, exact=True, stamp=10.0, sensors={
+        'tip_tracker': SensorReading(seen, stamp=5.0)})
+    moved = [e.shape.tip_position[0] - model.shape.tip_position[0] for e in (fresh, old)]
+    assert 0.0 < moved[1] < moved[0]
+    assert np.trace(old.tip_covariance[:3, :3]) > np.trace(fresh.tip_covariance[:3, :3])
