@@ -78,31 +78,19 @@ def rotation_vector_matrix(vector):
 
 
 @numba.njit(cache=True, nogil=True)
-def _turn(rotations, vectors, out):
-    for n in range(rotations.shape[0]):
-        x, y, z = vectors[n, 0], vectors[n, 1], vectors[n, 2]
-        angle = math.sqrt(x * x + y * y + z * z)
-        if angle < 1e-12:
-            a, b = 1.0, 0.5  # sin(t) / t and (1 - cos(t)) / t^2 at t -> 0
-        else:
-            a, b = math.sin(angle) / angle, (1.0 - math.cos(angle)) / (angle * angle)
-        # exp([v]x) = I + a [v]x + b [v]x^2 (Rodrigues), then times R
-        turn = np.empty((3, 3))
-        turn[0, 0] = 1.0 - b * (y * y + z * z)
-        turn[1, 1] = 1.0 - b * (x * x + z * z)
-        turn[2, 2] = 1.0 - b * (x * x + y * y)
-        turn[0, 1], turn[1, 0] = b * x * y - a * z, b * x * y + a * z
-        turn[0, 2], turn[2, 0] = b * x * z + a * y, b * x * z - a * y
-        turn[1, 2], turn[2, 1] = b * y * z - a * x, b * y * z + a * x
-        for i in range(3):
-            for j in range(3):
-                out[n, i, j] = (turn[i, 0] * rotations[n, 0, j] + turn[i, 1] * rotations[n, 1, j]
-                                + turn[i, 2] * rotations[n, 2, j])
-
-
-def turn_rotations(rotations, vectors):
-    """Return exp([v_n]x) R_n (N, 3, 3): each rotation turned by a rotation vector (rad)."""
-    rotations = np.ascontiguousarray(rotations, dtype=float)
-    out = np.empty_like(rotations)
-    _turn(rotations, np.ascontiguousarray(vectors, dtype=float), out)
-    return out
+def rotation_vector_into(vector):
+    """Return exp([v]x) (3, 3) of a rotation vector (rad): Rodrigues' formula, compiled."""
+    x, y, z = vector[0], vector[1], vector[2]
+    angle = math.sqrt(x * x + y * y + z * z)
+    if angle < 1e-12:
+        a, b = 1.0, 0.5  # sin(t) / t and (1 - cos(t)) / t^2 at t -> 0
+    else:
+        a, b = math.sin(angle) / angle, (1.0 - math.cos(angle)) / (angle * angle)
+    turn = np.empty((3, 3))  # I + a [v]x + b [v]x^2
+    turn[0, 0] = 1.0 - b * (y * y + z * z)
+    turn[1, 1] = 1.0 - b * (x * x + z * z)
+    turn[2, 2] = 1.0 - b * (x * x + y * y)
+    turn[0, 1], turn[1, 0] = b * x * y - a * z, b * x * y + a * z
+    turn[0, 2], turn[2, 0] = b * x * z + a * y, b * x * z - a * y
+    turn[1, 2], turn[2, 1] = b * y * z - a * x, b * y * z + a * x
+    return turn

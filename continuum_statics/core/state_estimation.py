@@ -40,12 +40,13 @@ from dataclasses import dataclass
 import functools
 import math
 
+import numba
 import numpy as np
 from scipy.stats import chi2 as chi2_distribution
 
 from continuum_statics.core import estimation
-from continuum_statics.core.layout import POSITION, ROTATION
-from continuum_statics.core.rotations import turn_rotations
+from continuum_statics.core.layout import POSITION_AT, ROTATION_AT
+from continuum_statics.core.rotations import rotation_vector_into
 from continuum_statics.core.sensors import SensorVerdict, as_reading
 
 #: The tip may move this fraction of the rod's length from where the load columns were made
@@ -55,9 +56,9 @@ REFRESH_DISTANCE = 0.02
 #: A tracking call refreshes the next load column once the tip moved this fraction of the rod's
 #: length from where that column was made (a robot at rest keeps its columns: no solves).
 COLUMN_DISTANCE = 0.01
-#: ... at most one column every this many calls (a node at 1 kHz: 20 columns a second; a
-#: column is two solves, ~0.3-0.6 ms, which must stay out of the 99th percentile).
-COLUMN_EVERY = 50
+#: ... at most one column every this many calls (a node at 1 kHz: ~7 columns a second; a
+#: column is two bounded solves, which must stay out of the 99th percentile).
+COLUMN_EVERY = 150
 #: Central-difference step of an ideal cable's length column, as a fraction of its prior sigma:
 #: small enough that the moved lengths still fit a shape (one sigma of one cable does not: a
 #: slack solve), large against the solver's tolerance; ideal cables act through geometry,
@@ -139,8 +140,7 @@ def prior_scales(robot):
 
 def propagate(robot, carried, stamp):
     """Return the unmodelled loads at ``stamp`` from the last estimate's (Ornstein-Uhlenbeck)."""
-    names, sigma = prior_scales(robot)
-    prior = np.diag(sigma ** 2)
+    names, prior = _prior(robot)
     if carried is None or carried.names != names:
         return Unmodelled(names, np.zeros(len(names)), prior, stamp)
     if stamp is None or carried.stamp is None:
@@ -151,6 +151,15 @@ def propagate(robot, carried, stamp):
                                max(stamp - carried.stamp, 0.0),
                                robot.model_uncertainty.correlation_time)
     return Unmodelled(names, mean, covariance, stamp)
+
+
+@functools.lru_cache(maxsize=64)
+def _prior(robot):
+    """Return (names, P0 (k, k)) of the robot's unmodelled loads."""
+    names, sigma = prior_scales(robot)
+    prior = np.diag(sigma ** 2)
+    prior.setflags(write=False)
+    return names, prior
 
 
 def decayed(mean, covariance, prior, elapsed, correlation_time):
@@ -221,10 +230,11 @@ def _sensitivity(robot, model, lengths, tip_force, tip_moment, tensions, carried
     fresh = carried is None or carried.positions.shape[2] != size or carried.positions.shape[
         0] != len(model.shape.s)
     bounded = tracking is not None and bool(tracking.max_model_runs)
-    if not fresh:
+    if not fresh and not bounded:
         moved = np.linalg.norm(carried.tips - tip, axis=1)
-        if not bounded:
-            fresh = np.max(moved) > REFRESH_DISTANCE * robot.length
+        fresh = np.max(moved) > REFRESH_DISTANCE * robot.length
+    elif not fresh and carried.rest >= COLUMN_EVERY:
+        moved = np.linalg.norm(carried.tips - tip, axis=1)
     if fresh:
         n = len(model.shape.s)
         carried = Sensitivity(np.zeros((n, 3, size)), np.zeros((n, 3, size)),
@@ -234,7 +244,7 @@ def _sensitivity(robot, model, lengths, tip_force, tip_moment, tensions, carried
           and np.max(moved) > COLUMN_DISTANCE * robot.length):
         columns = [int(np.argmax(moved))]
     else:
-        return dataclasses.replace(carried, rest=carried.rest + 1)
+        return Sensitivity(carried.positions, carried.angles, carried.tips, carried.rest + 1)
     positions, angles, tips = (carried.positions.copy(), carried.angles.copy(),
                                carried.tips.copy())
     names, sigma = prior_scales(robot)
@@ -247,25 +257,31 @@ def _sensitivity(robot, model, lengths, tip_force, tip_moment, tensions, carried
         step = np.zeros(size)
         small = names[j].startswith('cable_length') and robot.tendons.is_ideal
         step[j] = sigma[j] * (COLUMN_STEP if small else 1.0)
-        # central differences, both solved to the end from the estimate's state: an unfinished
-        # (bounded) estimate's own error cancels
-        up, down = (_moved(robot, model, lengths, tip_force, tip_moment, tensions, sign * step)
-                    for sign in (1.0, -1.0))
+        # central differences from the estimate's state: an unfinished estimate's error cancels
+        # (every column at once, the first time: solved to the end)
+        up, down = (_moved(robot, model, lengths, tip_force, tip_moment, tensions, sign * step,
+                           None if fresh or not bounded else tracking) for sign in (1.0, -1.0))
+        if up.capped or down.capped:  # a bounded solve left unfinished: keep the old column
+            tips[j] = carried.tips[j]
+            continue
+        up, down = up.shape, down.shape
         positions[:, :, j] = (up.positions - down.positions) / (2.0 * step[j])
         angles[:, :, j] = _small_rotations(up.rotations, down.rotations) / (2.0 * step[j])
     return Sensitivity(positions, angles, tips, 0)
 
 
-def _moved(robot, model, lengths, tip_force, tip_moment, tensions, load):
-    """Return the shape, solved to the end, with the unmodelled loads ``load`` in its inputs.
+def _moved(robot, model, lengths, tip_force, tip_moment, tensions, load, tracking):
+    """Return the estimate with the unmodelled loads ``load`` in its inputs.
 
-    Warm-started from the estimate itself (its state, Jacobians and friction history).
+    Warm-started from the estimate itself (its state, Jacobians and friction history), with the
+    node's per-call bound when ``tracking``: the two sides of a central difference start from
+    the same state with the same bound, so what one leaves unfinished the other does too.
     """
     force, moment, cable = split_loads(robot, load)
     return estimation.estimate_shape(
         robot, np.asarray(lengths, dtype=float) - cable, np.asarray(tip_force) + force,
         np.asarray(tip_moment) + moment, tensions, model.shape.state, model.jacobians, model,
-        None).shape
+        tracking)
 
 
 def split_loads(robot, load):
@@ -376,13 +392,27 @@ def _block_diagonal(blocks):
 def _corrected(shape, sensitivity, mean):
     """Return ``shape`` moved by the unmodelled loads ``mean`` (first order; same solver state)."""
     states = shape.states.copy()
-    positions = shape.positions + sensitivity.positions @ mean
-    angles = sensitivity.angles @ mean
-    rotations = turn_rotations(shape.rotations, angles)
-    states[:, POSITION] = positions
-    states[:, ROTATION] = rotations.reshape(len(states), 9)
+    _move_states(states, sensitivity.positions, sensitivity.angles, mean)
     return type(shape)(shape.s, states, shape.u0, shape.tip_force, shape.c, shape.d,
                        shape.state, shape.fixed_tensions)
+
+
+@numba.njit(cache=True, nogil=True)
+def _move_states(states, positions, angles, mean):
+    """Add G_r mean to each node's position and turn its rotation by G_theta mean (in place)."""
+    for n in range(states.shape[0]):
+        v = np.zeros(3)
+        for i in range(3):
+            for j in range(mean.shape[0]):
+                states[n, POSITION_AT + i] += positions[n, i, j] * mean[j]
+                v[i] += angles[n, i, j] * mean[j]
+        turn = rotation_vector_into(v)
+        rotation = states[n, ROTATION_AT:ROTATION_AT + 9].reshape(3, 3).copy()
+        for i in range(3):
+            for j in range(3):
+                states[n, ROTATION_AT + 3 * i + j] = (turn[i, 0] * rotation[0, j]
+                                                      + turn[i, 1] * rotation[1, j]
+                                                      + turn[i, 2] * rotation[2, j])
 
 
 def point_covariance(estimate, sensor):
