@@ -158,7 +158,8 @@ def test_calibrate_command_on_a_recorded_csv_writes_a_robot_file_that_reproduces
         '--fit', 'registration', 'section_rotation', 'stiffness', 'friction',
         '--max-evaluations', '6',
         '--cable-columns', ','.join(header[1:10]), '--cable-kind', 'displacement',
-        '--cable-scale', '0.001', '--tip-scale', '0.001', '--output', str(output)])
+        '--cable-scale', '0.001', '--tip-scale', '0.001', '--output', str(output),
+        '--model-uncertainty'])
     assert code == 0
     summary = json.loads(capsys.readouterr().out)
     assert summary['rms_after'] < 0.5 * summary['rms_before']  # zero offsets not fitted
@@ -168,6 +169,11 @@ def test_calibrate_command_on_a_recorded_csv_writes_a_robot_file_that_reproduces
     written = load_robot(output)
     points, failed = replay(written, run)
     assert not failed.any()
+    # the model's own error, measured on the run, is written (state estimation's prior)
+    uncertainty = written.model_uncertainty
+    assert uncertainty.correlation_time == pytest.approx(
+        summary['model_uncertainty']['correlation_time'], rel=1e-5)
+    assert uncertainty.any and uncertainty.correlation_time > 0.0
     assert rms(points - run.tips) == pytest.approx(summary['rms_after'],
                                                                     rel=1e-3)
 
