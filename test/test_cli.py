@@ -34,3 +34,15 @@ def test_solve_reports_bad_robot_file(tmp_path):
     result = run('solve', '--robot', str(bad))
     assert result.returncode == 1
     assert 'rod.length must be > 0' in result.stderr
+
+
+def test_fusion_simulated_truth_json():
+    """``fusion --simulate``: a row per number of sensors, errors shrinking along the rod's tip."""
+    result = run('fusion', '--robot', 'config/tendon_robot_sensors.yaml', '--simulate', '20',
+                 '--json')
+    assert result.returncode == 0, result.stderr
+    rows = json.loads(result.stdout)['rows']
+    assert [len(row['sensors']) for row in rows] == [0, 1, 2]
+    assert rows[1]['rms'][-1] < 0.5 * rows[0]['rms'][-1]
+    refused = run('fusion', '--robot', 'config/tendon_robot.yaml', '--simulate', '5')
+    assert refused.returncode == 1 and 'no model_uncertainty' in refused.stderr

@@ -392,13 +392,13 @@ def _block_diagonal(blocks):
 def _corrected(shape, sensitivity, mean):
     """Return ``shape`` moved by the unmodelled loads ``mean`` (first order; same solver state)."""
     states = shape.states.copy()
-    _move_states(states, sensitivity.positions, sensitivity.angles, mean)
+    move_states(states, sensitivity.positions, sensitivity.angles, mean)
     return type(shape)(shape.s, states, shape.u0, shape.tip_force, shape.c, shape.d,
                        shape.state, shape.fixed_tensions)
 
 
 @numba.njit(cache=True, nogil=True)
-def _move_states(states, positions, angles, mean):
+def move_states(states, positions, angles, mean):
     """Add G_r mean to each node's position and turn its rotation by G_theta mean (in place)."""
     for n in range(states.shape[0]):
         v = np.zeros(3)

@@ -35,7 +35,7 @@ ENTRY_POINTS = (
     'continuum_statics.core.length_tracking.jacobian_pieces',
     'continuum_statics.core.least_squares.constrained_step',
     'continuum_statics.core.rotations._quaternions',
-    'continuum_statics.core.state_estimation._move_states',
+    'continuum_statics.core.state_estimation.move_states',
     'continuum_statics.core.backbone_sampling._sample',
     'continuum_statics.core.tendon_kernel.path_stretch',
     'continuum_statics.core.kernel.section_tensions',
@@ -105,7 +105,7 @@ def _exercise(robot):
     from continuum_statics.core.backbone_sampling import BackboneSampler
     from continuum_statics.core.estimation import Tracking
     from continuum_statics.core.rotations import rotation_to_quaternion
-    from continuum_statics.core.state_estimation import _move_states
+    from continuum_statics.core.state_estimation import move_states
 
     zero = np.zeros(3)
     load = np.zeros(6)  # the nodes pass slices of a 6-vector as tip force and moment
@@ -115,7 +115,7 @@ def _exercise(robot):
     rotation_to_quaternion(shape.rotations)
     rotation_to_quaternion(shape.rotations[:1])
     rotation_to_quaternion(shape.tip_rotation)
-    _move_states(shape.states.copy(), np.zeros((len(shape.s), 3, 1)),  # a fused estimate's
+    move_states(shape.states.copy(), np.zeros((len(shape.s), 3, 1)),  # a fused estimate's
                  np.zeros((len(shape.s), 3, 1)), np.zeros(1))  # shape
     robot.jacobian(zero)
     robot.solve_bvp(tip_force=load[:3], tip_moment=load[3:])
