@@ -11,7 +11,7 @@ REQUIREMENTS=${REQUIREMENTS:-requirements.txt}
 stamp=$VENV/.installed
 want=$(cat "$REQUIREMENTS" setup.py package.xml scripts/build_interfaces.sh \
   continuum_statics_interfaces/CMakeLists.txt continuum_statics_interfaces/package.xml \
-  continuum_statics_interfaces/action/*.action vendor/tf2_msgs/CMakeLists.txt \
+  continuum_statics_interfaces/action/*.action continuum_statics_interfaces/msg/*.msg vendor/tf2_msgs/CMakeLists.txt \
   vendor/tf2_msgs/package.xml vendor/tf2_msgs/msg/*.msg | sha256sum | cut -d' ' -f1)
 if [ -f "$stamp" ] && [ "$(cat "$stamp")" = "$want" ]; then
   exit 0

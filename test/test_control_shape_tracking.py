@@ -93,3 +93,23 @@ def test_without_a_tip_load_a_model_failure_is_left_to_the_caller():
 
     with pytest.raises(ValueError, match='no shape'):
         ShapeTracker._estimate(Model(), np.full(4, 0.3), np.zeros(6), None, None, {})
+
+
+def test_sensor_inbox_fuses_each_reading_once_and_counts_verdicts():
+    from continuum_statics.control.sensor_readings import SensorInbox
+    from continuum_statics.core.sensors import SensorVerdict
+
+    inbox = SensorInbox(['tip_tracker', 'coil'], timeout=0.5)
+    assert inbox.take(0.0) is None
+    inbox.put('tip_tracker', (0.0, 0.0, 0.3), None, 10.0, now=1.0)
+    inbox.put('coil', (0.0, 0.0, 0.1), None, 10.0, now=0.2)
+    taken = inbox.take(1.1)
+    assert list(taken) == ['tip_tracker'] and inbox.records['coil'].stale == 1
+    assert inbox.take(1.2) is None  # read once
+    inbox.put('tip_tracker', (0.0, float('nan'), 0.3), None, 11.0, now=1.3)
+    assert inbox.records['tip_tracker'].rejected == 1 and inbox.take(1.3) is None
+    inbox.judged({'tip_tracker': SensorVerdict(False, 80.0, 'innovation chi2 80.0 above')})
+    assert inbox.records['tip_tracker'].set_aside == 1
+    assert 'tip_tracker set aside' in inbox.problems(1.3)
+    assert 'silent' in inbox.problems(5.0)
+    assert 'set aside 1' in inbox.values(1.3)['sensor_tip_tracker']

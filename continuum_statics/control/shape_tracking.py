@@ -85,6 +85,7 @@ class ShapeTracker:
         self.warm = None  # the last published (or unfinished) estimate: warm start of the next
         self.set_max_iterations(max_iterations)
         self.max_model_runs = max_model_runs
+        self._fusion = None, None  # this measurement's sensor readings and stamp
 
     def set_max_iterations(self, max_iterations):
         """Cap the Gauss-Newton iterations per measurement (0: the robot file's)."""
@@ -97,14 +98,18 @@ class ShapeTracker:
         """Warm-start the next update from a result whose shape was published."""
         self.warm = result.estimate
 
-    def update(self, lengths, tensions, load, thresholds, tension_limit):
+    def update(self, lengths, tensions, load, thresholds, tension_limit, sensors=None,
+               stamp=None):
         """Judge and solve one measurement.
 
         :param lengths: (n_cables,) measured lengths, m, robot order
         :param tensions: (n_cables,) measured tensions, N, or None
         :param load: (6,) tip wrench (N, N m), base frame
         :param thresholds: :class:`Thresholds`; ``tension_limit``: largest plausible tension, N
+        :param sensors: {name: SensorReading} to fuse (robot files with sensors), or None
+        :param stamp: the measurement's stamp, s (the unmodelled loads' decay)
         """
+        self._fusion = sensors, stamp
         names = self.cable_names
         outside = np.flatnonzero((lengths < self.low - thresholds.margin)
                                  | (lengths > self.high + thresholds.margin))
@@ -138,7 +143,9 @@ class ShapeTracker:
             capped = estimate.capped or (not estimate.converged
                                          and self._tracking is not self.robot)
             if capped and not estimate.residual <= thresholds.drop:
-                # far from the last shape (a jump, a restart): one more bounded estimate now
+                # far from the last shape (a jump, a restart): one more bounded estimate now,
+                # from this one (its readings are fused already)
+                self._fusion = None, stamp
                 estimate = self._estimate(self.robot, lengths, load, tensions, estimate, notes,
                                           tracking)
                 capped = estimate.capped
@@ -172,18 +179,20 @@ class ShapeTracker:
                            capped=capped, best_fit=not good_fit,
                            tensions_used=tensions is not None, **notes)
 
-    @staticmethod
-    def _estimate(robot, lengths, load, tensions, warm, notes, tracking=None):
+    def _estimate(self, robot, lengths, load, tensions, warm, notes, tracking=None):
         """Estimate; a tip load the model cannot take is replaced by zero (and noted)."""
+        sensors, stamp = self._fusion
         try:
             return robot.estimate_shape(lengths, tip_force=load[:3], tip_moment=load[3:],
-                                        tensions=tensions, warm_start=warm, tracking=tracking)
+                                        tensions=tensions, warm_start=warm, tracking=tracking,
+                                        sensors=sensors, stamp=stamp)
         except ValueError as error:
             if not np.any(load):
                 raise
             notes['load_problem'] = ('the model has no finite shape under tip load %s (%s): '
                                      'using zero' % (np.array2string(load, precision=3), error))
-            return robot.estimate_shape(lengths, tensions=tensions, warm_start=None)
+            return robot.estimate_shape(lengths, tensions=tensions, warm_start=None,
+                                        sensors=sensors, stamp=stamp)
 
 
 def passive_shape(robot, load):

@@ -57,6 +57,9 @@ def statics_parameters():
                   "'arm1/': two arms from one robot file); the base frame stays the robot "
                   "file's", read_only=True),
         max_stamp_offset_spec(),
+        ParamSpec('sensor_timeout', 0.5, "a reading of one of the robot file's sensors "
+                  '(sensors/<name>, tip_pose_measured) older than this at the next estimate is '
+                  'not fused, s', 0.0, 3600.0),
         ParamSpec('tip_wrench_timeout', 1.0, 'a tip_wrench estimate older than this is '
                   'replaced by zero, s (0: never expires)', 0.0, 3600.0),
         ParamSpec('tip_wrench_source', 'topic', 'where the tip load comes from: topic '

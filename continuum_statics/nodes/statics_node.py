@@ -54,8 +54,9 @@ from nav_msgs.msg import Path
 import numpy as np
 from rclpy.node import Node
 from sensor_msgs.msg import JointState
+from std_msgs.msg import Header
 
-from continuum_statics.control.health import StaticsHealth, load_values
+from continuum_statics.control.health import OK, WARN, StaticsHealth, load_values
 from continuum_statics.control.records import TipLoad, current_load
 from continuum_statics.control.shape_tracking import ShapeTracker, Thresholds, passive_shape
 from continuum_statics.control.stamps import StampRule
@@ -76,6 +77,7 @@ from continuum_statics.nodes.pose_encoder import PoseSequenceEncoder
 from continuum_statics.nodes.qos import LATCHED_QOS, LATEST_SENSOR_QOS, measurement_queue_qos
 from continuum_statics.nodes.robot_description import publish_robot_description
 from continuum_statics.nodes.ros_conversions import tip_load
+from continuum_statics.nodes.sensor_topics import SensorTopics, tip_sigma_mm
 from continuum_statics.nodes.shape_markers import ShapeMarkers
 from continuum_statics.nodes.tf_outputs import tf_outputs
 from continuum_statics.nodes.timers import steady_timer
@@ -112,6 +114,7 @@ class StaticsNode(Node):
         self._wrench_expired = False
         self._stamp = None
         self._tip_position = None
+        self._tip_sigma = math.nan  # the fused tip's largest standard deviation, mm
         self._path_encoder = PoseSequenceEncoder(self.base_frame_id,
                                                  self._params['path_samples'])
         self._tip_encoder = PoseSequenceEncoder(self.base_frame_id)
@@ -141,6 +144,8 @@ class StaticsNode(Node):
             self._intake.start()
         self.create_subscription(WrenchStamped, tip_wrench_topic(self._params),
                                  self._on_tip_wrench, LATEST_SENSOR_QOS)
+        self._sensors = (SensorTopics(self, self.robot, self._params['sensor_timeout'])
+                         if self.robot.sensors or self.robot.model_uncertainty else None)
         self._markers.set_rate(self._params['marker_rate'])
         self._passive_load = None
         if self._passive:
@@ -203,9 +208,13 @@ class StaticsNode(Node):
         tensions = None
         if self._params['use_measured_tensions']:
             tensions, _ = self._cable_states.tensions(view, self._tensions)  # else unused
+        readings = None if self._sensors is None else self._sensors.take()
         result = self._tracker.update(lengths, tensions,
                                       self._current_tip_load(time.monotonic()),
-                                      self._thresholds(), self._tension_limit())
+                                      self._thresholds(), self._tension_limit(), readings,
+                                      view.sec + 1e-9 * view.nanosec)
+        if self._sensors is not None and result.estimate is not None:
+            self._sensors.judged(result.estimate)
         if result.load_problem:
             self._problems.reject('tip_wrench', result.load_problem)
             self._load = None
@@ -214,7 +223,8 @@ class StaticsNode(Node):
             return
         self.health.estimated(result, time.perf_counter() - start)
         if not result.rejection and self._publish_shape(result.estimate.shape, view.sec,
-                                                        view.nanosec, 'cable_states'):
+                                                        view.nanosec, 'cable_states',
+                                                        result.estimate):
             self._tracker.accept(result)
             self.health.published(time.perf_counter() - start)
 
@@ -238,10 +248,11 @@ class StaticsNode(Node):
             self.health.published()
             self.health.solved_passive(time.perf_counter() - start)
 
-    def _publish_shape(self, shape, sec, nanosec, stream):
+    def _publish_shape(self, shape, sec, nanosec, stream, estimate=None):
         """Publish backbone and tip pose of ``shape``; return False if it was not finite.
 
         Stamped with the measurement's stamp (``stream``'s), unless the stamp rule replaces it.
+        A fused ``estimate`` also publishes its covariances (:mod:`.sensor_topics`).
         """
         samples = self._params['path_samples']
         sampler = self._sampler
@@ -270,6 +281,11 @@ class StaticsNode(Node):
             publisher.publish(transforms)
         self._stamp = (sec, nanosec)
         self._tip_position = points[-1]
+        if estimate is not None and self._sensors is not None:
+            header = Header(frame_id=self.base_frame_id)
+            header.stamp.sec, header.stamp.nanosec = int(sec), int(nanosec)
+            self._sensors.publish(estimate, header, points, quaternions, sampler.s)
+            self._tip_sigma = tip_sigma_mm(estimate)
         self._markers.published(shape, sampler, self._stamp)
         return True
 
@@ -305,6 +321,12 @@ class StaticsNode(Node):
             *tip_wrench_limits(self.robot, self._params)))
         if self._tip_position is not None:
             values['tip_position_m'] = '%.5f %.5f %.5f' % tuple(self._tip_position)
+        if self._sensors is not None:
+            values.update(self._sensors.values())
+            values['tip_sigma_mm'] = self._tip_sigma
+            note = self._sensors.problems()
+            if note and level == OK:
+                level, message = WARN, note
         self._diagnostics.publish(diag.diagnostic_array(
             self.get_clock().now().to_msg(), self.get_fully_qualified_name().lstrip('/'),
             self.robot.name, level, message, values))

@@ -1,0 +1,113 @@
+"""The sensors' readings between their topics and the estimator (no ROS).
+
+Each sensor of the robot file (:mod:`continuum_statics.core.sensors`) delivers readings at its
+own rate (an optical tracker 120 Hz, EM coils 40 Hz) while statics estimates at the encoders'
+(1 kHz). A reading is fused once, by its stamp, at the first estimate after it arrived; one
+older than ``timeout`` when that estimate comes is not used (a stalled stream must not pin the
+shape). What the estimator made of each (:class:`~continuum_statics.core.sensors.SensorVerdict`)
+is counted here per sensor, for ``/diagnostics``: statics, and every node that follows statics'
+fused estimate, judge a sensor by this one verdict.
+"""
+from dataclasses import dataclass, field
+import math
+
+import numpy as np
+
+from continuum_statics.core.sensors import SensorReading
+
+
+@dataclass
+class SensorRecord:
+    """What one sensor delivered and what became of it."""
+
+    received: int = 0
+    used: int = 0
+    set_aside: int = 0
+    stale: int = 0
+    rejected: int = 0  # malformed, non-finite, another frame
+    last_arrival: float = None  # s, monotonic
+    last_chi2: float = math.nan
+    last_reason: str = ''
+    last_used: bool = True  # the estimator used its last judged reading
+    arrivals: list = field(default_factory=list)  # monotonic times of the last second
+
+
+class SensorInbox:
+    """The newest unread reading of each sensor, and each sensor's record.
+
+    :param names: the robot file's sensor names
+    :param timeout: s; a reading older than this at the next estimate is not used
+    """
+
+    def __init__(self, names, timeout):
+        self.timeout = float(timeout)
+        self.records = {name: SensorRecord() for name in names}
+        self._unread = {}
+
+    def put(self, name, position, rotation, stamp, now):
+        """Keep a reading (base frame, m; stamp s) that arrived at ``now`` (monotonic s)."""
+        record = self.records[name]
+        position = np.asarray(position, dtype=float)
+        if position.shape != (3,) or not np.all(np.isfinite(position)) or (
+                rotation is not None and not np.all(np.isfinite(rotation))):
+            self.reject(name, 'a reading that is not finite')
+            return
+        record.received += 1
+        record.last_arrival = now
+        record.arrivals = [t for t in record.arrivals if now - t < 1.0] + [now]
+        self._unread[name] = (SensorReading(position, rotation, stamp), now)
+
+    def reject(self, name, reason):
+        """Count a reading that could not be used at all (its reason goes on diagnostics)."""
+        record = self.records[name]
+        record.rejected += 1
+        record.last_used = False
+        record.last_reason = reason
+
+    def take(self, now):
+        """Return {name: SensorReading} of the fresh unread readings (then read), or None."""
+        if not self._unread:
+            return None
+        fresh = {}
+        for name, (reading, arrival) in self._unread.items():
+            if now - arrival <= self.timeout:
+                fresh[name] = reading
+            else:
+                self.records[name].stale += 1
+        self._unread = {}
+        return fresh or None
+
+    def judged(self, verdicts):
+        """Count the estimator's verdicts ({name: SensorVerdict}) of the readings it was given."""
+        for name, verdict in (verdicts or {}).items():
+            record = self.records[name]
+            record.last_chi2 = verdict.chi2
+            record.last_used = verdict.used
+            if verdict.used:
+                record.used += 1
+            else:
+                record.set_aside += 1
+                record.last_reason = verdict.reason
+
+    def values(self, now):
+        """Diagnostic values per sensor: rate, age, innovation chi2, counts, last reason."""
+        values = {}
+        for name, record in self.records.items():
+            age = math.inf if record.last_arrival is None else now - record.last_arrival
+            rate = len([t for t in record.arrivals if now - t < 1.0])
+            values['sensor_%s' % name] = (
+                'rate %d Hz, age %.3g s, chi2 %.3g, used %d, set aside %d, stale %d, '
+                'rejected %d%s' % (rate, age, record.last_chi2, record.used, record.set_aside,
+                                   record.stale, record.rejected,
+                                   ': %s' % record.last_reason if record.last_reason else ''))
+        return values
+
+    def problems(self, now):
+        """Return WARN text: sensors whose last reading was set aside, or that went silent."""
+        notes = []
+        for name, record in self.records.items():
+            if record.last_arrival is not None and now - record.last_arrival > self.timeout:
+                notes.append('sensor %s silent for %.1f s' % (name, now - record.last_arrival))
+            elif not record.last_used and record.last_reason:
+                notes.append('sensor %s set aside: %s' % (name, record.last_reason))
+        return '; '.join(notes)

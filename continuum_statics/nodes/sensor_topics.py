@@ -1,0 +1,134 @@
+"""statics' sensor topics and covariance outputs (issue 35, state estimation).
+
+In: ``sensors/<name>`` (geometry_msgs/PoseStamped) for each sensor of the robot file, and
+``tip_pose_measured`` (PoseStamped) for the one at the tip (the tip tracker). A position sensor
+reads the pose's position (its orientation is ignored); a pose sensor uses the orientation when
+its quaternion is a unit one. Readings must be in the robot's base frame (an empty frame id is
+taken as it): register a tracker's frame before publishing (doc/state_estimation.md). Readings
+go to a :class:`~continuum_statics.control.sensor_readings.SensorInbox`.
+
+Out (robot files with ``model_uncertainty``): ``tip_pose_covariance``
+(geometry_msgs/PoseWithCovarianceStamped: the tip pose and its 6x6 covariance, ROS order x, y,
+z, rotation about x, y, z) and ``backbone_estimate``
+(continuum_statics_interfaces/msg/BackboneEstimate: the published backbone's poses with each
+point's position covariance, 9 values per pose, row-major). Both latched like ``tip_pose``.
+"""
+import math
+import time
+
+from geometry_msgs.msg import Pose, PoseStamped, PoseWithCovarianceStamped
+import numpy as np
+
+from continuum_statics.control.sensor_readings import SensorInbox
+from continuum_statics.core.rotations import quaternion_to_rotation
+from continuum_statics.nodes.qos import LATCHED_QOS, LATEST_SENSOR_QOS
+
+
+class SensorTopics:
+    """Subscriptions of a robot's sensors and publishers of the fused estimate's covariance."""
+
+    def __init__(self, node, robot, timeout):
+        self.robot = robot
+        self.inbox = SensorInbox([sensor.name for sensor in robot.sensors], timeout)
+        self._base = robot.base_frame_id
+        for sensor in robot.sensors:
+            node.create_subscription(PoseStamped, 'sensors/%s' % sensor.name,
+                                     self._reader(sensor), LATEST_SENSOR_QOS)
+            if sensor.at_tip and not any(s.at_tip for s in robot.sensors[:robot.sensors.index(
+                    sensor)]):
+                node.create_subscription(PoseStamped, 'tip_pose_measured',
+                                         self._reader(sensor), LATEST_SENSOR_QOS)
+        self._covariance_pub = self._backbone_pub = None
+        if robot.model_uncertainty is not None:
+            self._covariance_pub = node.create_publisher(PoseWithCovarianceStamped,
+                                                         'tip_pose_covariance', LATCHED_QOS)
+            message = _backbone_estimate_type()
+            if message is not None:
+                self._backbone_pub = node.create_publisher(message, 'backbone_estimate',
+                                                           LATCHED_QOS)
+
+    def _reader(self, sensor):
+        def on_reading(msg):
+            now = time.monotonic()
+            frame = msg.header.frame_id
+            if frame and frame != self._base:
+                self.inbox.reject(sensor.name, 'frame %r is not the base frame %r (register '
+                                               'the sensor first)' % (frame, self._base))
+                return
+            p, q = msg.pose.position, msg.pose.orientation
+            rotation = None
+            quaternion = np.array([q.x, q.y, q.z, q.w])
+            if sensor.kind == 'pose' and np.all(np.isfinite(quaternion)) and abs(
+                    np.linalg.norm(quaternion) - 1.0) < 1e-3:
+                rotation = quaternion_to_rotation(quaternion)
+            stamp = msg.header.stamp.sec + 1e-9 * msg.header.stamp.nanosec
+            self.inbox.put(sensor.name, (p.x, p.y, p.z), rotation, stamp or None, now)
+        return on_reading
+
+    def take(self):
+        """Return the readings for this estimate ({name: SensorReading}) or None."""
+        return self.inbox.take(time.monotonic()) if self.robot.sensors else None
+
+    def publish(self, estimate, header, points, quaternions, s_samples):
+        """Publish the covariance outputs of a published fused ``estimate``.
+
+        ``header``: the backbone's (stamp, base frame); ``points`` (n, 3), ``quaternions``
+        (n, 4) the published backbone at arc lengths ``s_samples`` (n,).
+        """
+        if self._covariance_pub is None or estimate.sensitivity is None:
+            return
+        tip = estimate.tip_covariance
+        covariance = estimate.position_covariance
+        if not (np.all(np.isfinite(tip)) and np.all(np.isfinite(covariance))):
+            return  # never anything non-finite
+        message = PoseWithCovarianceStamped()
+        message.header = header
+        message.pose.pose = _pose(points[-1], quaternions[-1])
+        message.pose.covariance = [float(v) for v in tip.ravel()]
+        self._covariance_pub.publish(message)
+        if self._backbone_pub is None:
+            return
+        nodes = np.clip(np.searchsorted(estimate.shape.s, s_samples), 0, len(covariance) - 1)
+        backbone = self._backbone_pub.msg_type()
+        backbone.header = header
+        backbone.s = [float(v) for v in s_samples]
+        backbone.poses = [_pose(p, q) for p, q in zip(points, quaternions)]
+        backbone.position_covariance = [float(v) for v in covariance[nodes].ravel()]
+        self._backbone_pub.publish(backbone)
+
+    def values(self):
+        """Diagnostic values of every sensor, and the fused estimate's tip sigma."""
+        return self.inbox.values(time.monotonic())
+
+    def problems(self):
+        """WARN text of the sensors (set aside, silent), '' when all is well."""
+        return self.inbox.problems(time.monotonic())
+
+    def judged(self, estimate):
+        """Count the verdicts of the readings the estimate was given."""
+        self.inbox.judged(getattr(estimate, 'sensors', None))
+
+
+def tip_sigma_mm(estimate):
+    """Return the fused tip position's standard deviation (mm, largest axis), or nan."""
+    tip = getattr(estimate, 'tip_covariance', None)
+    if tip is None:
+        return math.nan
+    return 1e3 * math.sqrt(max(float(np.max(np.linalg.eigvalsh(tip[:3, :3]))), 0.0))
+
+
+def _pose(point, quaternion):
+    pose = Pose()
+    pose.position.x, pose.position.y, pose.position.z = (float(v) for v in point)
+    (pose.orientation.x, pose.orientation.y, pose.orientation.z,
+     pose.orientation.w) = (float(v) for v in quaternion)
+    return pose
+
+
+def _backbone_estimate_type():
+    """Return the BackboneEstimate message class, or None without the interfaces package."""
+    try:
+        from continuum_statics_interfaces.msg import BackboneEstimate
+    except ImportError:
+        return None
+    return BackboneEstimate

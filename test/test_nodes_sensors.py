@@ -1,0 +1,130 @@
+"""statics with sensors over DDS (issue 35): the fused shape, its covariance, the gate."""
+from pathlib import Path as FilePath
+
+from conftest import REPO
+from nodes_helpers import LATCHED, Collector, diagnostic_values, publish_until, wait_until
+import numpy as np
+import pytest
+import yaml
+
+rclpy = pytest.importorskip('rclpy')
+from builtin_interfaces.msg import Time  # noqa: E402
+from diagnostic_msgs.msg import DiagnosticArray  # noqa: E402
+from geometry_msgs.msg import PoseStamped, PoseWithCovarianceStamped  # noqa: E402
+from nav_msgs.msg import Path  # noqa: E402
+from rclpy.qos import qos_profile_sensor_data  # noqa: E402
+from sensor_msgs.msg import JointState  # noqa: E402
+
+from continuum_statics import load_robot  # noqa: E402
+from continuum_statics.nodes.statics_node import StaticsNode  # noqa: E402
+
+pytestmark = pytest.mark.ros
+SENSOR_ROBOT = REPO / 'config' / 'tendon_robot_sensors.yaml'
+
+
+def robot_file(tmp_path, correlation_time):
+    """The sensor robot with another correlation time (s)."""
+    with open(SENSOR_ROBOT, encoding='utf-8') as stream:
+        document = yaml.safe_load(stream)
+    document['model_uncertainty']['correlation_time'] = correlation_time
+    path = FilePath(tmp_path) / 'robot.yaml'
+    path.write_text(yaml.safe_dump(document))
+    return path
+
+
+class Rig:
+    """statics with sensors, a client feeding cable_states and a tip tracker."""
+
+    def __init__(self, harness, path):
+        self.robot = load_robot(path)
+        self.node = harness.add(StaticsNode, robot_file=str(path), max_stamp_offset=1e12)
+        client = harness.client()
+        self.backbone = Collector(client, Path, 'backbone', LATCHED)
+        self.tip = Collector(client, PoseStamped, 'tip_pose', LATCHED)
+        self.covariance = Collector(client, PoseWithCovarianceStamped, 'tip_pose_covariance',
+                                    LATCHED)
+        from continuum_statics_interfaces.msg import BackboneEstimate
+
+        self.estimate = Collector(client, BackboneEstimate, 'backbone_estimate', LATCHED)
+        self.diagnostics = Collector(client, DiagnosticArray, '/diagnostics', 10)
+        self.states = client.create_publisher(JointState, 'cable_states', qos_profile_sensor_data)
+        self.tracker = client.create_publisher(PoseStamped, 'sensors/tip_tracker',
+                                               qos_profile_sensor_data)
+        self.stamp = 100
+        self.lengths = np.array(self.robot.straight_cable_lengths)
+        self.lengths[0] -= 0.004
+        model = self.robot.with_model_uncertainty(None)
+        shape = model.solve_lengths(self.lengths).shape
+        self.model_marker = shape.tip_position + shape.tip_rotation @ self.robot.tip_marker
+
+    def feed(self):
+        """Publish one measurement until its covariance comes back; return (tip, covariance)."""
+        self.stamp += 1
+        msg = JointState(name=list(self.robot.cable_names), position=list(self.lengths))
+        msg.header.stamp = Time(sec=self.stamp)
+        stamp = self.stamp
+        publish_until(self.states, msg, lambda: self.covariance.last is not None
+                      and self.covariance.last.header.stamp.sec == stamp, 15.0,
+                      'the covariance of measurement %d' % stamp)
+        last = self.covariance.last
+        position = last.pose.pose.position
+        return (np.array([position.x, position.y, position.z]),
+                np.array(last.pose.covariance).reshape(6, 6))
+
+    def see(self, offset):
+        """Send one tracker reading at the model's marker + offset (m), stamped as the next."""
+        msg = PoseStamped()
+        msg.header.frame_id = self.robot.base_frame_id
+        msg.header.stamp = Time(sec=self.stamp + 1)
+        point = self.model_marker + np.asarray(offset)
+        msg.pose.position.x, msg.pose.position.y, msg.pose.position.z = (float(v)
+                                                                          for v in point)
+        msg.pose.orientation.w = 1.0
+        received = self.node._sensors.inbox.records['tip_tracker'].received
+        publish_until(self.tracker, msg, lambda: self.node._sensors.inbox.records[
+            'tip_tracker'].received > received, 10.0, 'the tracker reading')
+
+    def sensor_value(self):
+        found = diagnostic_values(self.diagnostics, '/statics')
+        return (found[0].get('sensor_tip_tracker', ''), found[1]) if found else ('', None)
+
+
+def test_the_fused_tip_follows_the_tracker_and_its_covariance_shrinks(harness, tmp_path):
+    rig = Rig(harness, robot_file(tmp_path, 10.0))
+    tip, covariance = rig.feed()
+    assert np.all(np.isfinite(covariance)) and np.trace(covariance[:3, :3]) > 0.0
+    wait_until(lambda: rig.estimate.last is not None, 5.0, 'backbone_estimate')
+    estimate = rig.estimate.last
+    assert len(estimate.s) == len(estimate.poses) == len(rig.backbone.last.poses)
+    assert len(estimate.position_covariance) == 9 * len(estimate.poses)
+    assert np.allclose(estimate.position_covariance[:9],  # the base: the offset's alone
+                       (5e-4 ** 2 * np.eye(3)).ravel(), rtol=1e-3)
+    rig.see([0.002, 0.0, 0.0])
+    fused, fused_covariance = rig.feed()
+    assert fused[0] - tip[0] > 1e-3  # moved most of the 2 mm towards the tracker
+    assert np.trace(fused_covariance[:3, :3]) < 0.3 * np.trace(covariance[:3, :3])
+    wait_until(lambda: 'used 1' in rig.sensor_value()[0], 5.0, 'the verdict on diagnostics')
+
+
+def test_a_biased_tracker_is_set_aside_and_named(harness, tmp_path):
+    rig = Rig(harness, robot_file(tmp_path, 10.0))
+    tip, _ = rig.feed()
+    rig.see([0.03, 0.0, 0.0])
+    after, _ = rig.feed()
+    assert np.allclose(after, tip, atol=1e-6)  # the shape does not move towards it
+    wait_until(lambda: 'set aside 1' in rig.sensor_value()[0], 5.0, 'the set-aside count')
+    value, status = rig.sensor_value()
+    assert 'chi2' in value and '30.0 mm from the estimate' in value
+    assert status.level == b'\x01' and 'tip_tracker set aside' in status.message
+
+
+def test_a_correction_fades_when_the_tracker_stops(harness, tmp_path):
+    rig = Rig(harness, robot_file(tmp_path, 0.5))  # each measurement is 1 s later: 2 tau
+    tip, covariance = rig.feed()
+    rig.see([0.002, 0.0, 0.0])
+    fused, small = rig.feed()
+    assert fused[0] - tip[0] > 1e-3
+    later = [rig.feed() for _ in range(6)]
+    assert np.trace(later[0][1][:3, :3]) > np.trace(small[:3, :3])
+    assert np.allclose(later[-1][0], tip, atol=2e-5)  # faded back to the model's
+    np.testing.assert_allclose(later[-1][1], covariance, rtol=1e-3, atol=1e-12)
