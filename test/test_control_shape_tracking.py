@@ -75,7 +75,8 @@ def test_a_tip_load_the_model_cannot_take_is_blamed_on_tip_wrench():
         """Stands in for a robot whose model is not finite under any tip load."""
 
         def estimate_shape(self, lengths, tip_force=(0.0, 0.0, 0.0), tip_moment=(0.0, 0.0, 0.0),
-                           tensions=None, warm_start=None, tracking=None):
+                           tensions=None, warm_start=None, tracking=None, sensors=None,
+                           stamp=None):
             if np.any(tip_force) or np.any(tip_moment):
                 raise ValueError('the model is not finite at the start')
             return 'unloaded estimate'

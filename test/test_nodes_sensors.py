@@ -23,7 +23,7 @@ SENSOR_ROBOT = REPO / 'config' / 'tendon_robot_sensors.yaml'
 
 
 def robot_file(tmp_path, correlation_time):
-    """The sensor robot with another correlation time (s)."""
+    """Write the sensor robot with another correlation time (s); return its path."""
     with open(SENSOR_ROBOT, encoding='utf-8') as stream:
         document = yaml.safe_load(stream)
     document['model_uncertainty']['correlation_time'] = correlation_time

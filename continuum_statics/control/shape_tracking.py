@@ -85,7 +85,6 @@ class ShapeTracker:
         self.warm = None  # the last published (or unfinished) estimate: warm start of the next
         self.set_max_iterations(max_iterations)
         self.max_model_runs = max_model_runs
-        self._fusion = None, None  # this measurement's sensor readings and stamp
 
     def set_max_iterations(self, max_iterations):
         """Cap the Gauss-Newton iterations per measurement (0: the robot file's)."""
@@ -109,7 +108,6 @@ class ShapeTracker:
         :param sensors: {name: SensorReading} to fuse (robot files with sensors), or None
         :param stamp: the measurement's stamp, s (the unmodelled loads' decay)
         """
-        self._fusion = sensors, stamp
         names = self.cable_names
         outside = np.flatnonzero((lengths < self.low - thresholds.margin)
                                  | (lengths > self.high + thresholds.margin))
@@ -130,7 +128,7 @@ class ShapeTracker:
             tracking = None if self.warm is None else Tracking(
                 self.max_model_runs, thresholds.warn, thresholds.motion, thresholds.noise)
             estimate = self._estimate(self._tracking, lengths, load, tensions, self.warm, notes,
-                                      tracking)
+                                      tracking, sensors, stamp)
             if tensions is not None and not estimate.residual <= thresholds.warn:
                 # tensions and lengths disagree: the lengths (encoders) are trusted, the
                 # tensions (a sensor, a current estimate) are not used for this shape
@@ -139,15 +137,14 @@ class ShapeTracker:
                                      % estimate.residual)
                 tensions = None
                 estimate = self._estimate(self._tracking, lengths, load, None, self.warm, notes,
-                                          tracking)
+                                          tracking, sensors, stamp)
             capped = estimate.capped or (not estimate.converged
                                          and self._tracking is not self.robot)
             if capped and not estimate.residual <= thresholds.drop:
                 # far from the last shape (a jump, a restart): one more bounded estimate now,
                 # from this one (its readings are fused already)
-                self._fusion = None, stamp
                 estimate = self._estimate(self.robot, lengths, load, tensions, estimate, notes,
-                                          tracking)
+                                          tracking, None, stamp)
                 capped = estimate.capped
             if capped:  # the best state reached: the next measurement goes on from it
                 self.warm = estimate
@@ -179,9 +176,10 @@ class ShapeTracker:
                            capped=capped, best_fit=not good_fit,
                            tensions_used=tensions is not None, **notes)
 
-    def _estimate(self, robot, lengths, load, tensions, warm, notes, tracking=None):
+    @staticmethod
+    def _estimate(robot, lengths, load, tensions, warm, notes, tracking=None, sensors=None,
+                  stamp=None):
         """Estimate; a tip load the model cannot take is replaced by zero (and noted)."""
-        sensors, stamp = self._fusion
         try:
             return robot.estimate_shape(lengths, tip_force=load[:3], tip_moment=load[3:],
                                         tensions=tensions, warm_start=warm, tracking=tracking,
