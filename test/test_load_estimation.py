@@ -180,3 +180,65 @@ def test_bad_arguments_name_the_problem(arguments, words):
     robot = load_robot(REPO / 'config' / 'three_section_robot.yaml')
     with pytest.raises(ValueError, match=words):
         robot.estimate_tip_wrench(**arguments)
+
+
+def _stiffer(robot, factor):
+    rod = dataclasses.replace(robot.description.rod,
+                              youngs_modulus=robot.rod.youngs_modulus * factor)
+    return Robot(dataclasses.replace(robot.description, rod=rod))
+
+
+def test_a_payload_is_a_weight_from_the_tip_position_alone():
+    """Issue 35: a hanging mass, 0-50 g, on a rod whose E is 5 % off, tracker noise 1 mm.
+
+    With load='weight' the mass is one unknown along gravity and comes out within the 5 % the
+    wrong E makes. The general 3-D force trades it against a force along the rod, and its
+    covariance does not cover that (printed, not asserted: left for the general estimator).
+    """
+    rod = load_robot(REPO / 'config' / 'jones2009_nitinol_rod.yaml')
+    truth = _stiffer(rod, 1.05)
+    rng = np.random.default_rng(35)
+    errors, normalised = [], []
+    for mass in np.linspace(0.0, 0.05, 11):
+        force = mass * np.asarray(rod.gravity)
+        shape = truth.solve_bvp(tip_force=force)
+        tip = shape.tip_position + shape.tip_rotation @ rod.tip_marker + rng.normal(0, 1e-3, 3)
+        weight = rod.estimate_tip_wrench(tip_position=tip, noise={'tip_position': 1e-3},
+                                         load='weight')
+        assert weight.converged and weight.mass_sigma < 1e-3
+        np.testing.assert_allclose(weight.force, weight.mass * np.asarray(rod.gravity))
+        errors.append(weight.mass - mass)
+        assert abs(weight.mass - mass) < 0.06 * mass + 3 * weight.mass_sigma
+        for model, what in ((truth, 'right E'), (rod, 'E 5 % off')):
+            general = model.estimate_tip_wrench(tip_position=tip, noise={'tip_position': 1e-3})
+            values, vectors = np.linalg.eigh(general.covariance)
+            normalised.append((what, np.max(np.abs(vectors.T @ (general.force - force))
+                                            / np.sqrt(values))))
+    print('mass RMS %.2f g; 3-D force, largest normalised error: right E %.2f, E 5 %% off %.1f'
+          % (1e3 * np.sqrt(np.mean(np.square(errors))),
+             max(v for w, v in normalised if w == 'right E'),
+             max(v for w, v in normalised if w != 'right E')))
+    assert 1e3 * np.sqrt(np.mean(np.square(errors))) < 2.0  # g
+
+
+def test_load_models_agree_and_refuse_what_they_cannot_be():
+    rod = load_robot(REPO / 'config' / 'jones2009_nitinol_rod.yaml')
+    shape = rod.solve_bvp(tip_force=0.02 * np.asarray(rod.gravity))
+    tip = shape.tip_position + shape.tip_rotation @ rod.tip_marker
+    weight = rod.estimate_tip_wrench(tip_position=tip, load='weight')
+    along = rod.estimate_tip_wrench(tip_position=tip, load=('direction', rod.gravity))
+    np.testing.assert_allclose(along.force, weight.force, rtol=1e-6, atol=1e-9)
+    assert weight.mass == pytest.approx(0.02, rel=1e-3) and along.mass is None
+    robot = load_robot(REPO / 'config' / 'tendon_robot_real_tendons.yaml')
+    lengths = robot.straight_cable_lengths - np.array([0.003, 0.0, 0.0, 0.0])
+    wrench = robot.estimate_tip_wrench(lengths=lengths, tensions=np.full(4, 2.0),
+                                       load='wrench')
+    moment = robot.estimate_tip_wrench(lengths=lengths, tensions=np.full(4, 2.0), moment=True)
+    np.testing.assert_allclose(wrench.wrench, moment.wrench)
+    for bad, expected in ((('size',), 'load must be one of'), ('mass', 'load must be one of'),
+                          (('direction', (0, 0, 0)), 'must not be zero')):
+        with pytest.raises(ValueError, match=expected):
+            rod.estimate_tip_wrench(tip_position=tip, load=bad)
+    flat = Robot(dataclasses.replace(rod.description, gravity=np.zeros(3)))
+    with pytest.raises(ValueError, match='gravity is zero'):
+        flat.estimate_tip_wrench(tip_position=tip, load='weight')

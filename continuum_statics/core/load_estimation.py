@@ -66,6 +66,9 @@ LOAD_STEP = 1e-5
 LENGTH_STEP, TENSION_STEP = 1e-6, 1e-5
 #: The smallest tension standard deviation (N) of a 'P%' noise figure (a zero reading).
 MIN_TENSION_NOISE = 1e-3
+#: A direction of the load is named as poorly seen when its standard deviation is more than this
+#: fraction of the estimate there (not only when the measurements do not see it at all).
+POORLY_SEEN = 0.5
 #: The chi-square gate: a measurement set whose weighted squared residual exceeds the (1 - p)
 #: quantile of the chi-square distribution with (measurements - seen load directions) degrees
 #: of freedom is one the model cannot explain at the stated noise (a faulty sensor, a wrong
@@ -117,6 +120,8 @@ class WrenchEstimate:
     weights: object = None  # the residual's whitener, reused by the next warm estimate
     measurements: int = 0  # how many scalar measurements chi2 is the mean over
     friction_reference: object = None  # free lengths (m) where each cable last moved
+    mass: float = None  # kg, a payload (load='weight')
+    mass_sigma: float = None  # kg
 
     @property
     def dof(self):
@@ -333,8 +338,13 @@ def _angle(rotation):
 
 
 def estimate_tip_wrench(robot, lengths=None, tensions=None, tip_position=None, tip_rotation=None,
-                        noise=None, moment=False, warm_start=None):
+                        noise=None, moment=False, warm_start=None, load='force'):
     """Estimate the tip wrench (base frame) from any measurements that make it observable.
+
+    ``load``: what the lab knows of the load (:func:`load_model`): ``'force'`` (3 unknowns),
+    ``'wrench'`` (6: the force and moment, as ``moment=True``), ``('direction', d)`` (its size
+    along a known unit direction d, N) or ``'weight'`` (a payload hung on the tip: its mass,
+    along gravity; ``mass`` and ``mass_sigma`` in kg).
 
     ``lengths`` (m, motor side) and ``tensions`` (N, motor side) in ``robot.cable_names`` order;
     ``tip_position`` (m) the tracked point (the rod's tip plus ``tip_marker``) and
@@ -361,12 +371,17 @@ def estimate_tip_wrench(robot, lengths=None, tensions=None, tip_position=None, t
     if n == 0 and (lengths is not None or tensions is not None):
         raise ValueError('this robot has no cables: estimate from the tip pose')
     levels = noise_levels(noise)
+    direction, scale = load_model(robot, load, moment)
+    moment = moment or load == 'wrench'
     previous = warm_start if isinstance(warm_start, WrenchEstimate) else None
     if previous is not None and not previous.explains():
         # an estimate of measurements the model could not explain (a wrong unit, a faulty
         # sensor) sits on a branch of equilibria of its own: the next one starts afresh
         previous = None
     try:
+        if direction is not None:
+            return _estimate_along(robot, lengths, tensions, tip_position, tip_rotation, levels,
+                                   direction, scale, load == 'weight', previous)
         return _estimate(robot, lengths, tensions, tip_position, tip_rotation, levels, moment,
                          previous)
     except _ForwardFailed as error:
@@ -378,6 +393,119 @@ def estimate_tip_wrench(robot, lengths=None, tensions=None, tip_position=None, t
             previous, converged=False,
             message='no equilibrium for these measurements (%s): kept the last estimate'
             % error)
+
+
+#: Load models of :func:`estimate_tip_wrench` (besides ``('direction', d)``).
+LOAD_MODELS = ('force', 'wrench', 'weight')
+
+
+def load_model(robot, load, moment=False):
+    """Return (unit direction (3,) or None, N per unit of the unknown) of a load model.
+
+    None: the general models (force, wrench). ``'weight'``: gravity's direction, |g| N per kg;
+    ``('direction', d)``: d normalised, 1 N per N. ``ValueError`` names what was expected.
+    """
+    if isinstance(load, str):
+        if load not in LOAD_MODELS:
+            raise ValueError("load must be one of %s or ('direction', (dx, dy, dz)), got %r"
+                             % (', '.join(LOAD_MODELS), load))
+        if load == 'weight':
+            g = float(np.linalg.norm(robot.gravity))
+            if not g > 0.0:
+                raise ValueError("load='weight' needs gravity: the robot file's gravity is zero")
+            if moment:
+                raise ValueError("load='weight' is a force along gravity: not with moment=True")
+            return np.asarray(robot.gravity, dtype=float) / g, g
+        return None, None
+    if not (isinstance(load, (tuple, list)) and len(load) == 2 and load[0] == 'direction'):
+        raise ValueError("load must be one of %s or ('direction', (dx, dy, dz)), got %r"
+                         % (', '.join(LOAD_MODELS), load))
+    direction = as_vector(load[1], 3, 'load direction')
+    norm = float(np.linalg.norm(direction))
+    if not norm > 0.0:
+        raise ValueError('load direction must not be zero, got %s' % direction.tolist())
+    if moment:
+        raise ValueError("load=('direction', d) is a force: not with moment=True")
+    return direction / norm, 1.0
+
+
+def _estimate_along(robot, lengths, tensions, tip_position, tip_rotation, levels, direction,
+                    scale, weight, previous):
+    """Estimate one unknown: the tip force's size along ``direction`` (x scale N per unit).
+
+    The same maximum a posteriori estimate as :func:`_estimate` (Rucker & Webster 2011's
+    deflection-based estimator) on one unknown p, w = scale p direction: Gauss-Newton on
+    e^T C^-1 e + (p / prior)^2 with a step limit, the covariance 1 / (J^T C^-1 J + prior^-2).
+    A hanging mass is one number: a tip position that barely sees a force along the rod cannot
+    trade it against the vertical one.
+    """
+    force_scale, _ = plausible_tip_load(robot)
+    prior = force_scale / scale
+    steps = LOAD_STEP * np.full(6, force_scale)
+    model = _Model(robot, lengths, tensions, tip_position, tip_rotation, levels,
+                   None if previous is None else previous.solution,
+                   None if previous is None else previous.friction_reference)
+    value = 0.0
+    if previous is not None and np.all(np.isfinite(previous.force)):
+        value = float(previous.force @ direction) / scale
+    wrench = np.zeros(6)
+
+    def at(p):
+        wrench[:3] = scale * p * direction
+        return model.evaluate(wrench.copy())
+
+    def slope(p, predicted, result):
+        wrench[:3] = scale * p * direction
+        return model.load_jacobian(wrench.copy(), 3, steps, predicted, result) @ direction * scale
+
+    predicted, result, shape = at(value)
+    whiten = model.whitener(wrench.copy(), predicted, result)
+    jac = whiten @ slope(value, predicted, result)
+    converged, notes, iterations = False, [], 0
+    for iterations in range(1, MAX_ITERATIONS + 1):
+        residual = whiten @ (predicted - model.measured)
+        information = float(jac @ jac) + prior ** -2
+        step = -(float(jac @ residual) + value / prior ** 2) / information
+        step = float(np.clip(step, -STEP_LIMIT * prior, STEP_LIMIT * prior))
+        if abs(step) * math.sqrt(information) <= STEP_TOLERANCE:
+            converged = True
+            break
+        objective = float(residual @ residual) + (value / prior) ** 2
+        for _ in range(10):
+            trial = value + step
+            trial_predicted, trial_result, trial_shape = at(trial)
+            trial_residual = whiten @ (trial_predicted - model.measured)
+            if float(trial_residual @ trial_residual) + (trial / prior) ** 2 <= objective:
+                break
+            step *= 0.5
+        else:
+            notes.append('no step lowers the misfit')
+            break
+        value, predicted, result, shape = trial, trial_predicted, trial_result, trial_shape
+        jac = whiten @ slope(value, predicted, result)
+    else:
+        notes.append('not converged in %d iterations' % MAX_ITERATIONS)
+    residual = whiten @ (predicted - model.measured)
+    sigma = 1.0 / math.sqrt(float(jac @ jac) + prior ** -2)
+    force = scale * value * direction
+    covariance = (scale * sigma) ** 2 * np.outer(direction, direction)
+    unseen = np.zeros((0, 3))
+    if float(jac @ jac) < prior ** -2:
+        unseen = direction[None, :]
+        notes.insert(0, 'the measurements do not determine the tip force along (%.3g, %.3g, '
+                        '%.3g): held near zero with the prior' % tuple(direction))
+    elif sigma > POORLY_SEEN * abs(value):
+        notes.insert(0, 'the %s is poorly seen: sigma %.3g %s against %.3g estimated' % (
+            'mass' if weight else 'force along (%.3g, %.3g, %.3g)' % tuple(direction),
+            sigma * (1e3 if weight else 1.0), 'g' if weight else 'N',
+            value * (1e3 if weight else 1.0)))
+    return WrenchEstimate(force=force, moment=np.zeros(3), covariance=covariance, shape=shape,
+                          converged=converged, message='; '.join(notes), unseen=unseen,
+                          iterations=iterations,
+                          chi2=float(residual @ residual) / max(len(residual), 1),
+                          solution=result, measurements=len(residual),
+                          friction_reference=model.reference,
+                          mass=value if weight else None, mass_sigma=sigma if weight else None)
 
 
 def _estimate(robot, lengths, tensions, tip_position, tip_rotation, levels, moment, previous):
@@ -486,6 +614,9 @@ def _estimate(robot, lengths, tensions, tip_position, tip_rotation, levels, mome
     covariance = np.linalg.inv(data_information + np.diag(1.0 / prior ** 2))
     covariance = 0.5 * (covariance + covariance.T)
     unseen = _unseen(data_information, prior)
+    poorly = _poorly_seen(covariance[:3, :3], load[:3], unseen)
+    if poorly:
+        notes.insert(0, poorly)
     if len(unseen):
         notes.insert(0, _unseen_note(unseen, size))
     chi2 = float(residual @ residual) / max(len(residual), 1)
@@ -574,6 +705,23 @@ def _unseen(information, prior):
             direction = vector * prior  # back to load units, then normalised
             directions.append(direction / np.linalg.norm(direction))
     return np.array(directions).reshape(-1, len(prior))
+
+
+def _poorly_seen(covariance, force, unseen):
+    """Name the force's principal directions whose sigma exceeds POORLY_SEEN of its size."""
+    size = float(np.linalg.norm(force))
+    values, vectors = np.linalg.eigh(covariance)
+    notes = []
+    for value, vector in zip(values[::-1], vectors.T[::-1]):
+        sigma = math.sqrt(max(value, 0.0))
+        if sigma <= POORLY_SEEN * size or any(abs(float(vector @ u[:3])) > 0.9 for u in unseen):
+            continue
+        notes.append('(%.2f, %.2f, %.2f): sigma %.3g N' % (*(vector * np.sign(
+            vector[np.argmax(np.abs(vector))])), sigma))
+    if not notes:
+        return ''
+    return ('the tip force is poorly seen along %s, against %.3g N estimated'
+            % (', '.join(notes), size))
 
 
 def _unseen_note(unseen, size):
