@@ -94,3 +94,18 @@ def test_estimate_load_refuses_options_it_would_ignore_with_the_reason(args, wor
     # convert string to float"
     result = solve('--estimate-load', '--tensions', '1', '1', '1', '1', *args)
     assert result.returncode == 1 and words in result.stderr, result.stderr
+
+
+def test_estimate_load_as_a_weight_gives_the_payload_mass():
+    rod_file = REPO / 'config' / 'jones2009_nitinol_rod.yaml'
+    rod = load_robot(rod_file)
+    shape = rod.solve_bvp(tip_force=0.015 * np.asarray(rod.gravity))
+    tip = shape.tip_position + shape.tip_rotation @ rod.tip_marker
+    args = [sys.executable, '-m', 'continuum_statics', 'solve', '--robot', str(rod_file),
+            '--estimate-load', '--tip-position', *('%.9f' % v for v in tip), '--load', 'weight']
+    result = subprocess.run(args + ['--json'], capture_output=True, text=True, timeout=300)
+    assert result.returncode == 0, result.stderr
+    data = json.loads(result.stdout)
+    assert data['mass_kg'] == pytest.approx(0.015, abs=3 * data['mass_sigma_kg'] + 1e-5)
+    human = subprocess.run(args, capture_output=True, text=True, timeout=300)
+    assert 'payload mass  15.0' in human.stdout, human.stdout

@@ -40,6 +40,10 @@ def solve_main(argv=None):
                         'point, tip_marker), base frame (m); with --estimate-load')
     parser.add_argument('--moment', action='store_true',
                         help='with --estimate-load: estimate the tip moment too')
+    parser.add_argument('--load', nargs='+', default=['force'], metavar='MODEL',
+                        help='with --estimate-load: what is known of the load: force (3 '
+                        'unknowns, default), wrench (with the moment), weight (a payload: its '
+                        'mass along gravity) or direction DX DY DZ (its size along d)')
     parser.add_argument('--noise', nargs=2, action='append', default=[],
                         metavar=('KIND', 'SIGMA'), help='with --estimate-load: a measurement '
                         'standard deviation, KIND one of length (m), tension (N, or P%%), '
@@ -135,9 +139,13 @@ def _estimate_load(args, robot):
     """``--estimate-load``: print the tip wrench, its sigma and what the measurements miss."""
     noise = {kind: _noise_value(kind, value) for kind, value in args.noise}
     start = time.perf_counter()
+    load = args.load[0] if len(args.load) == 1 else (
+        (args.load[0], [float(v) for v in args.load[1:]]) if args.load[0] == 'direction'
+        else tuple(args.load))
+    args.moment = args.moment or load == 'wrench'
     estimate = robot.estimate_tip_wrench(lengths=args.cable_lengths, tensions=args.tensions,
                                          tip_position=args.tip_position, noise=noise,
-                                         moment=args.moment)
+                                         moment=args.moment, load=load)
     elapsed = time.perf_counter() - start
     sigma = estimate.sigma
     if args.json:
@@ -150,11 +158,15 @@ def _estimate_load(args, robot):
             'unseen_directions': estimate.unseen.tolist(), 'converged': estimate.converged,
             'chi2': estimate.chi2, 'iterations': estimate.iterations,
             'tip_position': estimate.shape.tip_position.tolist(),
+            'mass_kg': estimate.mass, 'mass_sigma_kg': estimate.mass_sigma,
             'message': estimate.message, 'elapsed_ms': elapsed * 1e3}))
         return 0 if estimate.converged else 1
     print('robot %s, frame %s: tip load estimated in %.1f ms (%d iterations)%s' % (
         robot.name, robot.base_frame_id, elapsed * 1e3, estimate.iterations,
         '' if estimate.converged else ', NOT converged'))
+    if estimate.mass is not None:
+        print('payload mass  %.2f g   sigma %.2f g' % (1e3 * estimate.mass,
+                                                      1e3 * estimate.mass_sigma))
     print('force  [N]    %s   sigma %s' % (_triple(estimate.force), _triple(sigma[:3])))
     if args.moment:
         print('moment [N m]  %s   sigma %s' % (_triple(estimate.moment), _triple(sigma[3:])))
