@@ -198,3 +198,42 @@ def test_bad_input_is_rejected_the_last_estimate_kept_and_nothing_non_finite_pub
         assert np.all(np.isfinite(wrench_of(msg)))
     assert np.all(np.abs(wrench_of(estimates.last)[:2] - HIDDEN[:2])
                   <= 3.0 * sigma_of(values())[:2])
+
+
+@pytest.mark.ros
+def test_load_models_over_dds_a_known_direction_and_a_payload(harness):
+    """load_model direction: one unknown along load_direction (normalised)."""
+    common = {'robot_file': str(REAL_FILE)}
+    harness.add(CableDriverNode, sim_tip_wrench=[0.12, 0.0, 0.0, 0.0, 0.0, 0.0], **common)
+    harness.add(TipLoadEstimatorNode, load_model='direction', load_direction=[2.0, 0.0, 0.0],
+                **common)
+    client = harness.client()
+    estimates = Collector(client, WrenchStamped, 'tip_wrench_estimate', 10)
+    wait_until(lambda: len(estimates) >= 10, 20.0, 'estimates along x')
+    force = wrench_of(estimates.last)
+    assert force[1] == 0.0 and force[2] == 0.0
+    assert force[0] == pytest.approx(0.12, abs=0.03)
+
+
+@pytest.mark.ros
+def test_a_payload_model_reports_its_mass_and_refuses_a_lateral_load(harness):
+    """load_model weight: the mass and its sigma on diagnostics; a push is not a weight."""
+    common = {'robot_file': str(REAL_FILE)}
+    driver = harness.add(CableDriverNode, sim_tip_wrench=[0.0, 0.0, -0.1, 0.0, 0.0, 0.0],
+                         **common)
+    harness.add(TipLoadEstimatorNode, load_model='weight', **common)
+    client = harness.client()
+    diagnostics = Collector(client, DiagnosticArray, '/diagnostics', 10)
+
+    def values():
+        found = diagnostic_values(diagnostics, '/tip_load_estimator')
+        return found[0] if found else {}
+
+    wait_until(lambda: 'payload_mass_g' in values(), 20.0, 'the payload mass')
+    assert float(values()['payload_mass_sigma_g']) > 0.0
+    # a lateral push no weight explains: set aside by the gate, named, never published as mass
+    driver.set_parameters([rclpy.parameter.Parameter('sim_tip_wrench',
+                                                     value=[0.3, 0.0, 0.0, 0.0, 0.0, 0.0])])
+    wait_until(lambda: 'cannot explain' in values().get('last_rejection', '')
+               + values().get('rejected_reason', '') + str(values()), 20.0,
+               'the lateral push set aside')

@@ -201,6 +201,11 @@ def cable_driver_parameters():
     ]
 
 
+def _check_load_model(value):
+    return (None if value in ('force', 'wrench', 'weight', 'direction')
+            else "must be 'force', 'wrench', 'weight' or 'direction'")
+
+
 def tip_load_estimator_parameters():
     """Return the tip_load_estimator node's ParamSpecs."""
     return [
@@ -223,6 +228,12 @@ def tip_load_estimator_parameters():
                   'rigid-body tracker; a single marker gives position only)'),
         ParamSpec('estimate_moment', False, 'estimate the tip moment too (needs a tracked '
                   'orientation or many cables to be seen)', read_only=True),
+        ParamSpec('load_model', 'force', 'what is known of the tip load: force (3 unknowns), '
+                  'wrench (with the moment, as estimate_moment), weight (a payload: its mass '
+                  'along gravity, on diagnostics) or direction (its size along load_direction)',
+                  read_only=True, check=_check_load_model),
+        ParamSpec('load_direction', [0.0, 0.0, -1.0], 'with load_model direction: the '
+                  "load's direction, base frame (normalised)", read_only=True),
         ParamSpec('input_timeout', 0.5, 'cable_states and tip_pose_measured older than this '
                   'are not used, s', 0.001, 60.0),
         ParamSpec('contact_threshold', 0.0, 'tip_contact turns true when the force exceeds '

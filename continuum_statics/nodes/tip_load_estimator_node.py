@@ -36,7 +36,7 @@ from std_msgs.msg import Bool
 from continuum_statics.control.contact import force_along
 from continuum_statics.control.load_watch import Inputs, LoadWatch, Verdict
 from continuum_statics.control.stamps import StampRule
-from continuum_statics.core.load_estimation import plausible_tip_load
+from continuum_statics.core.load_estimation import load_model, plausible_tip_load
 from continuum_statics.core.rotations import quaternion_to_rotation
 from continuum_statics.core.warmup import warm_up
 from continuum_statics.nodes import diagnostics_util as diag
@@ -60,6 +60,10 @@ class TipLoadEstimatorNode(Node):
         super().__init__(node_name, **kwargs)
         self._params = ParameterTable(self, tip_load_estimator_parameters())
         self.robot = load_robot_file(self._params['robot_file'], self.get_logger())
+        # a load model the robot cannot have (a weight without gravity) is named now
+        load_model(self.robot, self._params['load_model'] if self._params['load_model'] !=
+                   'direction' else ('direction', list(self._params['load_direction'])),
+                   self._params['estimate_moment'])
         self._diagnostics = self.create_publisher(diag.DiagnosticArray, '/diagnostics', 10)
         diag.publish_starting(self, self._diagnostics, self.robot.name, 'compiling kernels')
         warm_up(self.robot, self.get_logger().info)
@@ -188,9 +192,12 @@ class TipLoadEstimatorNode(Node):
         self._publish(outcome.estimate, outcome.contact_changed)
 
     def _solve(self, warm_start, **kwargs):
+        model = self._params['load_model']
+        load = ('direction', list(self._params['load_direction'])) if model == 'direction' \
+            else model
         return self.robot.estimate_tip_wrench(noise=self._noise(),
                                               moment=self._params['estimate_moment'],
-                                              warm_start=warm_start, **kwargs)
+                                              warm_start=warm_start, load=load, **kwargs)
 
     def _publish(self, estimate, contact_changed):
         msg = WrenchStamped()
@@ -246,7 +253,10 @@ class TipLoadEstimatorNode(Node):
                                                for d in estimate.unseen) or 'none',
                 'estimate_message': estimate.message or 'none',
             })
-            if self._params['estimate_moment']:
+            if estimate.mass is not None:
+                values['payload_mass_g'] = '%.2f' % (1e3 * estimate.mass)
+                values['payload_mass_sigma_g'] = '%.2f' % (1e3 * estimate.mass_sigma)
+            if len(sigma) > 3:
                 values['moment_nm'] = ' '.join('%.4g' % v for v in estimate.moment)
                 values['moment_sigma_nm'] = ' '.join('%.3g' % v for v in sigma[3:])
             if self._watch.contact.in_contact:
