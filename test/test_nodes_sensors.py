@@ -128,3 +128,23 @@ def test_a_correction_fades_when_the_tracker_stops(harness, tmp_path):
     assert np.trace(later[0][1][:3, :3]) > np.trace(small[:3, :3])
     assert np.allclose(later[-1][0], tip, atol=2e-5)  # faded back to the model's
     np.testing.assert_allclose(later[-1][1], covariance, rtol=1e-3, atol=1e-12)
+
+
+def test_other_nodes_read_only_the_readings_statics_accepted(harness, tmp_path):
+    """One judgement: sensors/tip_tracker/accepted carries the used readings, not the biased."""
+    from continuum_statics.nodes.sensor_topics import tracker_topic
+
+    rig = Rig(harness, robot_file(tmp_path, 10.0))
+    assert tracker_topic(rig.robot) == 'sensors/tip_tracker/accepted'
+    client = harness.client('listener')
+    accepted = Collector(client, PoseStamped, 'sensors/tip_tracker/accepted',
+                         qos_profile_sensor_data)
+    rig.feed()
+    rig.see([0.002, 0.0, 0.0])
+    rig.feed()
+    wait_until(lambda: len(accepted) >= 1, 5.0, 'the accepted reading')
+    first = len(accepted)
+    rig.see([0.03, 0.0, 0.0])
+    rig.feed()
+    wait_until(lambda: 'set aside 1' in rig.sensor_value()[0], 5.0, 'the biased one set aside')
+    assert len(accepted) == first

@@ -7,7 +7,10 @@ its quaternion is a unit one. Readings must be in the robot's base frame (an emp
 taken as it): register a tracker's frame before publishing (doc/state_estimation.md). Readings
 go to a :class:`~continuum_statics.control.sensor_readings.SensorInbox`.
 
-Out (robot files with ``model_uncertainty``): ``tip_pose_covariance``
+Out: ``sensors/<name>/accepted`` (PoseStamped), each reading the estimator used, as it came:
+statics judges every sensor once, and tip_controller and tip_load_estimator read the tip
+tracker from there (:func:`tracker_topic`), so a reading statics set aside reaches no node.
+With ``model_uncertainty``: ``tip_pose_covariance``
 (geometry_msgs/PoseWithCovarianceStamped: the tip pose and its 6x6 covariance, ROS order x, y,
 z, rotation about x, y, z) and ``backbone_estimate``
 (continuum_statics_interfaces/msg/BackboneEstimate: the published backbone's poses with each
@@ -31,6 +34,10 @@ class SensorTopics:
         self.robot = robot
         self.inbox = SensorInbox([sensor.name for sensor in robot.sensors], timeout)
         self._base = robot.base_frame_id
+        self._messages = {}  # the newest message of each sensor, republished once accepted
+        self._accepted = {sensor.name: node.create_publisher(
+            PoseStamped, 'sensors/%s/accepted' % sensor.name, LATEST_SENSOR_QOS)
+            for sensor in robot.sensors}
         for sensor in robot.sensors:
             node.create_subscription(PoseStamped, 'sensors/%s' % sensor.name,
                                      self._reader(sensor), LATEST_SENSOR_QOS)
@@ -63,6 +70,7 @@ class SensorTopics:
                 rotation = quaternion_to_rotation(quaternion)
             stamp = msg.header.stamp.sec + 1e-9 * msg.header.stamp.nanosec
             self.inbox.put(sensor.name, (p.x, p.y, p.z), rotation, stamp or None, now)
+            self._messages[sensor.name] = msg
         return on_reading
 
     def take(self):
@@ -105,8 +113,24 @@ class SensorTopics:
         return self.inbox.problems(time.monotonic())
 
     def judged(self, estimate):
-        """Count the verdicts of the readings the estimate was given."""
-        self.inbox.judged(getattr(estimate, 'sensors', None))
+        """Count the verdicts of the readings the estimate was given; pass on the accepted."""
+        verdicts = getattr(estimate, 'sensors', None)
+        self.inbox.judged(verdicts)
+        for name, verdict in (verdicts or {}).items():
+            if verdict.used and name in self._messages:
+                self._accepted[name].publish(self._messages[name])
+
+
+def tracker_topic(robot):
+    """Return the topic a node reads the tip tracker from (one judgement of the sensor).
+
+    statics' accepted readings of the robot file's tip sensor, or ``tip_pose_measured`` for a
+    robot file without one.
+    """
+    for sensor in robot.sensors:
+        if sensor.at_tip:
+            return 'sensors/%s/accepted' % sensor.name
+    return 'tip_pose_measured'
 
 
 def tip_sigma_mm(estimate):

@@ -75,6 +75,7 @@ from continuum_statics.nodes.ros_conversions import (
     tip_load,
     twist_vectors,
 )
+from continuum_statics.nodes.sensor_topics import tracker_topic
 from continuum_statics.nodes.timers import steady_timer
 from continuum_statics.nodes.waits import InFlight, Waits
 
@@ -123,7 +124,7 @@ class TipControllerNode(Node):
                                    'tip_controller_intake')
         self._intake.add(PoseStamped, 'tip_pose', self._on_tip_pose, LATCHED_QOS)
         # an external tracker (motion capture, EM) registered to the base by calibrate
-        self._intake.add(PoseStamped, 'tip_pose_measured', self._on_tip_pose_measured,
+        self._intake.add(PoseStamped, tracker_topic(self.robot), self._on_tip_pose_measured,
                          LATEST_SENSOR_QOS)
         # Kept as bytes: only the backbone that answers a goal is ever decoded.
         self._intake.add(Path, 'backbone', self._on_backbone, LATCHED_QOS, raw=True)

@@ -46,6 +46,7 @@ from continuum_statics.nodes.parameter_tables import tip_load_estimator_paramete
 from continuum_statics.nodes.qos import LATCHED_QOS, LATEST_SENSOR_QOS
 from continuum_statics.nodes.ros_conversions import check_frame, ns_to_stamp
 from continuum_statics.nodes.ros_conversions import stamp_ns as stamp_ns_of
+from continuum_statics.nodes.sensor_topics import tracker_topic
 from continuum_statics.nodes.timers import steady_timer
 
 NS = 1_000_000_000
@@ -87,7 +88,7 @@ class TipLoadEstimatorNode(Node):
         self._contact_pub.publish(Bool(data=False))
         self.create_subscription(JointState, 'cable_states', self._on_cable_states,
                                  LATEST_SENSOR_QOS, raw=True)
-        self.create_subscription(PoseStamped, 'tip_pose_measured', self._on_tip_pose,
+        self.create_subscription(PoseStamped, tracker_topic(self.robot), self._on_tip_pose,
                                  LATEST_SENSOR_QOS)
         steady_timer(self, 1.0 / self._params['rate'], self._on_timer)
         steady_timer(self, 1.0 / self._params['diagnostics_rate'], self._publish_diagnostics)
