@@ -94,3 +94,34 @@ def test_estimate_load_refuses_options_it_would_ignore_with_the_reason(args, wor
     # convert string to float"
     result = solve('--estimate-load', '--tensions', '1', '1', '1', '1', *args)
     assert result.returncode == 1 and words in result.stderr, result.stderr
+
+
+def test_estimate_load_weighs_a_payload():
+    # a 20 g mass hung on the Jones rod: --load weight gives it back in g, --json in kg
+    rod_file = REPO / 'config' / 'jones2009_nitinol_rod.yaml'
+    rod = load_robot(rod_file)
+    tip = rod.solve_bvp(0.02 * np.asarray(rod.gravity)).tip_position
+    args = [sys.executable, '-m', 'continuum_statics', 'solve', '--robot', str(rod_file),
+            '--estimate-load', '--tip-position', *('%.9f' % v for v in tip),
+            '--noise', 'tip_position', '1e-3']
+
+    def run(*extra):
+        return subprocess.run(args + list(extra), capture_output=True, text=True, timeout=300)
+
+    result = run('--load', 'weight', '--json')
+    assert result.returncode == 0, result.stderr
+    data = json.loads(result.stdout)
+    assert data['load'] == 'weight'
+    assert abs(data['mass'] - 0.02) <= 3.0 * data['mass_sigma'] and data['mass_sigma'] < 1e-3
+    human = run('--load', 'weight')
+    assert human.returncode == 0 and 'mass   [g]    20' in human.stdout, human.stdout
+    force = json.loads(run('--json').stdout)  # the default: three unknowns, no mass
+    assert force['load'] == 'force' and force['mass'] is None
+    along = json.loads(run('--load', 'direction', '0', '0', '-2', '--json').stdout)
+    assert along['load'] == 'direction'
+    assert along['force_n'][2] == pytest.approx(0.02 * rod.gravity[2], rel=1e-3)
+    wrong = run('--load', 'direction', '0', '0')
+    assert wrong.returncode == 1 and 'needs three numbers DX DY DZ' in wrong.stderr
+    wrong = run('--load', 'mass')
+    assert wrong.returncode == 1 and '--load must be weight, force, wrench or direction' in \
+        wrong.stderr
