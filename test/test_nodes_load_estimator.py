@@ -198,3 +198,39 @@ def test_bad_input_is_rejected_the_last_estimate_kept_and_nothing_non_finite_pub
         assert np.all(np.isfinite(wrench_of(msg)))
     assert np.all(np.abs(wrench_of(estimates.last)[:2] - HIDDEN[:2])
                   <= 3.0 * sigma_of(values())[:2])
+
+
+@pytest.mark.ros
+def test_a_payload_is_weighed_with_load_model_weight(harness):
+    # a rod without cables, a tracker on its tip, 20 g hung there: the mass on /diagnostics
+    rod_file = REPO / 'config' / 'jones2009_nitinol_rod.yaml'
+    rod = load_robot(rod_file)
+    harness.add(TipLoadEstimatorNode, robot_file=str(rod_file), load_model='weight',
+                noise_tip_position=1e-3, diagnostics_rate=10.0)
+    client = harness.client()
+    diagnostics = Collector(client, DiagnosticArray, '/diagnostics', 10)
+    tracker = client.create_publisher(PoseStamped, 'tip_pose_measured', 10)
+    tip = rod.solve_bvp(0.02 * np.asarray(rod.gravity)).tip_position
+    pose = PoseStamped()
+    pose.header.frame_id = rod.base_frame_id
+    pose.pose.position.x, pose.pose.position.y, pose.pose.position.z = (float(v) for v in tip)
+    pose.pose.orientation.w = 1.0
+
+    def values():
+        found = diagnostic_values(diagnostics, '/tip_load_estimator')
+        return found[0] if found else {}
+
+    seen = {}
+
+    def weighed():  # the tracker streams (stamped now) until the mass is on /diagnostics
+        pose.header.stamp = client.get_clock().now().to_msg()
+        tracker.publish(pose)
+        seen.update(values())
+        return 'mass_kg' in seen
+
+    wait_until(weighed, 30.0, 'mass_kg on /diagnostics')
+    mass, sigma = float(seen['mass_kg']), float(seen['mass_sigma_kg'])
+    assert seen['load_model'] == 'weight'
+    assert abs(mass - 0.02) <= 3.0 * sigma and sigma < 1e-3, (mass, sigma)
+    force = np.array([float(v) for v in seen['force_n'].split()])
+    np.testing.assert_allclose(force, mass * np.asarray(rod.gravity), rtol=1e-3, atol=1e-9)
