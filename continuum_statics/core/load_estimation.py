@@ -26,7 +26,7 @@ neither                       ``solve_bvp(w)``             tip
 The noise of the inputs reaches the predictions through the model, so the residual e = f(u, w)
 - y has covariance C = R_y + J_u R_u J_u^T (u: the inputs, J_u = df/du). With a zero-mean
 Gaussian prior P on p (standard deviation: the largest plausible tip load, see
-:func:`plausible_tip_load`; for a mass, that force over |g|) the estimate minimises
+:func:`plausible_tip_load`; for a mass, that force over ``|g|``) the estimate minimises
 e^T C^-1 e + p^T P^-1 p by Gauss-Newton (Levenberg-Marquardt), and its covariance is
 Cov_p = (J_p^T C^-1 J_p + P^-1)^-1 with J_p = J_w B (the maximum a posteriori estimate and its
 Laplace covariance, as in Rucker & Webster's deflection-based estimator); the wrench's is
@@ -136,7 +136,7 @@ def load_model(robot, load=None, moment=False, prior=None):
     ``load``: 'weight' | 'force' | ('direction', (dx, dy, dz)) | 'wrench' (None: 'force', or
     'wrench' with ``moment=True``). ``prior``: the prior's standard deviation(s) in the model's
     units (kg for 'weight', N for a force, N m for a moment; a number or one per parameter;
-    None: :func:`plausible_tip_load`, for a mass that force over |g|).
+    None: :func:`plausible_tip_load`, for a mass that force over ``|g|``).
     """
     if moment and load not in (None, 'wrench'):
         raise ValueError("moment=True is load='wrench'; it cannot go with load=%r" % (load,))
@@ -184,7 +184,7 @@ def load_model(robot, load=None, moment=False, prior=None):
                              'deviation(s) > 0, got %r' % (name, len(scale), prior))
         scale = values
     # the difference steps move the wrench by LOAD_STEP of its scale (E I / L^2 of force,
-    # E I / L of moment), whatever p's units: a column b of B moves it by |b| per unit of p
+    # E I / L of moment), whatever p's units: a column b of B moves it by its norm per unit of p
     wrench_scale = np.concatenate([np.full(3, force_scale), np.full(3, moment_scale)])
     steps = LOAD_STEP * np.array([1.0 / np.linalg.norm(column / wrench_scale)
                                   for column in basis.T])
