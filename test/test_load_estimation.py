@@ -182,63 +182,145 @@ def test_bad_arguments_name_the_problem(arguments, words):
         robot.estimate_tip_wrench(**arguments)
 
 
-def _stiffer(robot, factor):
-    rod = dataclasses.replace(robot.description.rod,
-                              youngs_modulus=robot.rod.youngs_modulus * factor)
-    return Robot(dataclasses.replace(robot.description, rod=rod))
+# -- load models (issue 35 item 4) -------------------------------------------------------------
+JONES = REPO / 'config' / 'jones2009_nitinol_rod.yaml'
 
 
-def test_a_payload_is_a_weight_from_the_tip_position_alone():
-    """Issue 35: a hanging mass, 0-50 g, on a rod whose E is 5 % off, tracker noise 1 mm.
+def with_modulus(robot, factor):
+    """Return the robot with its rod's E and G times ``factor`` (physics the estimator lacks)."""
+    rod = robot.description.rod
+    return Robot(dataclasses.replace(robot.description, rod=dataclasses.replace(
+        rod, youngs_modulus=factor * rod.youngs_modulus,
+        shear_modulus=factor * rod.shear_modulus)))
 
-    With load='weight' the mass is one unknown along gravity and comes out within the 5 % the
-    wrong E makes. The general 3-D force trades it against a force along the rod, and its
-    covariance does not cover that (printed, not asserted: left for the general estimator).
-    """
-    rod = load_robot(REPO / 'config' / 'jones2009_nitinol_rod.yaml')
-    truth = _stiffer(rod, 1.05)
+
+def test_a_hanging_mass_is_weighed_from_the_tip_position_alone():
+    # the paper's Table II done right: truth from a rod 5 % softer than the estimator's (its
+    # file's E), tracked with 1 mm noise; masses 0-50 g hung on the tip (force m g)
+    rod = load_robot(JONES)
+    truth = with_modulus(rod, 0.95)
+    gravity = np.asarray(rod.gravity)
     rng = np.random.default_rng(35)
-    errors, normalised = [], []
-    for mass in np.linspace(0.0, 0.05, 11):
-        force = mass * np.asarray(rod.gravity)
-        shape = truth.solve_bvp(tip_force=force)
-        tip = shape.tip_position + shape.tip_rotation @ rod.tip_marker + rng.normal(0, 1e-3, 3)
-        weight = rod.estimate_tip_wrench(tip_position=tip, noise={'tip_position': 1e-3},
-                                         load='weight')
-        assert weight.converged and weight.mass_sigma < 1e-3
-        np.testing.assert_allclose(weight.force, weight.mass * np.asarray(rod.gravity))
-        errors.append(weight.mass - mass)
-        assert abs(weight.mass - mass) < 0.06 * mass + 3 * weight.mass_sigma
-        for model, what in ((truth, 'right E'), (rod, 'E 5 % off')):
-            general = model.estimate_tip_wrench(tip_position=tip, noise={'tip_position': 1e-3})
-            values, vectors = np.linalg.eigh(general.covariance)
-            normalised.append((what, np.max(np.abs(vectors.T @ (general.force - force))
-                                            / np.sqrt(values))))
-    print('mass RMS %.2f g; 3-D force, largest normalised error: right E %.2f, E 5 %% off %.1f'
-          % (1e3 * np.sqrt(np.mean(np.square(errors))),
-             max(v for w, v in normalised if w == 'right E'),
-             max(v for w, v in normalised if w != 'right E')))
-    assert 1e3 * np.sqrt(np.mean(np.square(errors))) < 2.0  # g
+    noise = {'tip_position': 1e-3}
+    masses = np.linspace(0.0, 0.05, 11)
+    mass_error, sigma, force_error, force_sigma = [], [], [], []
+    for mass in masses:
+        tip = truth.solve_bvp(mass * gravity).tip_position + rng.normal(0.0, 1e-3, 3)
+        weight = rod.estimate_tip_wrench(tip_position=tip, load='weight', noise=noise)
+        force = rod.estimate_tip_wrench(tip_position=tip, noise=noise)
+        assert weight.converged and force.converged, (weight.message, force.message)
+        np.testing.assert_allclose(weight.force, weight.mass * gravity, atol=1e-12)
+        assert weight.covariance.shape == (3, 3) and len(weight.parameters) == 1
+        mass_error.append(weight.mass - mass)
+        sigma.append(weight.mass_sigma)
+        force_error.append(force.force - mass * gravity)
+        force_sigma.append(force.sigma)
+    mass_error, sigma = np.array(mass_error), np.array(sigma)
+    # the reported sigma is the tracker's noise (0.08-0.5 g); the 5 % stiffness error the
+    # estimator is not told of adds at most 1 / 0.95 - 1 = 5.3 % of the mass (a cantilever's
+    # deflection goes as m / E, less at large bends)
+    assert np.all(np.abs(mass_error) <= 3.0 * sigma + (1.0 / 0.95 - 1.0) * masses), \
+        np.round(1e3 * mass_error, 2)
+    rms = np.sqrt(np.mean(mass_error ** 2))
+    assert rms < (1.0 / 0.95 - 1.0) * np.sqrt(np.mean(masses ** 2)) + 3.0 * np.sqrt(
+        np.mean(sigma ** 2))
+    assert np.all(sigma < 1e-3)  # under a gram: one unknown, seen well
+    # the general force model trades the hanging mass against a push along the rod (the real
+    # Table II failure): its sigma covers that error, component by component...
+    force_error, force_sigma = np.array(force_error), np.array(force_sigma)
+    assert np.all(np.abs(force_error) <= 3.0 * force_sigma), force_error / force_sigma
+    # ...but as a mass it is far worse than the weight model's
+    as_mass = np.linalg.norm(force_error, axis=1) / np.linalg.norm(gravity)
+    assert np.sqrt(np.mean(as_mass ** 2)) > 5.0 * np.sqrt(np.mean(mass_error ** 2))
 
 
-def test_load_models_agree_and_refuse_what_they_cannot_be():
-    rod = load_robot(REPO / 'config' / 'jones2009_nitinol_rod.yaml')
-    shape = rod.solve_bvp(tip_force=0.02 * np.asarray(rod.gravity))
-    tip = shape.tip_position + shape.tip_rotation @ rod.tip_marker
-    weight = rod.estimate_tip_wrench(tip_position=tip, load='weight')
-    along = rod.estimate_tip_wrench(tip_position=tip, load=('direction', rod.gravity))
-    np.testing.assert_allclose(along.force, weight.force, rtol=1e-6, atol=1e-9)
-    assert weight.mass == pytest.approx(0.02, rel=1e-3) and along.mass is None
-    robot = load_robot(REPO / 'config' / 'tendon_robot_real_tendons.yaml')
-    lengths = robot.straight_cable_lengths - np.array([0.003, 0.0, 0.0, 0.0])
-    wrench = robot.estimate_tip_wrench(lengths=lengths, tensions=np.full(4, 2.0),
-                                       load='wrench')
-    moment = robot.estimate_tip_wrench(lengths=lengths, tensions=np.full(4, 2.0), moment=True)
-    np.testing.assert_allclose(wrench.wrench, moment.wrench)
-    for bad, expected in ((('size',), 'load must be one of'), ('mass', 'load must be one of'),
-                          (('direction', (0, 0, 0)), 'must not be zero')):
-        with pytest.raises(ValueError, match=expected):
-            rod.estimate_tip_wrench(tip_position=tip, load=bad)
-    flat = Robot(dataclasses.replace(rod.description, gravity=np.zeros(3)))
-    with pytest.raises(ValueError, match='gravity is zero'):
-        flat.estimate_tip_wrench(tip_position=tip, load='weight')
+def test_weight_on_the_bundled_tip_load_rows():
+    # examples/jones2009_tip_loads.csv: made with E = 51 GPa and a clamp pitched 0.8 deg up
+    # (its header), 1 mm noise read to 0.5 mm; the file here says 54 GPa, level: the masses
+    # come out within the stiffness share (54 / 51 - 1 = 5.9 %) and 3 sigma of 1 mm, + 1 g
+    # for the pitch (0.8 deg of a 0.39 m rod: 5 mm at the tip, a few mN)
+    rod = load_robot(JONES)
+    lines = (REPO / 'examples' / 'jones2009_tip_loads.csv').read_text().splitlines()
+    rows = [line for line in lines if line and not line.startswith('#')]
+    assert rows[0].split(',')[0] == 'mass_g' and rows[0].split(',')[4:7] == [
+        'tip_x', 'tip_y', 'tip_z']
+    data = np.array([[float(v) for v in row.split(',')] for row in rows[1:]])
+    assert len(data) >= 8
+    errors = []
+    for mass_g, *_, x, y, z in data:
+        weight = rod.estimate_tip_wrench(tip_position=[x, y, z], load='weight',
+                                         noise={'tip_position': 1e-3})
+        assert weight.converged, weight.message
+        error = 1e3 * weight.mass - mass_g
+        assert abs(error) <= 3e3 * weight.mass_sigma + (54.0 / 51.0 - 1.0) * mass_g + 1.0, (
+            mass_g, error)
+        errors.append(error)
+    assert np.sqrt(np.mean(np.square(errors))) < 2.0, errors
+
+
+def test_a_force_along_a_known_direction():
+    rod = load_robot(JONES)
+    direction = np.array([0.3, -0.4, 0.5])
+    unit = direction / np.linalg.norm(direction)
+    force = 0.12 * unit
+    tip = rod.solve_bvp(force).tip_position
+    estimate = rod.estimate_tip_wrench(tip_position=tip, load=('direction', direction),
+                                       noise={'tip_position': 1e-6})
+    assert estimate.converged, estimate.message
+    np.testing.assert_allclose(estimate.force, force, atol=1e-5)
+    assert estimate.parameters[0] == pytest.approx(0.12, abs=1e-5)  # N along the unit vector
+    assert estimate.mass is None and estimate.mass_sigma is None
+    # one unknown: the covariance is rank one, along the direction
+    values, vectors = np.linalg.eigh(estimate.covariance)
+    assert values[:2] == pytest.approx([0.0, 0.0], abs=1e-18)
+    assert abs(vectors[:, 2] @ unit) > 1.0 - 1e-9
+
+
+def test_moment_true_is_the_wrench_model():
+    rod = load_robot(JONES)
+    shape = rod.solve_bvp([0.03, -0.02, 0.0], [0.0, 0.004, -0.002])
+    kwargs = {'tip_position': shape.tip_position, 'tip_rotation': shape.tip_rotation,
+              'noise': {'tip_position': 1e-4, 'tip_angle': 1e-3}}
+    old = rod.estimate_tip_wrench(moment=True, **kwargs)
+    new = rod.estimate_tip_wrench(load='wrench', **kwargs)
+    assert old.covariance.shape == new.covariance.shape == (6, 6)
+    np.testing.assert_array_equal(old.wrench, new.wrench)
+    np.testing.assert_array_equal(old.covariance, new.covariance)
+    assert old.message == new.message
+
+
+def test_a_poorly_seen_direction_is_named():
+    # a push along a bent rod's tip barely moves the tracked point: seen, but poorly
+    rod = load_robot(JONES)
+    gravity = np.asarray(rod.gravity)
+    tip = rod.solve_bvp(0.03 * gravity).tip_position
+    estimate = rod.estimate_tip_wrench(tip_position=tip, noise={'tip_position': 1e-3})
+    assert 'is poorly seen: sigma' in estimate.message, estimate.message
+    assert 'N estimated' in estimate.message
+    # the weight model's one unknown is well seen: nothing to name
+    weight = rod.estimate_tip_wrench(tip_position=tip, load='weight',
+                                     noise={'tip_position': 1e-3})
+    assert weight.message == '', weight.message
+
+
+@pytest.mark.parametrize('load, words', [
+    ('mass', "load must be 'weight', 'force'"),
+    (('direction', (0.0, 0.0, 0.0)), 'finite, non-zero vector'),
+    (('direction', (1.0, 2.0)), 'd must be 3 numbers'),
+    ('direction', "load must be 'weight', 'force', \\('direction'"),
+])
+def test_bad_load_models_name_what_was_expected(load, words):
+    rod = load_robot(JONES)
+    with pytest.raises(ValueError, match=words):
+        rod.estimate_tip_wrench(tip_position=[0.39, 0.0, -0.02], load=load)
+
+
+def test_weight_without_gravity_says_the_file_has_none():
+    rod = load_robot(JONES)
+    weightless = Robot(dataclasses.replace(rod.description, gravity=np.zeros(3)))
+    with pytest.raises(ValueError, match="load='weight' needs gravity"):
+        weightless.estimate_tip_wrench(tip_position=[0.39, 0.0, 0.0], load='weight')
+    with pytest.raises(ValueError, match="moment=True is load='wrench'"):
+        rod.estimate_tip_wrench(tip_position=[0.39, 0.0, 0.0], load='weight', moment=True)
+    with pytest.raises(ValueError, match='load_prior'):
+        rod.estimate_tip_wrench(tip_position=[0.39, 0.0, 0.0], load='weight', load_prior=-1.0)

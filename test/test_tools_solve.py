@@ -96,16 +96,32 @@ def test_estimate_load_refuses_options_it_would_ignore_with_the_reason(args, wor
     assert result.returncode == 1 and words in result.stderr, result.stderr
 
 
-def test_estimate_load_as_a_weight_gives_the_payload_mass():
+def test_estimate_load_weighs_a_payload():
+    # a 20 g mass hung on the Jones rod: --load weight gives it back in g, --json in kg
     rod_file = REPO / 'config' / 'jones2009_nitinol_rod.yaml'
     rod = load_robot(rod_file)
-    shape = rod.solve_bvp(tip_force=0.015 * np.asarray(rod.gravity))
-    tip = shape.tip_position + shape.tip_rotation @ rod.tip_marker
+    tip = rod.solve_bvp(0.02 * np.asarray(rod.gravity)).tip_position
     args = [sys.executable, '-m', 'continuum_statics', 'solve', '--robot', str(rod_file),
-            '--estimate-load', '--tip-position', *('%.9f' % v for v in tip), '--load', 'weight']
-    result = subprocess.run(args + ['--json'], capture_output=True, text=True, timeout=300)
+            '--estimate-load', '--tip-position', *('%.9f' % v for v in tip),
+            '--noise', 'tip_position', '1e-3']
+
+    def run(*extra):
+        return subprocess.run(args + list(extra), capture_output=True, text=True, timeout=300)
+
+    result = run('--load', 'weight', '--json')
     assert result.returncode == 0, result.stderr
     data = json.loads(result.stdout)
-    assert data['mass_kg'] == pytest.approx(0.015, abs=3 * data['mass_sigma_kg'] + 1e-5)
-    human = subprocess.run(args, capture_output=True, text=True, timeout=300)
-    assert 'payload mass  15.0' in human.stdout, human.stdout
+    assert data['load'] == 'weight'
+    assert abs(data['mass'] - 0.02) <= 3.0 * data['mass_sigma'] and data['mass_sigma'] < 1e-3
+    human = run('--load', 'weight')
+    assert human.returncode == 0 and 'mass   [g]    20' in human.stdout, human.stdout
+    force = json.loads(run('--json').stdout)  # the default: three unknowns, no mass
+    assert force['load'] == 'force' and force['mass'] is None
+    along = json.loads(run('--load', 'direction', '0', '0', '-2', '--json').stdout)
+    assert along['load'] == 'direction'
+    assert along['force_n'][2] == pytest.approx(0.02 * rod.gravity[2], rel=1e-3)
+    wrong = run('--load', 'direction', '0', '0')
+    assert wrong.returncode == 1 and 'needs three numbers DX DY DZ' in wrong.stderr
+    wrong = run('--load', 'mass')
+    assert wrong.returncode == 1 and '--load must be weight, force, wrench or direction' in \
+        wrong.stderr

@@ -3,7 +3,13 @@
 Intrinsic force sensing (Xu & Simaan: the wrench from actuation forces and the statics model)
 and deflection-based sensing (Rucker & Webster 2011: the wrench whose deflection matches a
 measured tip, with a probabilistic estimator) are one weighted least-squares problem here.
-Unknowns w: the tip force (N) and, with ``moment=True``, the tip moment (N m), base frame.
+Unknowns: the tip wrench w = [force (N); moment (N m)], base frame, through a load model
+(``load=``), a linear map w = B p of a few parameters p (:func:`load_model`): ``'force'`` (p the
+force, 3 unknowns, the default), ``'wrench'`` (6, also ``moment=True``), ``('direction', d)`` (1:
+the force's magnitude in N along the unit vector d) and ``'weight'`` (1: a payload's mass m in
+kg, w = m g with g the robot file's gravity, the same vector that weighs the rod; Rucker &
+Webster 2011 estimate a tip load from its deflection the same way, and a hanging mass is what
+their experiment and Jones et al.'s Table II apply).
 Measurements y, each optional: motor tensions, cable lengths, tip position (the robot file's
 tracked point, ``tip_marker`` in the tip frame), tip orientation. A forward model driven by the
 measurements the statics take as inputs predicts the others:
@@ -19,13 +25,16 @@ neither                       ``solve_bvp(w)``             tip
 
 The noise of the inputs reaches the predictions through the model, so the residual e = f(u, w)
 - y has covariance C = R_y + J_u R_u J_u^T (u: the inputs, J_u = df/du). With a zero-mean
-Gaussian prior P on w (standard deviation: the largest plausible tip load, see
-:func:`plausible_tip_load`) the estimate minimises e^T C^-1 e + w^T P^-1 w by Gauss-Newton, and
-its covariance is (J_w^T C^-1 J_w + P^-1)^-1 (the maximum a posteriori estimate and its
-Laplace covariance, as in Rucker & Webster's deflection-based estimator). The prior is what keeps
-a direction the measurements cannot see at zero with a large variance instead of a made-up
-value; those directions are named in the message. J_w and J_u are forward differences of the
-solvers, each warm-started from the nominal solve.
+Gaussian prior P on p (standard deviation: the largest plausible tip load, see
+:func:`plausible_tip_load`; for a mass, that force over ``|g|``) the estimate minimises
+e^T C^-1 e + p^T P^-1 p by Gauss-Newton (Levenberg-Marquardt), and its covariance is
+Cov_p = (J_p^T C^-1 J_p + P^-1)^-1 with J_p = J_w B (the maximum a posteriori estimate and its
+Laplace covariance, as in Rucker & Webster's deflection-based estimator); the wrench's is
+B Cov_p B^T. The prior is what keeps a direction the measurements cannot see at zero with a
+large variance instead of a made-up value; those directions are named in the message, and so
+is a seen direction whose standard deviation exceeds :data:`POORLY_SEEN` of the estimate. J_p
+(one forward solve per column of B) and J_u are forward differences of the solvers, each
+warm-started from the nominal solve.
 """
 import dataclasses
 from dataclasses import dataclass
@@ -66,15 +75,22 @@ LOAD_STEP = 1e-5
 LENGTH_STEP, TENSION_STEP = 1e-6, 1e-5
 #: The smallest tension standard deviation (N) of a 'P%' noise figure (a zero reading).
 MIN_TENSION_NOISE = 1e-3
-#: A direction of the load is named as poorly seen when its standard deviation is more than this
-#: fraction of the estimate there (not only when the measurements do not see it at all).
-POORLY_SEEN = 0.5
 #: The chi-square gate: a measurement set whose weighted squared residual exceeds the (1 - p)
 #: quantile of the chi-square distribution with (measurements - seen load directions) degrees
 #: of freedom is one the model cannot explain at the stated noise (a faulty sensor, a wrong
 #: unit, a tracker the tensions contradict). p = 1e-3: measurements whose noise is as stated
 #: are set aside once in a thousand; a faulty one is off by orders of magnitude more.
 CHI2_GATE_PROBABILITY = 1e-3
+#: A seen direction of the estimated force (or moment) is named as poorly seen when its standard
+#: deviation exceeds this fraction of the estimate's magnitude: worse than the accuracy force
+#: sensing publishes, 5-15 % of the magnitude (Xiao & Chen 2021, FBG; Eyberg et al. 2026, 14 %).
+#: Only while the estimate stands clear of zero (a load at all, not noise about none): its
+#: chi-square distance from zero beyond the THREE_SIGMA quantile.
+POORLY_SEEN = 0.2
+#: The probability inside 3 sigma of a Gaussian.
+THREE_SIGMA = 0.9973
+#: The load models of ``load=`` (:func:`load_model`).
+LOAD_MODELS = ('weight', 'force', 'direction', 'wrench')
 
 
 class _ForwardFailed(Exception):
@@ -92,6 +108,90 @@ def plausible_tip_load(robot):
 
 
 @dataclass(frozen=True, eq=False)
+class LoadModel:
+    """A load model: the tip wrench w (6,) = ``basis`` @ p of the parameters p (k,).
+
+    :ivar name: 'weight', 'force', 'direction' or 'wrench'
+    :ivar basis: B (6, k)
+    :ivar prior: (k,) standard deviations of the zero-mean prior on p, in p's units
+    :ivar steps: (k,) forward-difference steps of p
+    :ivar size: rows of the wrench the estimate reports (3: the force; 6: force and moment)
+    """
+
+    name: str
+    basis: np.ndarray
+    prior: np.ndarray
+    steps: np.ndarray
+    size: int
+
+    def same(self, other):
+        """Return True if ``other`` has the same parameters (a warm start's p carries over)."""
+        return isinstance(other, LoadModel) and other.basis.shape == self.basis.shape and \
+            bool(np.array_equal(other.basis, self.basis))
+
+
+def load_model(robot, load=None, moment=False, prior=None):
+    """Return the :class:`LoadModel` of ``load`` (see the module docstring); checked.
+
+    ``load``: 'weight' | 'force' | ('direction', (dx, dy, dz)) | 'wrench' (None: 'force', or
+    'wrench' with ``moment=True``). ``prior``: the prior's standard deviation(s) in the model's
+    units (kg for 'weight', N for a force, N m for a moment; a number or one per parameter;
+    None: :func:`plausible_tip_load`, for a mass that force over ``|g|``).
+    """
+    if moment and load not in (None, 'wrench'):
+        raise ValueError("moment=True is load='wrench'; it cannot go with load=%r" % (load,))
+    load = ('wrench' if moment else 'force') if load is None else load
+    force_scale, moment_scale = plausible_tip_load(robot)
+    zero = np.zeros(3)
+    if isinstance(load, str) and load == 'force':
+        basis, scale = np.vstack([np.eye(3), np.zeros((3, 3))]), np.full(3, force_scale)
+        name, size = 'force', 3
+    elif isinstance(load, str) and load == 'wrench':
+        basis, scale = np.eye(6), np.concatenate([np.full(3, force_scale),
+                                                  np.full(3, moment_scale)])
+        name, size = 'wrench', 6
+    elif isinstance(load, str) and load == 'weight':
+        gravity = np.asarray(robot.gravity, dtype=float)
+        magnitude = float(np.linalg.norm(gravity))
+        if not magnitude > 0.0:
+            raise ValueError("load='weight' needs gravity, but robot %r has gravity %s in its "
+                             "file: give the file's gravity (m/s^2, base frame) or estimate "
+                             "load='force'" % (robot.name, np.round(gravity, 6).tolist()))
+        basis = np.concatenate([gravity, zero])[:, None]
+        scale, name, size = np.array([force_scale / magnitude]), 'weight', 3
+    elif isinstance(load, (tuple, list)) and len(load) == 2 and load[0] == 'direction':
+        try:
+            direction = np.asarray(load[1], dtype=float).reshape(3)
+        except (TypeError, ValueError):
+            raise ValueError("load=('direction', d): d must be 3 numbers (dx, dy, dz), got %r"
+                             % (load[1],)) from None
+        norm = float(np.linalg.norm(direction))
+        if not (np.all(np.isfinite(direction)) and norm > 0.0):
+            raise ValueError("load=('direction', d): d must be a finite, non-zero vector "
+                             "(dx, dy, dz), got %s" % direction.tolist())
+        basis = np.concatenate([direction / norm, zero])[:, None]
+        scale, name, size = np.array([force_scale]), 'direction', 3
+    else:
+        raise ValueError("load must be 'weight', 'force', ('direction', (dx, dy, dz)) or "
+                         "'wrench', got %r" % (load,))
+    if prior is not None:
+        values = np.asarray(prior, dtype=float).reshape(-1)
+        if values.size == 1:
+            values = np.full(len(scale), float(values[0]))
+        if values.size != len(scale) or not np.all(np.isfinite(values)) or \
+                not np.all(values > 0.0):
+            raise ValueError('load_prior for load %r must be one or %d finite standard '
+                             'deviation(s) > 0, got %r' % (name, len(scale), prior))
+        scale = values
+    # the difference steps move the wrench by LOAD_STEP of its scale (E I / L^2 of force,
+    # E I / L of moment), whatever p's units: a column b of B moves it by its norm per unit of p
+    wrench_scale = np.concatenate([np.full(3, force_scale), np.full(3, moment_scale)])
+    steps = LOAD_STEP * np.array([1.0 / np.linalg.norm(column / wrench_scale)
+                                  for column in basis.T])
+    return LoadModel(name, basis, scale, steps, size)
+
+
+@dataclass(frozen=True, eq=False)
 class WrenchEstimate:
     """Result of :func:`estimate_tip_wrench` (base frame).
 
@@ -105,6 +205,11 @@ class WrenchEstimate:
     :ivar iterations: Gauss-Newton iterations
     :ivar chi2: weighted squared residual per measurement (about 1 when the noise is right)
     :ivar solution: the forward solve's result (warm-starts the next estimate's solves)
+    :ivar load: the :class:`LoadModel` estimated
+    :ivar parameters: (k,) its parameters p (w = B p): N, N m, or kg for 'weight'
+    :ivar parameter_covariance: (k, k) of p
+    :ivar mass: kg, the payload's mass with ``load='weight'`` (else None)
+    :ivar mass_sigma: kg, its standard deviation (else None)
     """
 
     force: np.ndarray
@@ -120,13 +225,18 @@ class WrenchEstimate:
     weights: object = None  # the residual's whitener, reused by the next warm estimate
     measurements: int = 0  # how many scalar measurements chi2 is the mean over
     friction_reference: object = None  # free lengths (m) where each cable last moved
-    mass: float = None  # kg, a payload (load='weight')
-    mass_sigma: float = None  # kg
+    load: object = None
+    parameters: object = None
+    parameter_covariance: object = None
+    mass: object = None
+    mass_sigma: object = None
 
     @property
     def dof(self):
         """Degrees of freedom of the residual: measurements less the seen load directions."""
-        return self.measurements - (len(self.covariance) - len(self.unseen))
+        unknowns = len(self.covariance if self.parameter_covariance is None
+                       else self.parameter_covariance)
+        return self.measurements - (unknowns - len(self.unseen))
 
     def explains(self, probability=CHI2_GATE_PROBABILITY):
         """Return True if the measurements pass the chi-square gate (see CHI2_GATE_PROBABILITY)."""
@@ -273,13 +383,12 @@ class _Model:
         result, shape = self.solve(load)
         return self.predict(result, shape), result, shape
 
-    def load_jacobian(self, load, size, steps, predicted, result):
-        """J_w (m, size): forward differences of the predictions in the wrench."""
+    def load_jacobian(self, wrench, basis, steps, predicted, result):
+        """J_p = J_w B (m, k): forward differences of the predictions along B's columns."""
         # perturbed solves start from the nominal one (its state and friction history)
-        jacobian = np.empty((len(predicted), size))
-        for k in range(size):
-            trial = load.copy()
-            trial[k] += steps[k]
+        jacobian = np.empty((len(predicted), basis.shape[1]))
+        for k in range(basis.shape[1]):
+            trial = wrench + steps[k] * basis[:, k]
             jacobian[:, k] = (self.predict(*self.solve(trial, warm=result))
                               - predicted) / steps[k]
         return jacobian
@@ -338,22 +447,21 @@ def _angle(rotation):
 
 
 def estimate_tip_wrench(robot, lengths=None, tensions=None, tip_position=None, tip_rotation=None,
-                        noise=None, moment=False, warm_start=None, load='force'):
+                        noise=None, moment=False, warm_start=None, load=None, load_prior=None):
     """Estimate the tip wrench (base frame) from any measurements that make it observable.
-
-    ``load``: what the lab knows of the load (:func:`load_model`): ``'force'`` (3 unknowns),
-    ``'wrench'`` (6: the force and moment, as ``moment=True``), ``('direction', d)`` (its size
-    along a known unit direction d, N) or ``'weight'`` (a payload hung on the tip: its mass,
-    along gravity; ``mass`` and ``mass_sigma`` in kg).
 
     ``lengths`` (m, motor side) and ``tensions`` (N, motor side) in ``robot.cable_names`` order;
     ``tip_position`` (m) the tracked point (the rod's tip plus ``tip_marker``) and
     ``tip_rotation`` (3x3) the tip orientation, base frame; ``noise`` standard deviations
     (:data:`DEFAULT_NOISE` keys); ``warm_start`` the previous :class:`WrenchEstimate` of a
-    sequence. Returns :class:`WrenchEstimate`; never raises for a failed solve (then
+    sequence; ``load`` the load model, 'weight' | 'force' (default) | ('direction', (dx, dy,
+    dz)) | 'wrench' (``moment=True`` is 'wrench'), with ``load_prior`` its prior's standard
+    deviation(s) in the model's units (:func:`load_model`). Returns :class:`WrenchEstimate`
+    (``.mass`` and ``.mass_sigma`` with 'weight'); never raises for a failed solve (then
     ``converged`` is False with the last good estimate); bad arguments raise ``ValueError``.
     """
     n = len(robot.cable_names)
+    model = load_model(robot, load, moment, load_prior)
     lengths = None if lengths is None else as_vector(lengths, n, 'lengths')
     tensions = None if tensions is None else as_vector(tensions, n, 'tensions')
     if tensions is not None and np.any(tensions < 0.0):
@@ -371,18 +479,13 @@ def estimate_tip_wrench(robot, lengths=None, tensions=None, tip_position=None, t
     if n == 0 and (lengths is not None or tensions is not None):
         raise ValueError('this robot has no cables: estimate from the tip pose')
     levels = noise_levels(noise)
-    direction, scale = load_model(robot, load, moment)
-    moment = moment or load == 'wrench'
     previous = warm_start if isinstance(warm_start, WrenchEstimate) else None
     if previous is not None and not previous.explains():
         # an estimate of measurements the model could not explain (a wrong unit, a faulty
         # sensor) sits on a branch of equilibria of its own: the next one starts afresh
         previous = None
     try:
-        if direction is not None:
-            return _estimate_along(robot, lengths, tensions, tip_position, tip_rotation, levels,
-                                   direction, scale, load == 'weight', previous)
-        return _estimate(robot, lengths, tensions, tip_position, tip_rotation, levels, moment,
+        return _estimate(robot, lengths, tensions, tip_position, tip_rotation, levels, model,
                          previous)
     except _ForwardFailed as error:
         # a solve failed after the start (a re-linearisation, the final Jacobian): the
@@ -395,159 +498,52 @@ def estimate_tip_wrench(robot, lengths=None, tensions=None, tip_position=None, t
             % error)
 
 
-#: Load models of :func:`estimate_tip_wrench` (besides ``('direction', d)``).
-LOAD_MODELS = ('force', 'wrench', 'weight')
+def _start(previous, load):
+    """Return the parameters p a warm start gives (zeros without one)."""
+    if previous is None or not np.all(np.isfinite(previous.wrench)):
+        return np.zeros(len(load.prior))
+    if load.same(previous.load) and previous.parameters is not None:
+        return np.array(previous.parameters, dtype=float)
+    # another model's estimate: the p whose wrench is nearest it (least squares)
+    return np.linalg.lstsq(load.basis, previous.wrench, rcond=None)[0]
 
 
-def load_model(robot, load, moment=False):
-    """Return (unit direction (3,) or None, N per unit of the unknown) of a load model.
-
-    None: the general models (force, wrench). ``'weight'``: gravity's direction, |g| N per kg;
-    ``('direction', d)``: d normalised, 1 N per N. ``ValueError`` names what was expected.
-    """
-    if isinstance(load, str):
-        if load not in LOAD_MODELS:
-            raise ValueError("load must be one of %s or ('direction', (dx, dy, dz)), got %r"
-                             % (', '.join(LOAD_MODELS), load))
-        if load == 'weight':
-            g = float(np.linalg.norm(robot.gravity))
-            if not g > 0.0:
-                raise ValueError("load='weight' needs gravity: the robot file's gravity is zero")
-            if moment:
-                raise ValueError("load='weight' is a force along gravity: not with moment=True")
-            return np.asarray(robot.gravity, dtype=float) / g, g
-        return None, None
-    if not (isinstance(load, (tuple, list)) and len(load) == 2 and load[0] == 'direction'):
-        raise ValueError("load must be one of %s or ('direction', (dx, dy, dz)), got %r"
-                         % (', '.join(LOAD_MODELS), load))
-    direction = as_vector(load[1], 3, 'load direction')
-    norm = float(np.linalg.norm(direction))
-    if not norm > 0.0:
-        raise ValueError('load direction must not be zero, got %s' % direction.tolist())
-    if moment:
-        raise ValueError("load=('direction', d) is a force: not with moment=True")
-    return direction / norm, 1.0
-
-
-def _estimate_along(robot, lengths, tensions, tip_position, tip_rotation, levels, direction,
-                    scale, weight, previous):
-    """Estimate one unknown: the tip force's size along ``direction`` (x scale N per unit).
-
-    The same maximum a posteriori estimate as :func:`_estimate` (Rucker & Webster 2011's
-    deflection-based estimator) on one unknown p, w = scale p direction: Gauss-Newton on
-    e^T C^-1 e + (p / prior)^2 with a step limit, the covariance 1 / (J^T C^-1 J + prior^-2).
-    A hanging mass is one number: a tip position that barely sees a force along the rod cannot
-    trade it against the vertical one.
-    """
-    force_scale, _ = plausible_tip_load(robot)
-    prior = force_scale / scale
-    steps = LOAD_STEP * np.full(6, force_scale)
-    model = _Model(robot, lengths, tensions, tip_position, tip_rotation, levels,
-                   None if previous is None else previous.solution,
-                   None if previous is None else previous.friction_reference)
-    value = 0.0
-    if previous is not None and np.all(np.isfinite(previous.force)):
-        value = float(previous.force @ direction) / scale
-    wrench = np.zeros(6)
-
-    def at(p):
-        wrench[:3] = scale * p * direction
-        return model.evaluate(wrench.copy())
-
-    def slope(p, predicted, result):
-        wrench[:3] = scale * p * direction
-        return model.load_jacobian(wrench.copy(), 3, steps, predicted, result) @ direction * scale
-
-    predicted, result, shape = at(value)
-    whiten = model.whitener(wrench.copy(), predicted, result)
-    jac = whiten @ slope(value, predicted, result)
-    converged, notes, iterations = False, [], 0
-    for iterations in range(1, MAX_ITERATIONS + 1):
-        residual = whiten @ (predicted - model.measured)
-        information = float(jac @ jac) + prior ** -2
-        step = -(float(jac @ residual) + value / prior ** 2) / information
-        step = float(np.clip(step, -STEP_LIMIT * prior, STEP_LIMIT * prior))
-        if abs(step) * math.sqrt(information) <= STEP_TOLERANCE:
-            converged = True
-            break
-        objective = float(residual @ residual) + (value / prior) ** 2
-        for _ in range(10):
-            trial = value + step
-            trial_predicted, trial_result, trial_shape = at(trial)
-            trial_residual = whiten @ (trial_predicted - model.measured)
-            if float(trial_residual @ trial_residual) + (trial / prior) ** 2 <= objective:
-                break
-            step *= 0.5
-        else:
-            notes.append('no step lowers the misfit')
-            break
-        value, predicted, result, shape = trial, trial_predicted, trial_result, trial_shape
-        jac = whiten @ slope(value, predicted, result)
-    else:
-        notes.append('not converged in %d iterations' % MAX_ITERATIONS)
-    residual = whiten @ (predicted - model.measured)
-    sigma = 1.0 / math.sqrt(float(jac @ jac) + prior ** -2)
-    force = scale * value * direction
-    covariance = (scale * sigma) ** 2 * np.outer(direction, direction)
-    unseen = np.zeros((0, 3))
-    if float(jac @ jac) < prior ** -2:
-        unseen = direction[None, :]
-        notes.insert(0, 'the measurements do not determine the tip force along (%.3g, %.3g, '
-                        '%.3g): held near zero with the prior' % tuple(direction))
-    elif sigma > POORLY_SEEN * abs(value):
-        notes.insert(0, 'the %s is poorly seen: sigma %.3g %s against %.3g estimated' % (
-            'mass' if weight else 'force along (%.3g, %.3g, %.3g)' % tuple(direction),
-            sigma * (1e3 if weight else 1.0), 'g' if weight else 'N',
-            value * (1e3 if weight else 1.0)))
-    return WrenchEstimate(force=force, moment=np.zeros(3), covariance=covariance, shape=shape,
-                          converged=converged, message='; '.join(notes), unseen=unseen,
-                          iterations=iterations,
-                          chi2=float(residual @ residual) / max(len(residual), 1),
-                          solution=result, measurements=len(residual),
-                          friction_reference=model.reference,
-                          mass=value if weight else None, mass_sigma=sigma if weight else None)
-
-
-def _estimate(robot, lengths, tensions, tip_position, tip_rotation, levels, moment, previous):
+def _estimate(robot, lengths, tensions, tip_position, tip_rotation, levels, load, previous):
     """Estimate on checked arguments (:func:`estimate_tip_wrench`); may raise _ForwardFailed."""
-    size = 6 if moment else 3
-    force_scale, moment_scale = plausible_tip_load(robot)
-    prior = np.concatenate([np.full(3, force_scale), np.full(3, moment_scale)])[:size]
-    steps = LOAD_STEP * np.concatenate([np.full(3, force_scale), np.full(3, moment_scale)])
+    basis, prior = load.basis, load.prior
     model = _Model(robot, lengths, tensions, tip_position, tip_rotation, levels,
                    None if previous is None else previous.solution,
                    None if previous is None else previous.friction_reference)
-    load = np.zeros(6)
-    if previous is not None and np.all(np.isfinite(previous.wrench)):
-        load[:size] = previous.wrench[:size]
+    p = _start(previous, load)
     notes, converged, iterations, failure = [], False, 0, ''
     try:
-        predicted, result, shape = model.evaluate(load)
+        predicted, result, shape = model.evaluate(basis @ p)
     except _ForwardFailed as error:
-        if not load.any():
+        if not p.any():
             raise ValueError('no equilibrium for these measurements even without a tip load: '
                              '%s' % error) from error
-        load[:] = 0.0  # the previous estimate no longer fits: start unloaded
-        predicted, result, shape = model.evaluate(load)
-    weights = _reused_weights(previous, model, load, prior)
+        p[:] = 0.0  # the previous estimate no longer fits: start unloaded
+        predicted, result, shape = model.evaluate(basis @ p)
+    weights = _reused_weights(previous, model, p, load)
     fresh = weights is None  # the load Jacobian is this estimate's own
     if fresh:
-        weights = _linearise(model, load, size, steps, predicted, result)
-    elif _moved(load, weights.jacobian_load, prior) > REJACOBIAN:
-        weights, fresh = _with_jacobian(model, weights, load, size, steps, predicted, result), True
+        weights = _linearise(model, p, load, predicted, result)
+    elif _moved(p, weights.jacobian_load, prior) > REJACOBIAN:
+        weights, fresh = _with_jacobian(model, weights, p, load, predicted, result), True
     jacobian = weights.whiten @ weights.load_jacobian
     seen = _seen_basis(jacobian, prior)
     # the directions the data do not see stay at the prior's mean, zero (never made up)
-    load[:size] = prior * (seen @ (seen.T @ (load[:size] / prior)))
-    # Levenberg-Marquardt in the seen directions on e^T C^-1 e + w^T P^-1 w (prior-scaled);
+    p = prior * (seen @ (seen.T @ (p / prior)))
+    # Levenberg-Marquardt in the seen directions on e^T C^-1 e + p^T P^-1 p (prior-scaled);
     # a warm start is near: Gauss-Newton steps from the first
     damping = COLD_DAMPING if previous is None else WARM_DAMPING
+    identity = np.eye(len(prior))
     for iterations in range(1, MAX_ITERATIONS + 1):
         residual = weights.whiten @ (predicted - model.measured)
-        objective = float(residual @ residual) + float(np.sum((load[:size] / prior) ** 2))
-        scaled = jacobian * prior  # d residual / d (w / prior)
-        hessian = seen.T @ (scaled.T @ scaled + np.eye(size)) @ seen
-        gradient = seen.T @ (scaled.T @ residual + load[:size] / prior)
+        objective = float(residual @ residual) + float(np.sum((p / prior) ** 2))
+        scaled = jacobian * prior  # d residual / d (p / prior)
+        hessian = seen.T @ (scaled.T @ scaled + identity) @ seen
+        gradient = seen.T @ (scaled.T @ residual + p / prior)
         if _sigmas(hessian, gradient) <= STEP_TOLERANCE:
             converged = True  # already there (a warm start on an unchanged measurement)
             break
@@ -559,26 +555,25 @@ def _estimate(robot, lengths, tensions, tip_position, tip_rotation, levels, mome
                 * np.eye(len(hessian)), gradient))
             # at most STEP_LIMIT of the prior scale per step: the branch of equilibria nearest
             # the start, not a far one (a rod near buckling explains a tip as well)
-            largest = float(np.max(np.abs(step) / prior))
+            largest = float(np.max(np.abs(step) / prior, initial=0.0))
             if largest > STEP_LIMIT:
                 step *= STEP_LIMIT / largest
-            trial = load.copy()
-            trial[:size] += step
+            trial = p + step
             try:
-                trial_predicted, trial_result, trial_shape = model.evaluate(trial)
+                trial_predicted, trial_result, trial_shape = model.evaluate(basis @ trial)
             except _ForwardFailed as error:
                 failure, damping = str(error), damping * 10.0
                 continue
             trial_residual = weights.whiten @ (trial_predicted - model.measured)
             trial_objective = (float(trial_residual @ trial_residual)
-                               + float(np.sum((trial[:size] / prior) ** 2)))
+                               + float(np.sum((trial / prior) ** 2)))
             if trial_objective <= objective:
                 accepted = True
                 break
             damping *= 10.0
         if not accepted:
             if not fresh:  # the previous estimate's Jacobian misled: take this one's
-                weights, fresh = _linearise(model, load, size, steps, predicted, result), True
+                weights, fresh = _linearise(model, p, load, predicted, result), True
                 jacobian = weights.whiten @ weights.load_jacobian
                 seen, damping = _seen_basis(jacobian, prior), COLD_DAMPING
                 continue
@@ -587,83 +582,97 @@ def _estimate(robot, lengths, tensions, tip_position, tip_rotation, levels, mome
             if failure:
                 notes.append('no equilibrium near the step from this estimate (%s)' % failure)
             break
-        load, predicted, result, shape = trial, trial_predicted, trial_result, trial_shape
+        p, predicted, result, shape = trial, trial_predicted, trial_result, trial_shape
         damping = max(damping / 10.0, WARM_DAMPING)
         # converged when the next Gauss-Newton step (this Jacobian) is below the tolerance, or
         # the fit no longer improves by a measurable amount (the solvers' resolution)
         residual = weights.whiten @ (predicted - model.measured)
-        gradient = seen.T @ (scaled.T @ residual + load[:size] / prior)
+        gradient = seen.T @ (scaled.T @ residual + p / prior)
         if _sigmas(hessian, gradient) <= STEP_TOLERANCE \
                 or (fresh and objective - trial_objective < OBJECTIVE_TOLERANCE):
             converged = True
             break
-        weights = (_linearise(model, load, size, steps, predicted, result)
-                   if _moved(load, weights.load, prior) > REWEIGH else
-                   _with_jacobian(model, weights, load, size, steps, predicted, result))
+        weights = (_linearise(model, p, load, predicted, result)
+                   if _moved(p, weights.load, prior) > REWEIGH else
+                   _with_jacobian(model, weights, p, load, predicted, result))
         fresh = True
         jacobian = weights.whiten @ weights.load_jacobian
         seen = _seen_basis(jacobian, prior)
     else:
         notes.append('not converged in %d iterations' % MAX_ITERATIONS)
-    if _moved(load, weights.jacobian_load, prior) > REJACOBIAN:
+    if _moved(p, weights.jacobian_load, prior) > REJACOBIAN:
         # the covariance is that of the estimate: its own Jacobian once the load moved
-        weights = _with_jacobian(model, weights, load, size, steps, predicted, result)
+        weights = _with_jacobian(model, weights, p, load, predicted, result)
         jacobian = weights.whiten @ weights.load_jacobian
     residual = weights.whiten @ (predicted - model.measured)
     data_information = jacobian.T @ jacobian
-    covariance = np.linalg.inv(data_information + np.diag(1.0 / prior ** 2))
+    parameter_covariance = np.linalg.inv(data_information + np.diag(1.0 / prior ** 2))
+    parameter_covariance = 0.5 * (parameter_covariance + parameter_covariance.T)
+    rows = basis[:load.size]  # the wrench rows reported: w = B p, Cov_w = B Cov_p B^T
+    covariance = rows @ parameter_covariance @ rows.T
     covariance = 0.5 * (covariance + covariance.T)
-    unseen = _unseen(data_information, prior)
-    poorly = _poorly_seen(covariance[:3, :3], load[:3], unseen)
+    unseen = _unseen(data_information, prior, rows)
+    wrench = basis @ p
+    mass = mass_sigma = None
+    if load.name == 'weight':
+        mass, mass_sigma = float(p[0]), float(np.sqrt(parameter_covariance[0, 0]))
+    poorly = _poorly_seen(wrench, covariance, load, mass, mass_sigma)
     if poorly:
         notes.insert(0, poorly)
     if len(unseen):
-        notes.insert(0, _unseen_note(unseen, size))
+        notes.insert(0, _unseen_note(unseen))
     chi2 = float(residual @ residual) / max(len(residual), 1)
-    return WrenchEstimate(force=load[:3].copy(),
-                          moment=load[3:].copy() if moment else np.zeros(3),
+    return WrenchEstimate(force=wrench[:3].copy(),
+                          moment=wrench[3:].copy() if load.size == 6 else np.zeros(3),
                           covariance=covariance, shape=shape, converged=converged,
                           message='; '.join(notes), unseen=unseen, iterations=iterations,
                           chi2=chi2, solution=result, weights=weights,
-                          measurements=len(residual), friction_reference=model.reference)
+                          measurements=len(residual), friction_reference=model.reference,
+                          load=load, parameters=p.copy(),
+                          parameter_covariance=parameter_covariance, mass=mass,
+                          mass_sigma=mass_sigma)
 
 
 @dataclass(frozen=True, eq=False)
 class _Weights:
-    """The residual's whitener W, the load Jacobian J_w, and the load and inputs they are of."""
+    """The residual's whitener W, the load Jacobian J_p, and the load and inputs they are of."""
 
     whiten: np.ndarray
     load_jacobian: np.ndarray
-    load: np.ndarray  # where the whitener was computed
+    load: np.ndarray  # the parameters p where the whitener was computed
     inputs: np.ndarray
-    jacobian_load: np.ndarray  # where the load Jacobian was computed
+    jacobian_load: np.ndarray  # the parameters p where the load Jacobian was computed
+    basis: np.ndarray  # the load model's B (p means this wrench)
 
 
-def _with_jacobian(model, weights, load, size, steps, predicted, result):
-    """``weights`` with the load Jacobian computed afresh at ``load`` (size forward solves)."""
+def _with_jacobian(model, weights, p, load, predicted, result):
+    """``weights`` with the load Jacobian computed afresh at ``p`` (k forward solves)."""
     return dataclasses.replace(weights, load_jacobian=model.load_jacobian(
-        load, size, steps, predicted, result), jacobian_load=load.copy())
+        load.basis @ p, load.basis, load.steps, predicted, result), jacobian_load=p.copy())
 
 
-def _linearise(model, load, size, steps, predicted, result):
-    """Fresh :class:`_Weights` at ``load`` (1 + n_inputs + size forward solves)."""
-    return _Weights(model.whitener(load, predicted, result),
-                    model.load_jacobian(load, size, steps, predicted, result), load.copy(),
-                    model.inputs, load.copy())
+def _linearise(model, p, load, predicted, result):
+    """Fresh :class:`_Weights` at ``p`` (1 + n_inputs + k forward solves)."""
+    wrench = load.basis @ p
+    return _Weights(model.whitener(wrench, predicted, result),
+                    model.load_jacobian(wrench, load.basis, load.steps, predicted, result),
+                    p.copy(), model.inputs, p.copy(), load.basis)
 
 
-def _reused_weights(previous, model, load, prior):
+def _reused_weights(previous, model, p, load):
     """Return the previous estimate's weights while load and inputs stay close, else None.
 
     The sensitivities change with the robot's bend: they are refreshed once the load moved by
-    :data:`REWEIGH` of its prior scale or an input by :data:`REWEIGH_INPUT` steps.
+    :data:`REWEIGH` of its prior scale or an input by :data:`REWEIGH_INPUT` steps. Another
+    load model's weights are never reused.
     """
     weights = getattr(previous, 'weights', None)
     if weights is None or weights.whiten.shape != (len(model.measured),) * 2 or \
             weights.inputs.shape != model.inputs.shape or \
-            weights.load_jacobian.shape[1] != len(prior):
+            weights.basis.shape != load.basis.shape or \
+            not np.array_equal(weights.basis, load.basis):
         return None
-    if _moved(load, weights.load, prior) > REWEIGH:
+    if _moved(p, weights.load, load.prior) > REWEIGH:
         return None
     if np.max(np.abs(model.inputs - weights.inputs), initial=0.0) > \
             REWEIGH_INPUT * model.input_step:
@@ -678,20 +687,20 @@ def _sigmas(hessian, gradient):
     return float(np.sqrt(max(float(gradient @ np.linalg.solve(hessian, gradient)), 0.0)))
 
 
-def _moved(load, since, prior):
-    """How far the load is from where something was computed, in prior scales (max norm)."""
-    return float(np.max(np.abs(load - since)[:len(prior)] / prior))
+def _moved(p, since, prior):
+    """How far the parameters are from where something was computed, in prior scales (max)."""
+    return float(np.max(np.abs(p - since) / prior, initial=0.0))
 
 
 def _seen_basis(jacobian, prior):
-    """Orthonormal basis (size, k) of the prior-scaled load directions the data see."""
+    """Orthonormal basis (k, j) of the prior-scaled parameter directions the data see."""
     scaled = jacobian * prior
     values, vectors = np.linalg.eigh(scaled.T @ scaled)
     return vectors[:, values >= 1.0]
 
 
-def _unseen(information, prior):
-    """Return the unit directions of w whose data-only sigma exceeds the prior's.
+def _unseen(information, prior, rows):
+    """Return the unit directions of w (rows B p) whose data-only sigma exceeds the prior's.
 
     In units of the prior (force / largest plausible force, moment likewise) so that force and
     moment compare; a direction the measurements pin down less well than "some plausible load"
@@ -702,33 +711,58 @@ def _unseen(information, prior):
     directions = []
     for value, vector in zip(values, vectors.T):
         if value < 1.0:  # data sigma > the prior's
-            direction = vector * prior  # back to load units, then normalised
+            direction = rows @ (vector * prior)  # back to load units, then normalised
             directions.append(direction / np.linalg.norm(direction))
-    return np.array(directions).reshape(-1, len(prior))
+    return np.array(directions).reshape(-1, len(rows))
 
 
-def _poorly_seen(covariance, force, unseen):
-    """Name the force's principal directions whose sigma exceeds POORLY_SEEN of its size."""
-    size = float(np.linalg.norm(force))
-    values, vectors = np.linalg.eigh(covariance)
-    notes = []
-    for value, vector in zip(values[::-1], vectors.T[::-1]):
-        sigma = math.sqrt(max(value, 0.0))
-        if sigma <= POORLY_SEEN * size or any(abs(float(vector @ u[:3])) > 0.9 for u in unseen):
-            continue
-        notes.append('(%.2f, %.2f, %.2f): sigma %.3g N' % (*(vector * np.sign(
-            vector[np.argmax(np.abs(vector))])), sigma))
-    if not notes:
-        return ''
-    return ('the tip force is poorly seen along %s, against %.3g N estimated'
-            % (', '.join(notes), size))
-
-
-def _unseen_note(unseen, size):
+def _unseen_note(unseen):
     parts = []
     for direction in unseen:
-        label = 'force' if size == 3 or not np.any(np.abs(direction[3:]) > 1e-3) else (
-            'moment' if not np.any(np.abs(direction[:3]) > 1e-3) else 'force/moment')
+        label = 'force' if len(direction) == 3 or not np.any(np.abs(direction[3:]) > 1e-3) \
+            else ('moment' if not np.any(np.abs(direction[:3]) > 1e-3) else 'force/moment')
         parts.append('%s along (%s)' % (label, ', '.join('%.2f' % v for v in direction)))
     return ('the measurements do not determine the tip %s: held at zero with the prior '
             'variance' % '; '.join(parts))
+
+
+def _poorly_seen(wrench, covariance, load, mass, mass_sigma):
+    """Name the seen directions whose sigma exceeds :data:`POORLY_SEEN` of the estimate, or ''.
+
+    Force and moment apart (their own magnitudes and units); only while the estimate stands
+    clear of zero (its chi-square distance from zero beyond the 3-sigma quantile). A direction
+    where the data weigh less than the prior (the posterior variance above half the prior's)
+    is an unseen one, named as such.
+    """
+    if mass is not None:
+        if POORLY_SEEN * abs(mass) < mass_sigma < abs(mass) / 3.0:
+            return ('the payload mass is poorly seen: sigma %.3g g against %.3g g estimated'
+                    % (1e3 * mass_sigma, 1e3 * mass))
+        return ''
+    rows = load.basis[:load.size]
+    prior_covariance = rows @ np.diag(load.prior ** 2) @ rows.T
+    parts = []
+    for block, label, unit in ((slice(0, 3), 'force', 'N'), (slice(3, 6), 'moment', 'N m')):
+        if block.start >= load.size:
+            break
+        value, spread = wrench[block], covariance[block, block]
+        magnitude = float(np.linalg.norm(value))
+        if magnitude == 0.0:
+            continue
+        values, vectors = np.linalg.eigh(spread)
+        kept = values > 1e-12 * max(float(values[-1]), 1e-300)
+        projected = vectors[:, kept].T @ value
+        distance = float(np.sum(projected ** 2 / values[kept]))  # chi-square from zero
+        if distance <= chi2_distribution.ppf(THREE_SIGMA, int(np.sum(kept))):
+            continue  # not a load at all: noise about none
+        for variance, vector in zip(values[::-1], vectors.T[::-1]):
+            sigma = math.sqrt(max(float(variance), 0.0))
+            if sigma <= POORLY_SEEN * magnitude:
+                break
+            if variance > 0.5 * float(vector @ prior_covariance[block, block] @ vector):
+                continue  # unseen: named as such
+            vector = vector * (1.0 if vector[np.argmax(np.abs(vector))] > 0 else -1.0)
+            parts.append('the tip %s along (%s) is poorly seen: sigma %.3g %s against %.3g %s '
+                         'estimated' % (label, ', '.join('%.2f' % v for v in vector), sigma,
+                                        unit, magnitude, unit))
+    return '; '.join(parts)

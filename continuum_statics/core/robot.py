@@ -468,17 +468,18 @@ class Robot:
 
     def estimate_tip_wrench(self, lengths=None, tensions=None, tip_position=None,
                             tip_rotation=None, noise=None, moment=False,
-                            warm_start=None, load='force') -> load_estimation.WrenchEstimate:
+                            warm_start=None, load=None,
+                            load_prior=None) -> load_estimation.WrenchEstimate:
         """Tip force (N) and moment (N m), base frame, that explain the measurements given.
 
         Lengths (m) and tensions (N) at the motors, the tracked tip point (m) and orientation;
-        see :mod:`load_estimation` (models, noise defaults, what each measurement observes).
-        ``load``: 'force', 'wrench', 'weight' (a payload's mass along gravity: ``.mass``,
-        ``.mass_sigma`` in kg) or ('direction', (dx, dy, dz)).
+        ``load``: 'weight' (a payload's mass along gravity: ``.mass``, ``.mass_sigma`` kg) |
+        'force' (default) | ('direction', (dx, dy, dz)) | 'wrench' (= ``moment=True``); see
+        :mod:`load_estimation` (models, noise defaults, what each measurement observes).
         """
         return load_estimation.estimate_tip_wrench(self, lengths, tensions, tip_position,
                                                    tip_rotation, noise, moment, warm_start,
-                                                   load)
+                                                   load, load_prior)
 
     def solve_tip_goal(self, goal_position, tip_force=(0.0, 0.0, 0.0), tolerance=None,
                        goal_direction=None, warm_start=None, tip_moment=(0.0, 0.0, 0.0),

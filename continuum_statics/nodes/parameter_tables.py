@@ -26,6 +26,19 @@ def _check_wrench_source(value):
     return None if value in ('topic', 'estimate') else "must be 'topic' or 'estimate'"
 
 
+def _check_load_model(value):
+    return None if value in ('weight', 'force', 'wrench', 'direction') else (
+        "must be 'weight', 'force', 'wrench' or 'direction' (with load_direction)")
+
+
+def _direction(value):
+    values = list(value)
+    if len(values) != 3 or not all(math.isfinite(v) for v in values) or \
+            not any(v != 0.0 for v in values):
+        return 'must be 3 finite numbers [dx, dy, dz], not all zero, got %s' % values
+    return None
+
+
 def _six_finite(value):
     values = list(value)
     if len(values) != 6 or not all(math.isfinite(v) for v in values):
@@ -201,11 +214,6 @@ def cable_driver_parameters():
     ]
 
 
-def _check_load_model(value):
-    return (None if value in ('force', 'wrench', 'weight', 'direction')
-            else "must be 'force', 'wrench', 'weight' or 'direction'")
-
-
 def tip_load_estimator_parameters():
     """Return the tip_load_estimator node's ParamSpecs."""
     return [
@@ -227,13 +235,16 @@ def tip_load_estimator_parameters():
         ParamSpec('use_tip_orientation', False, "also use the tracker's orientation (a "
                   'rigid-body tracker; a single marker gives position only)'),
         ParamSpec('estimate_moment', False, 'estimate the tip moment too (needs a tracked '
-                  'orientation or many cables to be seen)', read_only=True),
-        ParamSpec('load_model', 'force', 'what is known of the tip load: force (3 unknowns), '
-                  'wrench (with the moment, as estimate_moment), weight (a payload: its mass '
-                  'along gravity, on diagnostics) or direction (its size along load_direction)',
+                  "orientation or many cables to be seen); the same as load_model 'wrench'",
+                  read_only=True),
+        ParamSpec('load_model', 'force', "what the tip load is: 'weight' (a payload hung on "
+                  "the tip: one unknown, its mass along the robot file's gravity, on "
+                  "/diagnostics as mass_kg), 'force' (3 unknowns), 'wrench' (force and "
+                  "moment), 'direction' (the force's size along load_direction)",
                   read_only=True, check=_check_load_model),
-        ParamSpec('load_direction', [0.0, 0.0, -1.0], 'with load_model direction: the '
-                  "load's direction, base frame (normalised)", read_only=True),
+        ParamSpec('load_direction', [0.0, 0.0, -1.0], "load_model 'direction': the force's "
+                  'direction [dx, dy, dz], base frame (normalised)', read_only=True,
+                  check=_direction),
         ParamSpec('input_timeout', 0.5, 'cable_states and tip_pose_measured older than this '
                   'are not used, s', 0.001, 60.0),
         ParamSpec('contact_threshold', 0.0, 'tip_contact turns true when the force exceeds '

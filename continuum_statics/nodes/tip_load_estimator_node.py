@@ -8,7 +8,8 @@ runs :meth:`Robot.estimate_tip_wrench` (warm-started from the previous estimate)
 - ``tip_wrench_estimate`` (geometry_msgs/WrenchStamped, base frame, the cable_states stamp);
   statics and tip_controller use it with ``tip_wrench_source: estimate``;
 - ``/diagnostics``: the force, its standard deviations, the directions the measurements do not
-  see (published as zero: never made up), timing;
+  see (published as zero: never made up), timing; with ``load_model: weight`` (a payload along
+  gravity) its mass and standard deviation (``mass_kg``, ``mass_sigma_kg``);
 - ``tip_contact`` (std_msgs/Bool, latched): True while the force exceeds ``contact_threshold``
   with 3-sigma confidence (:mod:`continuum_statics.control.contact`), with a WARN diagnostic.
 
@@ -61,10 +62,7 @@ class TipLoadEstimatorNode(Node):
         super().__init__(node_name, **kwargs)
         self._params = ParameterTable(self, tip_load_estimator_parameters())
         self.robot = load_robot_file(self._params['robot_file'], self.get_logger())
-        # a load model the robot cannot have (a weight without gravity) is named now
-        load_model(self.robot, self._params['load_model'] if self._params['load_model'] !=
-                   'direction' else ('direction', list(self._params['load_direction'])),
-                   self._params['estimate_moment'])
+        self._load = self._load_model()
         self._diagnostics = self.create_publisher(diag.DiagnosticArray, '/diagnostics', 10)
         diag.publish_starting(self, self._diagnostics, self.robot.name, 'compiling kernels')
         warm_up(self.robot, self.get_logger().info)
@@ -102,6 +100,18 @@ class TipLoadEstimatorNode(Node):
     def _contact_threshold(self):
         """contact_threshold (N), or E I / L^2 of the rod when 0."""
         return self._params['contact_threshold'] or plausible_tip_load(self.robot)[0] / 10.0
+
+    def _load_model(self):
+        """Return the ``load`` argument of estimate_tip_wrench (checked: a bad one stops here)."""
+        name = self._params['load_model']
+        if self._params['estimate_moment'] and name not in ('force', 'wrench'):
+            raise ValueError("estimate_moment is load_model 'wrench'; it cannot go with "
+                             'load_model %r' % name)
+        load = 'wrench' if self._params['estimate_moment'] else name
+        if load == 'direction':
+            load = ('direction', tuple(self._params['load_direction']))
+        load_model(self.robot, load)  # e.g. 'weight' on a robot file without gravity
+        return load
 
     def _on_parameter_change(self, name, value):
         if name == 'contact_threshold':
@@ -193,12 +203,8 @@ class TipLoadEstimatorNode(Node):
         self._publish(outcome.estimate, outcome.contact_changed)
 
     def _solve(self, warm_start, **kwargs):
-        model = self._params['load_model']
-        load = ('direction', list(self._params['load_direction'])) if model == 'direction' \
-            else model
-        return self.robot.estimate_tip_wrench(noise=self._noise(),
-                                              moment=self._params['estimate_moment'],
-                                              warm_start=warm_start, load=load, **kwargs)
+        return self.robot.estimate_tip_wrench(noise=self._noise(), load=self._load,
+                                              warm_start=warm_start, **kwargs)
 
     def _publish(self, estimate, contact_changed):
         msg = WrenchStamped()
@@ -234,6 +240,7 @@ class TipLoadEstimatorNode(Node):
         estimate = self._published
         level, message = diag.OK, 'estimating'
         values = {'state': 'ready' if estimate is not None else 'starting',
+                  'load_model': self._params['load_model'],
                   'estimate_rate_hz': rate, 'estimates': count,
                   'estimate_time_median_ms': median, 'estimate_time_max_ms': maximum,
                   'failures_total': self._failures,
@@ -255,9 +262,9 @@ class TipLoadEstimatorNode(Node):
                 'estimate_message': estimate.message or 'none',
             })
             if estimate.mass is not None:
-                values['payload_mass_g'] = '%.2f' % (1e3 * estimate.mass)
-                values['payload_mass_sigma_g'] = '%.2f' % (1e3 * estimate.mass_sigma)
-            if len(sigma) > 3:
+                values['mass_kg'] = '%.5g' % estimate.mass
+                values['mass_sigma_kg'] = '%.3g' % estimate.mass_sigma
+            if len(sigma) == 6:
                 values['moment_nm'] = ' '.join('%.4g' % v for v in estimate.moment)
                 values['moment_sigma_nm'] = ' '.join('%.3g' % v for v in sigma[3:])
             if self._watch.contact.in_contact:

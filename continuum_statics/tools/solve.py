@@ -6,7 +6,9 @@ estimated from measured cable lengths (m), as the statics node does (with ``--te
 the tensions are measured). ``--plot FILE.png`` draws the backbone in 3-D.
 ``--estimate-load``: the tip force (and with ``--moment`` the moment) that explains the measured
 ``--cable-lengths`` / ``--tensions`` / ``--tip-position`` (:meth:`Robot.estimate_tip_wrench`),
-with its standard deviations and the directions the measurements do not see.
+with its standard deviations and the directions the measurements do not see; ``--load`` the
+load model (``weight``: a payload's mass along gravity, printed in g; ``force``; ``wrench``;
+``direction DX DY DZ``: the force's size along a known direction).
 """
 import argparse
 import json
@@ -39,11 +41,12 @@ def solve_main(argv=None):
                         metavar=('X', 'Y', 'Z'), help='measured tip position (the tracked '
                         'point, tip_marker), base frame (m); with --estimate-load')
     parser.add_argument('--moment', action='store_true',
-                        help='with --estimate-load: estimate the tip moment too')
-    parser.add_argument('--load', nargs='+', default=['force'], metavar='MODEL',
-                        help='with --estimate-load: what is known of the load: force (3 '
-                        'unknowns, default), wrench (with the moment), weight (a payload: its '
-                        'mass along gravity) or direction DX DY DZ (its size along d)')
+                        help='with --estimate-load: estimate the tip moment too (= --load '
+                        'wrench)')
+    parser.add_argument('--load', nargs='+', default=None, metavar='MODEL',
+                        help='with --estimate-load: the load model, weight (a payload: its '
+                        'mass along gravity), force (default), wrench, or direction DX DY DZ '
+                        '(the force along a known direction, base frame)')
     parser.add_argument('--noise', nargs=2, action='append', default=[],
                         metavar=('KIND', 'SIGMA'), help='with --estimate-load: a measurement '
                         'standard deviation, KIND one of length (m), tension (N, or P%%), '
@@ -68,8 +71,9 @@ def solve_main(argv=None):
                 raise ValueError('--tip-force, --tip-moment and --plot do not go with '
                                  '--estimate-load: the tip load is what it estimates')
             return _estimate_load(args, robot)
-        if args.tip_position is not None or args.moment or args.noise:
-            raise ValueError('--tip-position, --moment and --noise go with --estimate-load')
+        if args.tip_position is not None or args.moment or args.noise or args.load:
+            raise ValueError('--tip-position, --moment, --load and --noise go with '
+                             '--estimate-load')
         start = time.perf_counter()
         if args.cable_lengths is not None:
             extra = {} if args.tensions is None else {'tensions': args.tensions}
@@ -138,41 +142,59 @@ def _noise_value(kind, value):
 def _estimate_load(args, robot):
     """``--estimate-load``: print the tip wrench, its sigma and what the measurements miss."""
     noise = {kind: _noise_value(kind, value) for kind, value in args.noise}
+    load = _load_model(args.load)
     start = time.perf_counter()
-    load = args.load[0] if len(args.load) == 1 else (
-        (args.load[0], [float(v) for v in args.load[1:]]) if args.load[0] == 'direction'
-        else tuple(args.load))
-    args.moment = args.moment or load == 'wrench'
     estimate = robot.estimate_tip_wrench(lengths=args.cable_lengths, tensions=args.tensions,
                                          tip_position=args.tip_position, noise=noise,
                                          moment=args.moment, load=load)
     elapsed = time.perf_counter() - start
     sigma = estimate.sigma
+    with_moment = len(sigma) == 6
     if args.json:
         print(json.dumps({
             'robot': robot.name, 'frame_id': robot.base_frame_id,
+            'load': estimate.load.name, 'mass': estimate.mass, 'mass_sigma': estimate.mass_sigma,
             'force_n': estimate.force.tolist(), 'force_sigma_n': sigma[:3].tolist(),
             'moment_nm': estimate.moment.tolist(),
-            'moment_sigma_nm': sigma[3:].tolist() if args.moment else None,
+            'moment_sigma_nm': sigma[3:].tolist() if with_moment else None,
             'covariance': estimate.covariance.tolist(),
             'unseen_directions': estimate.unseen.tolist(), 'converged': estimate.converged,
             'chi2': estimate.chi2, 'iterations': estimate.iterations,
             'tip_position': estimate.shape.tip_position.tolist(),
-            'mass_kg': estimate.mass, 'mass_sigma_kg': estimate.mass_sigma,
             'message': estimate.message, 'elapsed_ms': elapsed * 1e3}))
         return 0 if estimate.converged else 1
     print('robot %s, frame %s: tip load estimated in %.1f ms (%d iterations)%s' % (
         robot.name, robot.base_frame_id, elapsed * 1e3, estimate.iterations,
         '' if estimate.converged else ', NOT converged'))
     if estimate.mass is not None:
-        print('payload mass  %.2f g   sigma %.2f g' % (1e3 * estimate.mass,
-                                                      1e3 * estimate.mass_sigma))
+        print('mass   [g]    %.4g   sigma %.3g   (a payload along gravity)' % (
+            1e3 * estimate.mass, 1e3 * estimate.mass_sigma))
     print('force  [N]    %s   sigma %s' % (_triple(estimate.force), _triple(sigma[:3])))
-    if args.moment:
+    if with_moment:
         print('moment [N m]  %s   sigma %s' % (_triple(estimate.moment), _triple(sigma[3:])))
     print('chi2 per measurement %.3g%s' % (estimate.chi2, (
         '\n' + estimate.message) if estimate.message else ''))
     return 0 if estimate.converged else 1
+
+
+def _load_model(words):
+    """``--load MODEL [DX DY DZ]`` -> the ``load`` argument of estimate_tip_wrench."""
+    if not words:
+        return None
+    name, rest = words[0], words[1:]
+    if name == 'direction':
+        try:
+            direction = [float(v) for v in rest]
+        except ValueError:
+            direction = []
+        if len(direction) != 3:
+            raise ValueError('--load direction needs three numbers DX DY DZ (base frame), '
+                             'got %s' % (' '.join(rest) or 'none'))
+        return ('direction', tuple(direction))
+    if name not in ('weight', 'force', 'wrench') or rest:
+        raise ValueError('--load must be weight, force, wrench or direction DX DY DZ, got %s'
+                         % ' '.join(words))
+    return name
 
 
 def _triple(values):
