@@ -114,6 +114,7 @@ def test_install_space_has_what_the_documentation_says(workspace):
     index = interfaces / 'share' / 'ament_index' / 'resource_index'
     assert (index / 'packages' / INTERFACES).is_file()
     assert 'action/MoveTip.action' in (index / 'rosidl_interfaces' / INTERFACES).read_text()
+    assert 'msg/BackboneEstimate.msg' in (index / 'rosidl_interfaces' / INTERFACES).read_text()
     assert list((interfaces / 'lib').glob('lib%s__rosidl_typesupport_*.so' % INTERFACES))
     assert list(interfaces.rglob('%s/action/_move_tip.py' % INTERFACES))
 

@@ -95,6 +95,13 @@ def test_the_interfaces_package_is_an_ament_cmake_interface_package_the_node_dep
             if part.split('#')[0].strip()] == [
         ['geometry_msgs/PoseStamped', 'target'], ['bool', 'use_direction'],
         ['float64', 'tolerance']]
+    message = (REPO / 'continuum_statics_interfaces' / 'msg' / 'BackboneEstimate.msg').read_text()
+    assert [line.split('#')[0].split() for line in message.splitlines()
+            if line.split('#')[0].strip()] == [
+        ['std_msgs/Header', 'header'], ['float64[]', 's'], ['geometry_msgs/Pose[]', 'poses'],
+        ['float64[]', 'position_covariance']]
+    assert {'std_msgs', 'geometry_msgs'} <= {
+        d.text for d in root.findall('depend')}
 
 
 def test_tf2_msgs_is_declared_and_the_vendored_copy_is_the_upstream_message():
