@@ -73,6 +73,9 @@ def statics_parameters():
         ParamSpec('sensor_timeout', 0.5, "a reading of one of the robot file's sensors "
                   '(sensors/<name>, tip_pose_measured) older than this at the next estimate is '
                   'not fused, s', 0.0, 3600.0),
+        ParamSpec('covariance_rate', 50.0, 'tip_pose_covariance and backbone_estimate (robot '
+                  'files with model_uncertainty) at most this often, Hz (0: with every '
+                  'estimate)', 0.0, 10000.0, read_only=True),
         ParamSpec('tip_wrench_timeout', 1.0, 'a tip_wrench estimate older than this is '
                   'replaced by zero, s (0: never expires)', 0.0, 3600.0),
         ParamSpec('tip_wrench_source', 'topic', 'where the tip load comes from: topic '

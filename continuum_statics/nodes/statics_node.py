@@ -144,7 +144,8 @@ class StaticsNode(Node):
             self._intake.start()
         self.create_subscription(WrenchStamped, tip_wrench_topic(self._params),
                                  self._on_tip_wrench, LATEST_SENSOR_QOS)
-        self._sensors = (SensorTopics(self, self.robot, self._params['sensor_timeout'])
+        self._sensors = (SensorTopics(self, self.robot, self._params['sensor_timeout'],
+                                      self._params['covariance_rate'])
                          if self.robot.sensors or self.robot.model_uncertainty else None)
         self._markers.set_rate(self._params['marker_rate'])
         self._passive_load = None
