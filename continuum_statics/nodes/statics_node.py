@@ -134,6 +134,10 @@ class StaticsNode(Node):
         self._stamps = StampRule(self._params['max_stamp_offset'])
         self._markers = ShapeMarkers(self, lambda: self._params['tube_diameter'],
                                      self._problems.reject)
+        # before the intake starts: its thread reads the sensors from the first message on
+        self._sensors = (SensorTopics(self, self.robot, self._params['sensor_timeout'],
+                                      self._params['covariance_rate'])
+                         if self.robot.sensors or self.robot.model_uncertainty else None)
         self._intake = make_intake(self, self._params['dedicated_intake_thread'])
         self._input = None
         if not self._passive:  # a passive rod has nothing to measure
@@ -144,9 +148,6 @@ class StaticsNode(Node):
             self._intake.start()
         self.create_subscription(WrenchStamped, tip_wrench_topic(self._params),
                                  self._on_tip_wrench, LATEST_SENSOR_QOS)
-        self._sensors = (SensorTopics(self, self.robot, self._params['sensor_timeout'],
-                                      self._params['covariance_rate'])
-                         if self.robot.sensors or self.robot.model_uncertainty else None)
         self._markers.set_rate(self._params['marker_rate'])
         self._passive_load = None
         if self._passive:
