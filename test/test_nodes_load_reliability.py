@@ -7,6 +7,7 @@ newtons with converged=True (and on the 3-section robot stopped the node); a cab
 of 1970 was copied onto tip_wrench_estimate without a warning; twists without a load declared
 contact (5 episodes in 22 s on the three-section real-tendon robot).
 """
+import re
 import time
 
 from conftest import REPO
@@ -211,8 +212,12 @@ def test_the_demo_goals_with_the_estimated_load_land_where_they_say(harness):
             # the friction state the statics and the simulator hold after a reversal (up to
             # 0.91 mm beyond the load's share seen in 8 runs on 2026-11-26)
             assert error <= 1e-3 + shift + 0.5e-3, outcome
-        else:  # no tracker runs, every goal is reachable: never blamed on either
-            assert 'disagree' not in outcome and 'unreachable' not in outcome, outcome
+        else:  # no tracker runs: never blamed on it; every goal is reachable under the true
+            # load, so an unreachable one is no further away than the load's error moves the tip
+            assert 'disagree' not in outcome, outcome
+            away = re.search(r'nearest reachable tip is ([0-9.]+) mm away', outcome)
+            assert 'unreachable' not in outcome or (
+                away and float(away.group(1)) * 1e-3 <= 1e-3 + shift), outcome
     # most goals land (a goal under friction may run out of corrections: said so)
     assert sum(reached for reached, _, _ in errors) >= 7, outcomes
     # the lateral load is seen within the estimate's own uncertainty (the push along the rod is

@@ -29,6 +29,21 @@ C_AT, C_INV_AT, D_AT, D_INV_AT, BODY_FORCE_AT, BASE_POSITION_AT, BASE_ROTATION_A
 PARAMS_SIZE = 27
 
 
+# the dynamic node state of ``dynamics_kernel`` (DYNAMIC_STATE values): p (3, m), R row-major
+# (9), n (3, N, global), m (3, N m, global), q (3, m/s, local), w (3, rad/s, local)
+(DYN_POSITION_AT, DYN_ROTATION_AT, DYN_FORCE_AT, DYN_MOMENT_AT, DYN_VELOCITY_AT,
+ DYN_ANGULAR_AT) = 0, 3, 12, 15, 18, 21
+DYNAMIC_STATE = 24
+#: a node's BDF-alpha history: v_h (3), u_h (3), q_h (3), w_h (3)
+DYN_HISTORY_SIZE = 12
+# the dynamics' rod constants: K_se = diag(GA, GA, EA) (3, N), B_se (3, N s), K_bt =
+# diag(EI, EI, GJ) (3, N m^2), B_bt (3, N m^2 s), rho A (kg/m), rho J (3, kg m), the gravity
+# acceleration (3, m/s^2, global), p(0) (3, m), R(0) row-major (9)
+(DYN_K_SE_AT, DYN_B_SE_AT, DYN_K_BT_AT, DYN_B_BT_AT, DYN_MASS_AT, DYN_RHO_J_AT, DYN_GRAVITY_AT,
+ DYN_BASE_POSITION_AT, DYN_BASE_ROTATION_AT) = 0, 3, 6, 9, 12, 13, 16, 19, 22
+DYN_PARAMS_SIZE = 31
+
+
 # rows of ``kernel.probe``'s values (and its Jacobian): first index of each block; the balance
 # block follows the n_cables lengths (the compiled code reads these)
 TIP_ROWS_AT, AXIS_ROWS_AT, LENGTH_ROWS_AT = 0, 3, 6

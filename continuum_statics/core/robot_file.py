@@ -33,6 +33,10 @@ class Rod:
     :ivar axial_rigidity: EA (N) when measured or fitted (a backbone that is not a solid rod:
         a spring, a tube with slots, disks that slide); None: E A of the solid section
     :ivar shear_rigidity: G A (N) likewise; None: G A of the solid section
+    :ivar bending_damping: Kelvin-Voigt damping of bending and torsion (N m^2 s; the file's
+        ``damping.bending``): B_bt = it times the identity (Till et al. 2019 eq. 4)
+    :ivar shear_damping: Kelvin-Voigt damping of shear and extension (N s; ``damping.shear``):
+        B_se = it times the identity
     """
 
     length: float
@@ -42,6 +46,8 @@ class Rod:
     density: float
     axial_rigidity: float = None
     shear_rigidity: float = None
+    bending_damping: float = 0.0
+    shear_damping: float = 0.0
 
     @property
     def area(self):
@@ -94,6 +100,36 @@ class SolverSettings:
     bvp_tolerance: float = 1e-10
     estimate_tolerance: float = 1e-9
     goal_tolerance: float = 1e-4
+
+
+@dataclass(frozen=True)
+class DynamicsSettings:
+    """The robot file's ``dynamics`` section: the defaults of ``Robot.dynamics()``.
+
+    :ivar dt: time step (s)
+    :ivar alpha: BDF-alpha parameter in [-0.5, 0] (Till et al. 2019 eq. 13: -0.5 the
+        trapezoidal rule, no numerical damping; 0 BDF2, the most)
+    """
+
+    dt: float = 1e-3
+    alpha: float = -0.2
+
+
+def check_dynamics(dt, alpha, field='dynamics'):
+    """Return (dt, alpha) as floats, or raise ValueError naming ``field``."""
+    dt = _positive(dt, field + '.dt')
+    if dt > MAX_DYNAMICS_DT:
+        raise ValueError('%s.dt must be <= %g s (a step is one shooting solve; a control loop '
+                         'runs faster), got %g' % (field, MAX_DYNAMICS_DT, dt))
+    alpha = _number(alpha, field + '.alpha')
+    if not -0.5 <= alpha <= 0.0:
+        raise ValueError('%s.alpha must be in [-0.5, 0] (Till et al. 2019: -0.5 trapezoidal, '
+                         '0 BDF2), got %g' % (field, alpha))
+    return dt, alpha
+
+
+#: Longest dynamics time step a robot file may give (s).
+MAX_DYNAMICS_DT = 0.1
 
 
 @dataclass(frozen=True)
@@ -151,6 +187,7 @@ class RobotDescription:
     cable_routes: tuple = ()
     sensors: tuple = ()
     model_uncertainty: ModelUncertainty = None
+    dynamics: DynamicsSettings = DynamicsSettings()
 
     def routes(self):
         """One route per cable (:mod:`~continuum_statics.core.routing`), straight by default."""
@@ -160,7 +197,8 @@ class RobotDescription:
 
 
 _ROD_KEYS = {'length', 'diameter', 'youngs_modulus', 'poisson_ratio', 'shear_modulus', 'density',
-             'axial_rigidity', 'shear_rigidity'}
+             'axial_rigidity', 'shear_rigidity', 'damping'}
+_DAMPING_KEYS = {'bending', 'shear'}
 _BASE_KEYS = {'frame_id', 'position', 'orientation'}
 _ROUTE_KEYS = ('offset', 'offsets', 'helix')
 _CABLE_KEYS = {'name', *_ROUTE_KEYS, 'length_limits', 'zero_offset', *TENDON_KEYS}
@@ -171,7 +209,8 @@ MAX_DISK_MASS = 1.0
 #: Plausible factors on the rod's bending stiffness a section's disks give.
 BENDING_SCALE_RANGE = (0.1, 100.0)
 _TOP_KEYS = {'name', 'description', 'rod', 'base', 'gravity', 'cables', 'guides', 'solver',
-             'sections', 'cable_model', 'tendons', 'tip_marker', 'sensors', 'model_uncertainty'}
+             'sections', 'cable_model', 'tendons', 'tip_marker', 'sensors', 'model_uncertainty',
+             'dynamics'}
 
 
 def _frozen(array):
@@ -254,6 +293,12 @@ def _parse_rod(data):
         raise ValueError('missing key rod.poisson_ratio (or rod.shear_modulus)')
     rigidities = {key: _positive(rod[key], 'rod.' + key)
                   for key in ('axial_rigidity', 'shear_rigidity') if key in rod}
+    damping = _mapping(rod.get('damping') or {}, 'rod.damping', _DAMPING_KEYS)
+    for key in sorted(damping):
+        value = _number(damping[key], 'rod.damping.' + key)
+        if value < 0.0:
+            raise ValueError('rod.damping.%s must be >= 0, got %g' % (key, value))
+        rigidities[key + '_damping'] = value
     return Rod(length, diameter, youngs, shear, density, **rigidities)
 
 
@@ -621,7 +666,15 @@ def parse_robot_description(data, source='robot file'):
         cable_routes=tuple(routes) if any(route is not None for route in routes) else (),
         tip_marker=_frozen(tip_marker),
         sensors=parse_sensors(data.get('sensors'), rod.length, guides, tip_marker),
-        model_uncertainty=parse_model_uncertainty(data.get('model_uncertainty')))
+        model_uncertainty=parse_model_uncertainty(data.get('model_uncertainty')),
+        dynamics=_parse_dynamics(data))
+
+
+def _parse_dynamics(data):
+    defaults = DynamicsSettings()
+    section = _mapping(data.get('dynamics') or {}, 'dynamics', {'dt', 'alpha'})
+    return DynamicsSettings(*check_dynamics(section.get('dt', defaults.dt),
+                                            section.get('alpha', defaults.alpha)))
 
 
 def read_robot_description(path):
