@@ -108,3 +108,24 @@ class Probe(NamedTuple):
     values: np.ndarray  # (ProbeRows.size,) rows as :class:`ProbeRows`
     jacobian: np.ndarray  # (ProbeRows.size, n_free) forward differences
     states: np.ndarray  # (N, 21) node states at the state probed
+
+
+class DynamicsModel(NamedTuple):
+    """What ``dynamics_kernel`` reads of one robot in motion, one argument (SI units).
+
+    :ivar s_grid: (N,) node arc lengths (m)
+    :ivar params: (DYN_PARAMS_SIZE,) rod constants and base pose (the ``DYN_*_AT`` layout)
+    :ivar disk_mass: (N,) guide-disk mass at each node (kg)
+    :ivar bending_scale: (N - 1,) factor on K_bt and B_bt over each interval
+    :ivar cable_offsets: (n_cables, 3) each cable's hole at its end disk, local (m)
+    :ivar cable_end_node: (n_cables,) node of each cable's end disk
+    :ivar scales: (6,) the tip residual's units: E I / L^2 (N) for n, E I / L (N m) for m
+    """
+
+    s_grid: np.ndarray
+    params: np.ndarray
+    disk_mass: np.ndarray
+    bending_scale: np.ndarray
+    cable_offsets: np.ndarray
+    cable_end_node: np.ndarray
+    scales: np.ndarray

@@ -10,7 +10,14 @@ return (:class:`~continuum_statics.core.layout.Probe`, :class:`tracking.Tracked`
 """
 import numpy as np
 
-from continuum_statics.core import goal_tracking, kernel, length_tracking, tendon_kernel, tracking
+from continuum_statics.core import (
+    dynamics_kernel,
+    goal_tracking,
+    kernel,
+    length_tracking,
+    tendon_kernel,
+    tracking,
+)
 from continuum_statics.core.layout import KernelModel, Probe
 
 
@@ -132,3 +139,21 @@ class Model:
         """Run the tendon statics' compiled chord steps (``length_tracking.chord``)."""
         return length_tracking.chord(self.record, tip_force, tip_moment, z0, tendon, scale,
                                      pieces, limits, start_values, start_states)
+
+    # -- the rod in motion (a robot's DynamicsModel record, built by core/dynamics.py) -------
+    @staticmethod
+    def dynamics_shoot(record, c0, history, base, tensions, states, left, work):
+        """Integrate one time step's IVP from the base (``dynamics_kernel.shoot``)."""
+        dynamics_kernel.shoot(record, c0, history, base, tensions, states, left, work)
+
+    @staticmethod
+    def dynamics_solve(record, c0, history, base, jacobian, tip, tensions, states, left,
+                       tolerance, max_iterations):
+        """Solve one time step (``dynamics_kernel.solve_step``): (converged, IVPs, refreshes)."""
+        return dynamics_kernel.solve_step(record, c0, history, base, jacobian, tip, tensions,
+                                          states, left, tolerance, max_iterations)
+
+    @staticmethod
+    def dynamics_values(record, states, left, history, c0, out):
+        """Each node's v, u, q, w on both sides (``dynamics_kernel.strains_and_velocities``)."""
+        dynamics_kernel.strains_and_velocities(record, states, left, history, c0, out)

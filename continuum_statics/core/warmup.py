@@ -51,6 +51,7 @@ KERNEL_MODULES = (
     'continuum_statics.core.backbone_sampling',
     'continuum_statics.core.tendon_kernel',
     'continuum_statics.core.state_estimation',
+    'continuum_statics.core.dynamics_kernel',
 )
 
 

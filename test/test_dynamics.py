@@ -1,0 +1,113 @@
+"""The rod in motion (issue 36, first part: core/dynamics.py) against independent truths.
+
+- Euler-Bernoulli's cantilever frequencies, (1.875, 4.694, 7.855)^2 sqrt(E I / (rho A L^4)) / 2 pi,
+  from the spectrum of a small free vibration without gravity, with the trapezoidal rule's
+  second-order convergence in dt;
+- the static solver of another formulation (``solve_tensions``: the paper's IVP in u(0)) at the
+  start and as the long-time limit of a damped motion, with gravity, cables and a tip load.
+"""
+from conftest import REPO
+import numpy as np
+import pytest
+import yaml
+
+from continuum_statics import load_robot
+
+ROBOT_FILE = REPO / 'config' / 'tendon_robot.yaml'
+EB_ROOTS = np.array([1.875104, 4.694091, 7.854757])  # of cos x cosh x = -1
+
+
+def robot_with(tmp_path, **changes):
+    data = yaml.safe_load(ROBOT_FILE.read_text())
+    for key, value in changes.items():
+        if key == 'damping':
+            data['rod']['damping'] = value
+        else:
+            data[key] = value
+    path = tmp_path / 'robot.yaml'
+    path.write_text(yaml.safe_dump(data))
+    return load_robot(path)
+
+
+def spectrum_peaks(signal, dt, near):
+    """Frequencies (Hz) of the largest peak of ``signal``'s spectrum within 20 % of each."""
+    x = (signal - signal.mean()) * np.hanning(len(signal))
+    size = 16 * len(x)  # zero padding: a finer grid to read the peak on
+    power = np.abs(np.fft.rfft(x, size))
+    freq = np.fft.rfftfreq(size, dt)
+    peaks = []
+    for f0 in near:
+        band = (freq > 0.8 * f0) & (freq < 1.2 * f0)
+        peaks.append(freq[band][np.argmax(power[band])])
+    return np.array(peaks)
+
+
+def test_small_free_vibration_has_euler_bernoulli_frequencies(tmp_path):
+    robot = robot_with(tmp_path, gravity=[0.0, 0.0, 0.0])
+    rod = robot.description.rod
+    exact = EB_ROOTS ** 2 * np.sqrt(robot.c[0] / (rod.mass_per_length * robot.length ** 4)) \
+        / (2.0 * np.pi)
+    errors = {}
+    for dt in (1e-3, 5e-4):
+        sim = robot.dynamics(dt=dt, alpha=-0.5)  # trapezoidal: no numerical damping
+        sim.start(tip_force=(1e-3, 0.0, 0.0))  # 0.2 mm of static tip deflection, released
+        tips = []
+        for _ in range(int(round(3.0 / dt))):
+            state = sim.step()
+            assert state.converged
+            tips.append(state.tip_position[0])
+        errors[dt] = spectrum_peaks(np.array(tips), dt, exact) / exact - 1.0
+        print('dt %g s: frequencies %s Hz, exact %s, errors %s %%'
+              % (dt, np.round((1 + errors[dt]) * exact, 2), np.round(exact, 2),
+                 np.round(100 * errors[dt], 2)))
+    # the first two modes within 1 % at dt = 0.5 ms (3 s of motion reads them to ~0.3 %)
+    assert np.all(np.abs(errors[5e-4][:2]) < 0.01)
+    # the trapezoidal rule's period error is second order, (w dt)^2 / 12: halving dt divides
+    # the third mode's error (7.5 % at 1 ms) by about four
+    ratio = errors[1e-3][2] / errors[5e-4][2]
+    assert 3.0 < ratio < 5.0, ratio
+
+
+def test_the_start_is_the_static_equilibrium_of_the_other_formulation():
+    robot = load_robot(ROBOT_FILE)
+    tensions, force = np.array([1.5, 0.0, 0.4, 0.0]), np.array([0.05, -0.02, 0.0])
+    state = robot.dynamics().start(tensions=tensions, tip_force=force)
+    static = robot.solve_tensions(tensions, force)
+    assert np.max(np.abs(state.shape.positions - static.positions)) < 1e-9
+    assert np.max(np.abs(state.velocity)) == 0.0 and state.time == 0.0
+
+
+def test_a_damped_motion_ends_in_the_static_equilibrium(tmp_path):
+    robot = robot_with(tmp_path, damping={'bending': 1e-4, 'shear': 1e-2})
+    sim = robot.dynamics()  # the robot file's dt (1 ms) and alpha (-0.2)
+    sim.start(tensions=[1.0, 0.0, 0.0, 0.0])
+    tensions, force = np.array([1.0, 0.3, 0.0, 0.0]), np.array([0.0, 0.02, 0.0])
+    path = []
+    for _ in range(3000):
+        state = sim.step(tensions=tensions, tip_force=force)
+        assert state.converged
+        path.append(state.tip_position)
+    static = robot.solve_tensions(tensions, force)
+    start = robot.solve_tensions([1.0, 0.0, 0.0, 0.0])
+    moved = np.linalg.norm(static.tip_position - start.tip_position)
+    overshoot = np.max(np.linalg.norm(np.array(path) - start.tip_position, axis=1)) - moved
+    print('moved %.2f mm, overshoot %.2f mm, after 3 s %.2g m from the static tip'
+          % (1e3 * moved, 1e3 * overshoot, np.linalg.norm(state.tip_position
+                                                         - static.tip_position)))
+    assert moved > 5e-3 and overshoot > 1e-3  # it moved, and swung past: inertia
+    assert np.linalg.norm(state.tip_position - static.tip_position) < 1e-6
+    assert np.max(np.abs(state.velocity)) < 1e-4
+
+
+def test_bad_inputs_are_refused_with_the_field_named():
+    robot = load_robot(ROBOT_FILE)
+    with pytest.raises(ValueError, match='alpha'):
+        robot.dynamics(alpha=0.5)
+    sim = robot.dynamics()
+    with pytest.raises(RuntimeError, match='start'):
+        sim.step()
+    sim.start()
+    with pytest.raises(ValueError, match='tensions'):
+        sim.step(tensions=[1.0, -1.0, 0.0, 0.0])
+    with pytest.raises(NotImplementedError, match='lengths'):
+        sim.step(lengths=robot.straight_cable_lengths)
