@@ -7,33 +7,45 @@ time derivatives discretised by BDF-alpha (Till et al. 2019, eq. 13):
     c0 = (1.5 + alpha) / (dt (1 + alpha)),  c1 = -2 / dt,  c2 = (0.5 + alpha) / (dt (1 + alpha)),
     d1 = alpha / (1 + alpha)
 
-for y = the strains v, u and the velocities q, w at every node. alpha = -0.5 is the trapezoidal
-rule (energy kept), alpha = 0 BDF2 (high frequencies damped); Till et al. use -0.2.
+for y = the strains v, u and the velocities q, w at every node. alpha -> -0.5 is the trapezoidal
+rule (energy kept), alpha = 0 BDF2 (high frequencies damped); Till et al. use -0.2. -0.45 is the
+least allowed (``robot_file.MIN_ALPHA``: at -0.5 a spurious mode of the discrete rod grows).
 
 Scope today: the rod with gravity, a tip load, guide-disk masses and the point-moment cable
 model driven by tensions (the paper's model). Lengths as inputs (real tendons: slack, stretch,
 friction) and the distributed cable model are refused with a message, not approximated.
 """
+import dataclasses
 from dataclasses import dataclass
+from typing import NamedTuple
 
 import numpy as np
 
+from continuum_statics.core.inputs import as_vector
 from continuum_statics.core.layout import (
-    DYN_FORCE_AT,
+    BENDING,
     DYN_HISTORY_SIZE,
+    DYN_MOMENT_AT,
     DYN_PARAMS_SIZE,
     DYN_POSITION_AT,
     DYN_ROTATION_AT,
     DYNAMIC_STATE,
+    MOMENT,
+    POSITION,
+    ROTATION,
+    STATE_SIZE,
+    STRETCH,
+    CableInputs,
     DynamicsModel,
 )
+from continuum_statics.core.length_statics import motion_since, problem_constants
 from continuum_statics.core.robot_file import check_dynamics
 from continuum_statics.core.shape import Shape
 
 #: Newton iterations per step at most (a warm step takes one or two)
 MAX_ITERATIONS = 30
-#: tip force and moment residual, relative to E I / L^2 and E I / L
-TOLERANCE = 1e-10
+#: residual of a solved step, each value in its unit (DynamicsModel.scales): ~1e-9 m at the tip
+TOLERANCE = 1e-8
 
 
 @dataclass(frozen=True)
@@ -95,9 +107,13 @@ def _node_masses(robot):
 class RodDynamics:
     """Time steps of one robot's rod (``Robot.dynamics``): ``start`` then ``step`` each dt.
 
+    Cables are driven either by tensions (N at the end disks) or, for real tendons, by the
+    motors' lengths (m, as ``solve_lengths``: stretch, slack, pretension and capstan friction
+    with its direction of motion); ``start`` chooses which for the whole run.
+
     :param robot: the :class:`~continuum_statics.core.robot.Robot`
     :param dt: time step (s); None: the robot file's ``dynamics.dt``
-    :param alpha: BDF-alpha in [-0.5, 0]; None: the robot file's ``dynamics.alpha``
+    :param alpha: BDF-alpha in [-0.45, 0]; None: the robot file's ``dynamics.alpha``
     """
 
     def __init__(self, robot, dt=None, alpha=None):
@@ -110,151 +126,227 @@ class RodDynamics:
                                       'yet (point_moment is)' % robot.cable_model)
         self.robot = robot
         self.c0, self.c1, self.c2, self.d1 = bdf_alpha(self.dt, self.alpha)
-        n = len(robot.s_grid)
-        scale = robot.interval_scale
-        ei, length = robot.c[0], robot.length
-        self.record = DynamicsModel(
-            robot.s_grid, dynamics_params(robot), _node_masses(robot),
-            np.ones(n - 1) if scale is None else np.asarray(scale, dtype=float),
-            np.ascontiguousarray(robot.cable_offsets, dtype=float).reshape(-1, 3),
-            robot.cable_end_node, np.array([ei / length ** 2] * 3 + [ei / length] * 3))
+        self.record = dynamics_model(robot, self.dt, self.c0)
+        self.segments = len(self.record.bounds) - 1
         self._model = robot.model
+        self._friction = problem_constants(robot).friction
+        n = len(robot.s_grid)
         self._states = np.zeros((n, DYNAMIC_STATE))
         self._left = np.zeros((n, 6))
-        self._base = np.zeros(6)
-        self._last_base = np.zeros(6)  # the step before's (the predictor's)
-        self._jacobian = np.eye(6)
-        # BDF-alpha memory per node and side: y(t_i-1), y(t_i), y_t(t_i) -> the next history
-        self._previous = np.zeros((n, 2, DYN_HISTORY_SIZE))
-        self._current = np.zeros((n, 2, DYN_HISTORY_SIZE))
-        self._rate = np.zeros((n, 2, DYN_HISTORY_SIZE))
-        self._history = np.zeros((n, 2, DYN_HISTORY_SIZE))
+        self._stages = np.zeros((n - 1, 4, DYN_HISTORY_SIZE))  # v, u, q, w at the RK4 stages
+        self._motor = np.zeros(len(robot.cable_names))  # motor-side tensions (N)
+        # BDF-alpha memory per RK4 stage: y(t_i-1), y(t_i), y_t(t_i) -> the next history
+        self._previous = np.zeros_like(self._stages)
+        self._current = np.zeros_like(self._stages)
+        self._rate = np.zeros_like(self._stages)
+        self._history = np.zeros_like(self._stages)
+        self.driven_by_lengths = False
+        self._motion = None  # length-driven: each cable's friction state (length_statics)
         self.time = None
         self.state = None
 
     # -- the two calls of the contract ----------------------------------------------------
     def start(self, lengths=None, tensions=None, tip_force=(0.0, 0.0, 0.0),
               tip_moment=(0.0, 0.0, 0.0)) -> DynamicState:
-        """Start at rest in static equilibrium under these loads (time 0)."""
-        tensions, tip = self._loads(lengths, tensions, tip_force, tip_moment)
-        static = self.robot.solve_tensions(tensions, tip[:3], tip[3:]) if len(tensions) \
-            else self.robot.solve_bvp(tip[:3], tip[3:])
-        # the static solution's base force and moment start Newton's method at c0 = 0 (no
-        # time derivative: the same kernel solves the statics of this discretisation)
-        rotation0 = static.rotations[0]
-        c = self.robot.node_c[0]
-        self._base[:3] = _base_force(self.robot, self.record.disk_mass, tip[:3])
-        self._base[3:] = rotation0 @ (c * static.u[0])
+        """Start at rest in static equilibrium under these loads (time 0).
+
+        ``lengths`` (m, the motors') drive the cables from now on; else ``tensions`` (N; None:
+        slack cables).
+        """
+        robot = self.robot
+        self.driven_by_lengths = lengths is not None
+        if self.driven_by_lengths and robot.tendons.is_ideal:
+            raise NotImplementedError('dynamics: lengths drive real tendons (a tendons block: '
+                                      'stretch, pretension); ideal cables take tensions')
+        tip = _tip(tip_force, tip_moment)
+        if self.driven_by_lengths:
+            lengths = as_vector(lengths, len(robot.cable_names), 'lengths')
+            static = robot.solve_lengths(lengths, tip[:3], tip[3:])
+            if not static.converged:
+                raise ValueError('dynamics: no static equilibrium at these lengths: %s'
+                                 % static.message)
+            self._motion = static
+            end_tensions = static.end_tensions
+            shape = static.shape
+        else:
+            end_tensions = self._tensions(tensions)
+            shape = robot.solve_tensions(end_tensions, tip[:3], tip[3:]) if len(end_tensions) \
+                else robot.solve_bvp(tip[:3], tip[3:])
+        # the unknowns: n(0), m(0), the state at each later segment's start, then (driven by
+        # lengths) each cable's end tension
+        rest = _unknowns_at_rest(robot, self.record, shape, tip)
+        self._x = np.concatenate([rest, end_tensions]) if self.driven_by_lengths else rest
+        self._last_x = self._x.copy()  # the step before's (the predictor's)
+        self._jacobian = np.zeros((len(self._x), len(self._x)))  # its inverse (Broyden)
+        self._pivots = np.zeros(len(self._x), dtype=np.int64)
+        # the static solution starts Newton's method at c0 = 0 (no time derivative: the same
+        # kernel solves the statics of this discretisation)
         self._history[:] = 0.0
-        self._first_solve(0.0, tensions, tip)
-        self._last_base[:] = self._base
-        values = self._values(0.0)
-        self._previous[:] = values
-        self._current[:] = values
+        converged, _ = self._solve(0.0, self._cables(lengths, end_tensions), tip, refresh=True)
+        if not converged:
+            raise ValueError('dynamics: no static equilibrium to start from under these loads')
+        self._last_x[:] = self._x
+        self._previous[:] = self._stages
+        self._current[:] = self._stages
         self._rate[:] = 0.0
         self.time = 0.0
-        self.state = self._state(tensions, True, 0)
+        self.state = self._state(True, 0)
         return self.state
 
     def step(self, lengths=None, tensions=None, tip_force=(0.0, 0.0, 0.0),
              tip_moment=(0.0, 0.0, 0.0)) -> DynamicState:
-        """Advance one dt under these loads; the result is also ``self.state``.
+        """Advance one dt under these inputs; the result is also ``self.state``.
 
         A step whose shooting problem fails keeps the last state (``converged`` False).
         """
         if self.time is None:
             raise RuntimeError('dynamics: call start() before step()')
-        tensions, tip = self._loads(lengths, tensions, tip_force, tip_moment)
+        if self.driven_by_lengths != (lengths is not None):
+            raise ValueError('dynamics: started driven by %s: give %s every step'
+                             % (('lengths', 'lengths') if self.driven_by_lengths
+                                else ('tensions', 'tensions')))
+        tip = _tip(tip_force, tip_moment)
+        cables = self._cables(lengths, tensions)
         # y_h = c1 y(t_i-1) + c2 y(t_i-2) + d1 y_t(t_i-1) (eq. 13)
         self._history[:] = (self.c1 * self._current + self.c2 * self._previous
                             + self.d1 * self._rate)
-        saved = self._base.copy(), self._states.copy(), self._left.copy()
-        # predictor: the base's force and moment extrapolated from the last two steps
-        self._base += self._base - self._last_base
-        converged, ivps = self._solve(self.c0, tensions, tip)
+        saved = (self._x.copy(), self._states.copy(), self._left.copy(),
+                 self._stages.copy(), self._motor.copy())
+        # predictor: the unknowns extrapolated from the last two steps
+        self._x += self._x - self._last_x
+        converged, ivps = self._solve(self.c0, cables, tip)
         if not converged:
-            self._base[:], self._states[:], self._left[:] = saved
-            return DynamicState(self.state.time, self.state.shape, self.state.velocity,
-                                self.state.angular_velocity, tensions, False, ivps,
-                                self.state.states)
-        self._last_base[:] = saved[0]
-        values = self._values(self.c0)
-        self._rate[:] = self.c0 * values + self._history
+            self._x[:], self._states[:], self._left[:], self._stages[:], self._motor[:] = saved
+            return dataclasses.replace(self.state, converged=False, iterations=ivps)
+        self._last_x[:] = saved[0]
+        self._rate[:] = self.c0 * self._stages + self._history
         self._previous[:] = self._current
-        self._current[:] = values
+        self._current[:] = self._stages
         self.time += self.dt
-        self.state = self._state(tensions, True, ivps)
+        self.state = self._state(True, ivps)
         return self.state
 
     # -- helpers --------------------------------------------------------------------------
-    def _loads(self, lengths, tensions, tip_force, tip_moment):
-        if lengths is not None:
-            raise NotImplementedError('dynamics: cable lengths as inputs (real tendons) are not '
-                                      'modelled in motion yet; give tensions')
+    def _tensions(self, tensions):
         n = len(self.robot.cable_names)
         tensions = np.zeros(n) if tensions is None else np.asarray(tensions, dtype=float)
         if tensions.shape != (n,) or not np.all(np.isfinite(tensions)) or np.any(tensions < 0):
             raise ValueError('tensions must be %d finite numbers >= 0 N, got %s'
                              % (n, np.asarray(tensions).tolist()))
-        tip = np.concatenate([np.asarray(tip_force, dtype=float).reshape(3),
-                              np.asarray(tip_moment, dtype=float).reshape(3)])
-        if not np.all(np.isfinite(tip)):
-            raise ValueError('tip_force and tip_moment must be finite, got %s' % tip.tolist())
-        return tensions, tip
+        return tensions
 
-    def _solve(self, c0, tensions, tip):
+    def _cables(self, lengths, tensions):
+        """Return the step's :class:`CableInputs`; driven by lengths, friction moves on."""
+        robot = self.robot
+        if not self.driven_by_lengths:
+            tensions = self._tensions(tensions)
+            return CableInputs(tensions, _NONE, np.zeros(len(tensions)))
+        lengths = as_vector(lengths, len(robot.cable_names), 'lengths')
+        free = robot.tendons.free_lengths(lengths, robot.straight_cable_lengths)
+        motion, reference = motion_since(robot, free, self._motion)
+        self._motion = _Motion(free, reference, motion)
+        return CableInputs(_NONE, free, self._friction * motion + 0.0)
+
+    def _solve(self, c0, cables, tip, refresh=False):
         converged, ivps, _ = self._model.dynamics_solve(
-            self.record, c0, self._history, self._base, self._jacobian, tip, tensions,
-            self._states, self._left, TOLERANCE, MAX_ITERATIONS)
+            self.record, c0, self._history, self._x, self._jacobian, self._pivots, tip,
+            cables, self._states, self._left, self._stages, self._motor, TOLERANCE, MAX_ITERATIONS,
+            refresh)
         return converged, ivps
 
-    def _first_solve(self, c0, tensions, tip):
-        """Solve with a Jacobian of forward differences at the start (no last step's)."""
-        work = np.empty((6, DYNAMIC_STATE))
-        scales = self.record.scales
-
-        def residual(x):
-            self._model.dynamics_shoot(self.record, c0, self._history, x, tensions,
-                                       self._states, self._left, work)
-            return (self._states[-1, DYN_FORCE_AT:DYN_FORCE_AT + 6] - tip) / scales
-
-        r0 = residual(self._base)
-        for j in range(6):
-            x = self._base.copy()
-            x[j] += 1e-7 * scales[j]
-            self._jacobian[:, j] = (residual(x) - r0) / (1e-7 * scales[j])
-        converged, ivps = self._solve(c0, tensions, tip)
-        if not converged:
-            raise ValueError('dynamics: no static equilibrium to start from under these loads')
-        return ivps + 7
-
-    def _values(self, c0):
-        out = np.empty_like(self._current)
-        self._model.dynamics_values(self.record, self._states, self._left, self._history, c0,
-                                    out)
-        return out
-
-    def _state(self, tensions, converged, ivps):
+    def _state(self, converged, ivps):
         states = self._states.copy()
         rotations = states[:, DYN_ROTATION_AT:DYN_ROTATION_AT + 9].reshape(-1, 3, 3)
-        values = self._current[:, 1]
-        static = np.empty((len(states), 21))
-        static[:, 0:3] = states[:, DYN_POSITION_AT:DYN_POSITION_AT + 3]
-        static[:, 3:12] = states[:, DYN_ROTATION_AT:DYN_ROTATION_AT + 9]
-        static[:, 12:15] = self._current[:, 0, 0:3] - np.array([0.0, 0.0, 1.0])
-        static[:, 15:18] = self._current[:, 0, 3:6]
-        static[:, 18:21] = states[:, DYN_FORCE_AT + 3:DYN_FORCE_AT + 6]
-        shape = Shape(self.robot.s_grid, static, self._current[0, 1, 3:6].copy(),
-                      self._base[:3].copy(), self.robot.node_c, self.robot.d,
-                      fixed_tensions=tensions)
-        velocity = np.einsum('nij,nj->ni', rotations, values[:, 6:9])
-        angular = np.einsum('nij,nj->ni', rotations, values[:, 9:12])
-        return DynamicState(self.time, shape, velocity, angular, tensions.copy(), converged,
+        # each node's v, u, q, w: the first stage at the base, the last of the interval before
+        # elsewhere (the strains' left limit, as the statics' shapes keep them)
+        nodes = np.concatenate([self._current[:1, 0], self._current[:, 3]])
+        static = np.empty((len(states), STATE_SIZE))
+        static[:, POSITION] = states[:, DYN_POSITION_AT:DYN_POSITION_AT + 3]
+        static[:, ROTATION] = states[:, DYN_ROTATION_AT:DYN_ROTATION_AT + 9]
+        static[:, STRETCH] = nodes[:, 0:3] - np.array([0.0, 0.0, 1.0])
+        static[:, BENDING] = nodes[:, 3:6]
+        static[:, MOMENT] = states[:, DYN_MOMENT_AT:DYN_MOMENT_AT + 3]
+        n_cables = len(self.robot.cable_names)
+        end = self._x[len(self._x) - n_cables:] if self.driven_by_lengths else self._motor
+        shape = Shape(self.robot.s_grid, static, nodes[0, 3:6].copy(), self._x[:3].copy(),
+                      self.robot.node_c, self.robot.d, fixed_tensions=end.copy())
+        velocity = np.einsum('nij,nj->ni', rotations, nodes[:, 6:9])
+        angular = np.einsum('nij,nj->ni', rotations, nodes[:, 9:12])
+        return DynamicState(self.time, shape, velocity, angular, self._motor.copy(), converged,
                             ivps, states)
 
 
-def _base_force(robot, masses, tip_force):
-    """n(0) at rest (N, global): the tip force and every weight (eq. 10 integrated)."""
-    weight = (robot.description.rod.mass_per_length * robot.length + masses.sum()) * np.asarray(
-        robot.gravity, dtype=float)
-    return weight + tip_force
+class _Motion(NamedTuple):
+    """Each cable's friction state between steps (what ``motion_since`` reads)."""
+
+    free_lengths: np.ndarray
+    motion_reference: np.ndarray
+    motion: np.ndarray
+
+
+_NONE = np.zeros(0)
+
+
+def _tip(tip_force, tip_moment):
+    tip = np.concatenate([as_vector(tip_force, 3, 'tip_force'),
+                          as_vector(tip_moment, 3, 'tip_moment')])
+    return tip
+
+
+def dynamics_model(robot, dt, c0):
+    """Return the robot's :class:`DynamicsModel` (what the kernel reads) for this time step."""
+    n = len(robot.s_grid)
+    scale = robot.interval_scale
+    constants = problem_constants(robot)
+    return DynamicsModel(
+        robot.s_grid, dynamics_params(robot), _node_masses(robot),
+        np.ones(n - 1) if scale is None else np.asarray(scale, dtype=float),
+        np.ascontiguousarray(robot.cable_offsets, dtype=float).reshape(-1, 3),
+        robot.cable_end_node, _scales(robot, dt), _bounds(robot, c0), robot.guide_nodes,
+        robot.cable_last_guide, robot.hole_offsets, constants.base_axis,
+        np.ascontiguousarray(constants.compliance, dtype=float), float(constants.kappa),
+        float(constants.radius), float(constants.t_ref))
+
+
+#: growth of a perturbation along one shooting segment, e-folds (exp(3) = 20)
+SEGMENT_GROWTH = 3.0
+
+
+def _bounds(robot, c0):
+    """Node index of each shooting segment's start, then the tip's.
+
+    The time-discretised bending equations grow a perturbation like exp(s lambda),
+    lambda = (rho A c0^2 / E I)^(1/4) (the beam equation E I w^(4) = -rho A c0^2 w): the rod
+    is cut where it has grown by SEGMENT_GROWTH e-folds, so Newton's method sees a mild problem.
+    """
+    rod = robot.description.rod
+    growth = (rod.mass_per_length * c0 ** 2 / robot.c[0]) ** 0.25 * robot.length
+    n_intervals = len(robot.s_grid) - 1
+    segments = int(min(max(1, np.ceil(growth / SEGMENT_GROWTH)), n_intervals))
+    return np.round(np.linspace(0, n_intervals, segments + 1)).astype(np.int64)
+
+
+def _scales(robot, dt):
+    """Units of the state values in the residual (``DynamicsModel.scales``)."""
+    ei, length = robot.c[0], robot.length
+    return np.concatenate([np.full(3, length), np.ones(9), np.full(3, ei / length ** 2),
+                           np.full(3, ei / length), np.full(3, length / dt), np.full(3, 1 / dt)])
+
+
+def _unknowns_at_rest(robot, record, static, tip):
+    """Return the unknowns of a rod at rest in ``static``: n, m at the base and each cut."""
+    weight = np.asarray(robot.gravity, dtype=float)
+    mass_beyond = (robot.description.rod.mass_per_length * (robot.length - robot.s_grid)
+                   + np.cumsum(record.disk_mass[::-1])[::-1] - record.disk_mass)
+    last = len(robot.s_grid) - 1
+    x = []
+    for j, node in enumerate(record.bounds[:-1]):
+        rotation = static.rotations[node]
+        force = tip[:3] + mass_beyond[node] * weight  # eq. 10 integrated
+        after = min(node + 1, last)  # the strain just past the node
+        moment = rotation @ (robot.node_c[after] * static.u[after])
+        if j == 0:
+            x += [force, moment]
+        else:
+            x += [static.positions[node], rotation.ravel(), force, moment, np.zeros(6)]
+    return np.concatenate(x)

@@ -20,8 +20,8 @@ tip must carry the tip load, n(L) = F and m(L) = M. Point loads at the nodes mak
 the weight and inertia of guide disks, m_d (g - R (q_t + w x q)), and the point-moment cable
 model's pull on each section's end disk, t_j R (e3 x l_j) (the paper; internal forces cancel).
 
-The spatial integration is classical RK4 on all 24 values, the history linear across an interval
-(second order in s where the history bends; :mod:`test_dynamics` measures the order). Newton's
+The spatial integration is classical RK4 on all 24 values, each of its stages with its own
+history (Till et al. keep one per grid point of their scheme likewise). Newton's
 method on the six unknowns reuses the last step's Jacobian (chord steps) and refreshes it by
 forward differences only when a chord step does not reduce the residual.
 """
@@ -34,21 +34,24 @@ from continuum_statics.core.layout import (
     DYN_BASE_POSITION_AT,
     DYN_BASE_ROTATION_AT,
     DYN_GRAVITY_AT,
-    DYN_HISTORY_SIZE,
     DYN_K_BT_AT,
     DYN_K_SE_AT,
     DYN_MASS_AT,
     DYN_RHO_J_AT,
     DYNAMIC_STATE,
 )
+from continuum_statics.core.tendon_kernel import path_stretch
 
 _SIXTH = 1.0 / 6.0
 HALVINGS = 12  # of a fresh Newton step at most
 
 
 @numba.njit(cache=True, nogil=True)
-def _derivative(y, hist, c0, params, scale, out):
-    """Write y_s of one state ``y`` (24,) with history ``hist`` (12,) into ``out`` (24,)."""
+def _derivative(y, hist, c0, params, scale, out, values):
+    """Write y_s of one state ``y`` (24,) with history ``hist`` (12,) into ``out`` (24,).
+
+    ``values`` (12,) receives v, u, q, w there: the next step's history at this point.
+    """
     r00, r01, r02 = y[3], y[4], y[5]
     r10, r11, r12 = y[6], y[7], y[8]
     r20, r21, r22 = y[9], y[10], y[11]
@@ -74,6 +77,9 @@ def _derivative(y, hist, c0, params, scale, out):
                                                               + c0 * params[bb + 1]))
     u2 = (lm2 - scale * params[bb + 2] * hist[5]) / (scale * (params[kb + 2]
                                                               + c0 * params[bb + 2]))
+    values[0], values[1], values[2], values[3], values[4], values[5] = v0, v1, v2, u0, u1, u2
+    values[6], values[7], values[8] = q0, q1, q2
+    values[9], values[10], values[11] = w0, w1, w2
     vt0, vt1, vt2 = c0 * v0 + hist[0], c0 * v1 + hist[1], c0 * v2 + hist[2]
     ut0, ut1, ut2 = c0 * u0 + hist[3], c0 * u1 + hist[4], c0 * u2 + hist[5]
     qt0, qt1, qt2 = c0 * q0 + hist[6], c0 * q1 + hist[7], c0 * q2 + hist[8]
@@ -145,157 +151,370 @@ def _point_loads(y, hist, c0, node, disk_mass, params, tensions, cable_offsets, 
 
 
 @numba.njit(cache=True, nogil=True)
-def shoot(model, c0, history, base, tensions, states, left, work):
-    """Integrate one step's IVP from the base's ``base`` = (n(0), m(0)) into ``states`` (N, 24).
+def _segment(model, c0, history, start, k0, k1, tensions, states, left, stages, work):
+    """Integrate nodes ``k0`` -> ``k1`` from ``start`` (24,), the state just past node ``k0``.
 
-    :param model: the robot's :class:`~continuum_statics.core.layout.DynamicsModel`
-    :param history: (N, 2, 12) v_h, u_h, q_h, w_h at the nodes (``DYN_HISTORY_SIZE``), the
-        limit from the base side [:, 0] and from the tip side [:, 1] (strains jump at point loads)
-    :param left: (N, 6) out: n, m on the base side of each node (``states`` holds the tip side)
-    :param tensions: (n_cables,) N
-    :param work: (6, 24) scratch
+    Writes ``states``, ``left`` and ``stages`` of those nodes and intervals (the rows of the
+    whole rod's arrays); ``work`` (6, 24) is scratch, its row 0 the state at ``k1`` after.
     """
     s_grid, params, disk_mass = model.s_grid, model.params, model.disk_mass
     bending_scale, cable_offsets, cable_end_node = (model.bending_scale, model.cable_offsets,
                                                     model.cable_end_node)
-    n_nodes = s_grid.shape[0]
-    y, k1, k2, k3, k4, tmp = work[0], work[1], work[2], work[3], work[4], work[5]
-    hist = np.empty(DYN_HISTORY_SIZE)
-    for i in range(3):
-        y[i] = params[DYN_BASE_POSITION_AT + i]
-    for i in range(9):
-        y[3 + i] = params[DYN_BASE_ROTATION_AT + i]
-    for i in range(6):
-        y[12 + i] = base[i]
-    for i in range(6):
-        y[18 + i] = 0.0
-    for i in range(6):
-        left[0, i] = y[12 + i]
-    _point_loads(y, history[0, 1], c0, 0, disk_mass, params, tensions, cable_offsets,
-                 cable_end_node)
-    states[0, :] = y
-    for k in range(n_nodes - 1):
+    y, d1, d2, d3, d4, tmp = work[0], work[1], work[2], work[3], work[4], work[5]
+    for i in range(DYNAMIC_STATE):
+        y[i] = start[i]
+    states[k0, :] = y
+    if k0 == 0:
+        for i in range(6):
+            left[0, i] = y[12 + i]
+    for k in range(k0, k1):
         h = s_grid[k + 1] - s_grid[k]
         scale = bending_scale[k]
-        _derivative(y, history[k, 1], c0, params, scale, k1)
-        for i in range(DYN_HISTORY_SIZE):
-            hist[i] = 0.5 * (history[k, 1, i] + history[k + 1, 0, i])
+        _derivative(y, history[k, 0], c0, params, scale, d1, stages[k, 0])
         for i in range(DYNAMIC_STATE):
-            tmp[i] = y[i] + 0.5 * h * k1[i]
-        _derivative(tmp, hist, c0, params, scale, k2)
+            tmp[i] = y[i] + 0.5 * h * d1[i]
+        _derivative(tmp, history[k, 1], c0, params, scale, d2, stages[k, 1])
         for i in range(DYNAMIC_STATE):
-            tmp[i] = y[i] + 0.5 * h * k2[i]
-        _derivative(tmp, hist, c0, params, scale, k3)
+            tmp[i] = y[i] + 0.5 * h * d2[i]
+        _derivative(tmp, history[k, 2], c0, params, scale, d3, stages[k, 2])
         for i in range(DYNAMIC_STATE):
-            tmp[i] = y[i] + h * k3[i]
-        _derivative(tmp, history[k + 1, 0], c0, params, scale, k4)
+            tmp[i] = y[i] + h * d3[i]
+        _derivative(tmp, history[k, 3], c0, params, scale, d4, stages[k, 3])
         for i in range(DYNAMIC_STATE):
-            y[i] += h * _SIXTH * (k1[i] + 2.0 * (k2[i] + k3[i]) + k4[i])
+            y[i] += h * _SIXTH * (d1[i] + 2.0 * (d2[i] + d3[i]) + d4[i])
         for i in range(6):
             left[k + 1, i] = y[12 + i]
-        _point_loads(y, history[k + 1, 0], c0, k + 1, disk_mass, params, tensions,
+        _point_loads(y, history[k, 3], c0, k + 1, disk_mass, params, tensions,
                      cable_offsets, cable_end_node)
         states[k + 1, :] = y
 
 
 @numba.njit(cache=True, nogil=True)
-def _residual(states, tip, scales, out):
-    last = states.shape[0] - 1
-    for i in range(6):
-        out[i] = (states[last, 12 + i] - tip[i]) / scales[i]
+def _start_of(model, x, j, bounds, out):
+    """Write segment ``j``'s start state (24,) from the unknowns ``x`` into ``out``."""
+    if j == 0:  # the base: p, R fixed, q = w = 0; n(0), m(0) unknown
+        params = model.params
+        for i in range(3):
+            out[i] = params[DYN_BASE_POSITION_AT + i]
+        for i in range(9):
+            out[3 + i] = params[DYN_BASE_ROTATION_AT + i]
+        for i in range(6):
+            out[12 + i] = x[i]
+            out[18 + i] = 0.0
+    else:
+        at = 6 + DYNAMIC_STATE * (j - 1)
+        for i in range(DYNAMIC_STATE):
+            out[i] = x[at + i]
 
 
 @numba.njit(cache=True, nogil=True)
-def solve_step(model, c0, history, base, jacobian, tip, tensions, states, left, tolerance,
-               max_iterations):
-    """Newton's method on ``base`` (6,) until the tip carries ``tip`` (6,: F, M, global).
+def _segment_residual(model, j, bounds, x, end, tip, out):
+    """Write the residual block that segment ``j``'s end state ``end`` (24,) meets into ``out``.
 
-    ``jacobian`` (6, 6) d residual / d base (residual = (n, m)(L) - tip, divided by ``scales``)
-    is read as the start and refreshed in place when a chord step fails to reduce the residual.
-    ``base``, ``states`` (N, 24) and ``left`` (N, 6) hold the solution. Returns (converged,
-    IVPs integrated, Jacobian refreshes).
+    Continuity with the next segment's start (24 values, each divided by its scale), or at the
+    tip n(L) - F, m(L) - M (6).
     """
     scales = model.scales
-    work = np.empty((6, DYNAMIC_STATE))
-    res = np.empty(6)
-    trial_res = np.empty(6)
-    trial = np.empty(6)
+    n_segments = bounds.shape[0] - 1
+    if j == n_segments - 1:
+        at = DYNAMIC_STATE * (n_segments - 1)
+        for i in range(6):
+            out[at + i] = (end[12 + i] - tip[i]) / scales[12 + i]
+    else:
+        at = DYNAMIC_STATE * j
+        start = 6 + DYNAMIC_STATE * j
+        for i in range(DYNAMIC_STATE):
+            out[at + i] = (end[i] - x[start + i]) / scales[i]
+
+
+@numba.njit(cache=True, nogil=True)
+def shoot(model, c0, history, x, tensions, tip, states, left, stages, work, residual):
+    """Integrate every segment from its start in ``x`` and write the ``residual``.
+
+    Multiple shooting (the rod split at the nodes ``bounds``): ``x`` holds n(0), m(0) (6) and
+    the full state (24) at the start of each segment after the first; the residual is each
+    segment's mismatch with the next (24) and the tip's load balance (6). One segment is the
+    statics' single shooting; more keep the growth of a perturbation along a segment small
+    (it grows like exp(s (rho A c0^2 / E I)^(1/4)) in the time-discretised equations).
+
+    :param model: the robot's :class:`~continuum_statics.core.layout.DynamicsModel`
+    :param history: (N - 1, 4, 12) v_h, u_h, q_h, w_h at each interval's four RK4 stages
+        (``DYN_HISTORY_SIZE``): every point the equations are evaluated at keeps its own
+        history, so BDF-alpha applies to the discrete system exactly (a history interpolated
+        between nodes gained 30 % of energy per second with the trapezoidal rule)
+    :param tensions: (n_cables,) N
+    :param tip: (6,) F (N), M (N m), global
+    :param left: (N, 6) out: n, m on the base side of each node (``states`` holds the tip side)
+    :param stages: (N - 1, 4, 12) out: v, u, q, w at each stage (the next history's values)
+    :param work: (7, 24) scratch
+    """
+    start, bounds = work[6], model.bounds
+    for j in range(bounds.shape[0] - 1):
+        _start_of(model, x, j, bounds, start)
+        _segment(model, c0, history, start, bounds[j], bounds[j + 1], tensions, states, left,
+                 stages, work[:6])
+        _segment_residual(model, j, bounds, x, work[0], tip, residual)
+
+
+@numba.njit(cache=True, nogil=True)
+def _lu_factor(a, pivots):
+    """Factor ``a`` (M, M) in place as P A = L U with partial pivoting; False if singular."""
+    m = a.shape[0]
+    for k in range(m):
+        p = k
+        big = abs(a[k, k])
+        for i in range(k + 1, m):
+            if abs(a[i, k]) > big:
+                big, p = abs(a[i, k]), i
+        if big == 0.0 or not np.isfinite(big):
+            return False
+        pivots[k] = p
+        if p != k:
+            for j in range(m):
+                a[k, j], a[p, j] = a[p, j], a[k, j]
+        inverse = 1.0 / a[k, k]
+        for i in range(k + 1, m):
+            factor = a[i, k] * inverse
+            a[i, k] = factor
+            if factor != 0.0:
+                for j in range(k + 1, m):
+                    a[i, j] -= factor * a[k, j]
+    return True
+
+
+@numba.njit(cache=True, nogil=True)
+def _lu_solve(lu, pivots, b, out):
+    """Solve A out = b with the factors of :func:`_lu_factor`."""
+    m = lu.shape[0]
+    for i in range(m):
+        out[i] = b[i]
+    for k in range(m):
+        p = pivots[k]
+        if p != k:
+            out[k], out[p] = out[p], out[k]
+    for i in range(m):
+        total = out[i]
+        for j in range(i):
+            total -= lu[i, j] * out[j]
+        out[i] = total
+    for i in range(m - 1, -1, -1):
+        total = out[i]
+        for j in range(i + 1, m):
+            total -= lu[i, j] * out[j]
+        out[i] = total / lu[i, i]
+
+
+@numba.njit(cache=True, nogil=True)
+def _cable_rows(model, states, x, cables, work, residual):
+    """Write the cables' rows of a length-driven step: min(kappa t, free - consumed) / radius.
+
+    The semismooth form of R&W 2011's length constraint with slack (as the statics',
+    ``length_statics``): a taut cable's path, stretched by its tension with capstan friction
+    (``tendon_kernel.path_stretch``), takes its free length; a slack one carries nothing.
+    """
+    first = x.shape[0] - cables.free.shape[0]
+    tensions = x[first:]
+    consumed, motor, mean = work
+    path_stretch(states, model.guide_nodes, model.cable_last_guide, model.hole_offsets,
+                 model.base_axis, tensions, cables.friction, model.compliance, consumed, motor,
+                 mean)
+    for j in range(tensions.shape[0]):
+        residual[first + j] = min(model.kappa * tensions[j],
+                                  cables.free[j] - consumed[j]) / model.radius
+
+
+@numba.njit(cache=True, nogil=True)
+def _evaluate(model, c0, history, x, cables, tip, states, left, stages, work, cable_work,
+              residual):
+    """Write the whole residual at ``x``: the segments, the tip and (driven by lengths) cables."""
+    n_free = cables.free.shape[0]
+    tensions = x[x.shape[0] - n_free:] if n_free else cables.tensions
+    shoot(model, c0, history, x, tensions, tip, states, left, stages, work, residual)
+    if n_free:
+        _cable_rows(model, states, x, cables, cable_work, residual)
+
+
+@numba.njit(cache=True, nogil=True)
+def _refresh(model, c0, history, x, cables, tip, residual, jacobian, nominal, scratch):
+    """Forward differences of the residual in each unknown.
+
+    A segment's unknowns rerun that segment alone (the others keep ``nominal`` = (states, left,
+    stages) of ``x``); a tension reruns the whole rod.
+    """
+    states, left, stages, work = scratch[0], scratch[1], scratch[2], scratch[3]
+    trial, cable_work = scratch[4], scratch[5]
+    bounds = model.bounds
+    n_unknowns = x.shape[0]
+    n_free = cables.free.shape[0]
+    tensions = x[n_unknowns - n_free:] if n_free else cables.tensions
+    column = np.empty(n_unknowns)
+    states[:, :] = nominal[0]
+    for j in range(bounds.shape[0] - 1):
+        first = 0 if j == 0 else 6 + DYNAMIC_STATE * (j - 1)
+        count = 6 if j == 0 else DYNAMIC_STATE
+        k0, k1 = bounds[j], bounds[j + 1]
+        for c in range(first, first + count):
+            scale = model.scales[12 + c] if j == 0 else model.scales[c - first]
+            delta = 1e-7 * scale
+            for i in range(n_unknowns):
+                trial[i] = x[i]
+            trial[c] += delta
+            _start_of(model, trial, j, bounds, work[6])
+            _segment(model, c0, history, work[6], k0, k1, tensions, states, left, stages,
+                     work[:6])
+            for i in range(n_unknowns):
+                column[i] = residual[i]
+            _segment_residual(model, j, bounds, trial, work[0], tip, column)
+            # the perturbed unknown also enters the previous segment's continuity block
+            if j > 0:
+                row = DYNAMIC_STATE * (j - 1) + (c - first)
+                column[row] = residual[row] - delta / model.scales[c - first]
+            if n_free:  # the cables see the rod as a full shoot would: the next start at k1
+                if j < bounds.shape[0] - 2:
+                    states[k1, :] = nominal[0][k1]
+                _cable_rows(model, states, trial, cables, cable_work, column)
+            for i in range(n_unknowns):
+                jacobian[i, c] = (column[i] - residual[i]) / delta
+            for k in range(k0, k1 + 1):
+                states[k, :] = nominal[0][k]
+    for c in range(n_unknowns - n_free, n_unknowns):
+        delta = 1e-7 * model.tension_scale
+        for i in range(n_unknowns):
+            trial[i] = x[i]
+        trial[c] += delta
+        _evaluate(model, c0, history, trial, cables, tip, states, left, stages, work,
+                  cable_work, column)
+        for i in range(n_unknowns):
+            jacobian[i, c] = (column[i] - residual[i]) / delta
+
+
+@numba.njit(cache=True, nogil=True)
+def _fresh_inverse(model, c0, history, x, cables, tip, res, inverse, pivots, nominal, scratch):
+    """Write the inverse of a fresh finite-difference Jacobian into ``inverse``; False: none."""
+    jacobian = scratch[6]
+    _refresh(model, c0, history, x, cables, tip, res, jacobian, nominal, scratch)
+    if not _lu_factor(jacobian, pivots):
+        return False
+    unit = np.zeros(x.shape[0])
+    column = np.empty(x.shape[0])
+    for c in range(x.shape[0]):
+        unit[c] = 1.0
+        _lu_solve(jacobian, pivots, unit, column)
+        inverse[:, c] = column
+        unit[c] = 0.0
+    return True
+
+
+@numba.njit(cache=True, nogil=True)
+def solve_step(model, c0, history, x, inverse, pivots, tip, cables, states, left, stages,
+               motor, tolerance, max_iterations, refresh_first):
+    """Quasi-Newton on ``x`` until every segment meets, the tip balances and the cables fit.
+
+    ``x`` holds 6 + 24 (K - 1) values (:func:`shoot`), then, for a step driven by lengths
+    (``cables.free`` given), each cable's end tension (N). ``inverse`` (M, M) carries the
+    inverse Jacobian of the residual from step to step: computed from forward differences at
+    the start (``refresh_first``) and when a step fails to reduce the residual or three in a
+    row fail to halve it, else updated by Broyden's good formula after each step (a rank-one
+    change, O(M^2)); ``pivots`` (M,) is scratch. ``x``, ``states`` (N, 24), ``left`` (N, 6),
+    ``stages`` and ``motor`` (the motor-side tensions, N) hold the solution. Returns
+    (converged, IVPs integrated (whole rods), Jacobian refreshes).
+    """
+    n_unknowns = x.shape[0]
+    n_segments = model.bounds.shape[0] - 1
+    n_cables = cables.friction.shape[0]
+    n_free = cables.free.shape[0]
+    work = np.empty((7, DYNAMIC_STATE))
+    cable_work = (np.empty(n_cables), np.empty(n_cables), np.empty(n_cables))
+    res = np.empty(n_unknowns)
+    trial_res = np.empty(n_unknowns)
+    trial = np.empty(n_unknowns)
+    step = np.empty(n_unknowns)
+    h_y = np.empty(n_unknowns)
+    s_h = np.empty(n_unknowns)
     column_states = np.empty_like(states)
     column_left = np.empty_like(left)
-    shoot(model, c0, history, base, tensions, states, left, work)
-    _residual(states, tip, scales, res)
+    column_stages = np.empty_like(stages)
+    scratch = (column_states, column_left, column_stages, work, np.empty(n_unknowns),
+               cable_work, np.empty((n_unknowns, n_unknowns)))
+    nominal = (states, left, stages)
+    refresh_cost = (6.0 + DYNAMIC_STATE * (n_segments - 1)) / n_segments + n_free
+    _evaluate(model, c0, history, x, cables, tip, states, left, stages, work, cable_work, res)
     norm = np.sqrt(np.sum(res * res))
-    ivps, refreshes = 1, 0
+    ivps, refreshes = 1.0, 0
     fresh = False
+    slow = 0  # steps in a row that did not halve the residual
+    converged = False
+    if refresh_first:
+        ivps += refresh_cost
+        refreshes, fresh = 1, True
+        if not _fresh_inverse(model, c0, history, x, cables, tip, res, inverse, pivots,
+                              nominal, scratch):
+            return False, ivps, refreshes
     for _ in range(max_iterations):
         if norm <= tolerance:
-            return True, ivps, refreshes
-        step = np.linalg.solve(jacobian, res)
-        # a chord step is tried whole; a fresh Jacobian's step is halved until it reduces the
-        # residual (backtracking: far from the solution the full step may overshoot)
+            converged = True
+            break
+        for i in range(n_unknowns):
+            total = 0.0
+            for j in range(n_unknowns):
+                total += inverse[i, j] * res[j]
+            step[i] = total
+        # a quasi-Newton step is tried whole; a fresh Jacobian's is halved until it reduces
+        # the residual (backtracking: far from the solution the full step may overshoot)
         fraction = 1.0
+        trial_norm = np.inf
         for _ in range(HALVINGS if fresh else 1):
-            for i in range(6):
-                trial[i] = base[i] - fraction * step[i]
-            shoot(model, c0, history, trial, tensions, column_states, column_left, work)
-            ivps += 1
-            _residual(column_states, tip, scales, trial_res)
+            for i in range(n_unknowns):
+                trial[i] = x[i] - fraction * step[i]
+            _evaluate(model, c0, history, trial, cables, tip, column_states, column_left,
+                      column_stages, work, cable_work, trial_res)
+            ivps += 1.0
             trial_norm = np.sqrt(np.sum(trial_res * trial_res))
             if trial_norm < norm:
                 break
             fraction *= 0.5
-        if trial_norm < 0.5 * norm or (fresh and trial_norm < norm):
-            base[:] = trial
+        if trial_norm < norm and (fresh or slow < 3):
+            # Broyden: H += (s - H y) (s^T H) / (s^T H y), s = the step taken, y = its change
+            # of the residual
+            for i in range(n_unknowns):
+                step[i] = trial[i] - x[i]
+                trial_res[i], res[i] = trial_res[i] - res[i], trial_res[i]  # y; res = new
+            denominator = 0.0
+            for i in range(n_unknowns):
+                total, other = 0.0, 0.0
+                for j in range(n_unknowns):
+                    total += inverse[i, j] * trial_res[j]
+                    other += step[j] * inverse[j, i]
+                h_y[i], s_h[i] = total, other
+                denominator += step[i] * total
+            if abs(denominator) > 1e-300:
+                for i in range(n_unknowns):
+                    factor = (step[i] - h_y[i]) / denominator
+                    for j in range(n_unknowns):
+                        inverse[i, j] += factor * s_h[j]
+            x[:] = trial
             states[:, :] = column_states
             left[:, :] = column_left
-            res[:] = trial_res
+            stages[:, :, :] = column_stages
+            slow = slow + 1 if trial_norm > 0.5 * norm else 0
             norm = trial_norm
             fresh = False
             continue
-        if fresh:  # a fresh Jacobian's step does not reduce the residual: no equilibrium near
-            return False, ivps, refreshes
-        # refresh the Jacobian by forward differences at the current base
-        for j in range(6):
-            delta = 1e-7 * scales[j] if scales[j] > 0.0 else 1e-7
-            for i in range(6):
-                trial[i] = base[i]
-            trial[j] += delta
-            shoot(model, c0, history, trial, tensions, column_states, column_left, work)
-            ivps += 1
-            _residual(column_states, tip, scales, trial_res)
-            for i in range(6):
-                jacobian[i, j] = (trial_res[i] - res[i]) / delta
+        if fresh:  # a fresh Jacobian's step does not reduce the residual: no solution near
+            break
+        ivps += refresh_cost
         refreshes += 1
-        fresh = True
-    return norm <= tolerance, ivps, refreshes
-
-
-@numba.njit(cache=True, nogil=True)
-def strains_and_velocities(model, states, left, history, c0, out):
-    """Write each node's v, u, q, w (N, 2, 12) of solved ``states``: the history's quantities.
-
-    [:, 0] on the base side of a node (n, m from ``left``), [:, 1] on the tip side.
-    """
-    params, bending_scale = model.params, model.bending_scale
-    n_nodes = states.shape[0]
-    for k in range(n_nodes):
-        y = states[k]
-        for side in range(2):
-            interval = min(max(k - 1 + side, 0), n_nodes - 2)
-            scale = bending_scale[interval]
-            for i in range(3):
-                if side == 0:
-                    n0, n1, n2 = left[k, 0], left[k, 1], left[k, 2]
-                    m0, m1, m2 = left[k, 3], left[k, 4], left[k, 5]
-                else:
-                    n0, n1, n2 = y[12], y[13], y[14]
-                    m0, m1, m2 = y[15], y[16], y[17]
-                ln = n0 * y[3 + i] + n1 * y[6 + i] + n2 * y[9 + i]
-                lm = m0 * y[3 + i] + m1 * y[6 + i] + m2 * y[9 + i]
-                ks, bs = params[DYN_K_SE_AT + i], params[DYN_B_SE_AT + i]
-                kb, bb = scale * params[DYN_K_BT_AT + i], scale * params[DYN_B_BT_AT + i]
-                out[k, side, i] = ((ln + (ks if i == 2 else 0.0) - bs * history[k, side, i])
-                                   / (ks + c0 * bs))
-                out[k, side, 3 + i] = (lm - bb * history[k, side, 3 + i]) / (kb + c0 * bb)
-                out[k, side, 6 + i] = y[18 + i]
-                out[k, side, 9 + i] = y[21 + i]
+        fresh, slow = True, 0
+        if not _fresh_inverse(model, c0, history, x, cables, tip, res, inverse, pivots,
+                              nominal, scratch):
+            break
+    else:
+        converged = norm <= tolerance
+    if n_free:  # the motor-side tensions of the solution
+        consumed, mean = cable_work[0], cable_work[2]
+        path_stretch(states, model.guide_nodes, model.cable_last_guide, model.hole_offsets,
+                     model.base_axis, x[n_unknowns - n_free:], cables.friction,
+                     model.compliance, consumed, motor, mean)
+    else:
+        motor[:] = cables.tensions
+    return converged, ivps, refreshes

@@ -34,6 +34,8 @@ PARAMS_SIZE = 27
 (DYN_POSITION_AT, DYN_ROTATION_AT, DYN_FORCE_AT, DYN_MOMENT_AT, DYN_VELOCITY_AT,
  DYN_ANGULAR_AT) = 0, 3, 12, 15, 18, 21
 DYNAMIC_STATE = 24
+# p and R where the statics' node state has r and R: the holes' code (routing.hole_in) reads both
+assert (DYN_POSITION_AT, DYN_ROTATION_AT) == (POSITION_AT, ROTATION_AT)
 #: a node's BDF-alpha history: v_h (3), u_h (3), q_h (3), w_h (3)
 DYN_HISTORY_SIZE = 12
 # the dynamics' rod constants: K_se = diag(GA, GA, EA) (3, N), B_se (3, N s), K_bt =
@@ -119,7 +121,14 @@ class DynamicsModel(NamedTuple):
     :ivar bending_scale: (N - 1,) factor on K_bt and B_bt over each interval
     :ivar cable_offsets: (n_cables, 3) each cable's hole at its end disk, local (m)
     :ivar cable_end_node: (n_cables,) node of each cable's end disk
-    :ivar scales: (6,) the tip residual's units: E I / L^2 (N) for n, E I / L (N m) for m
+    :ivar scales: (DYNAMIC_STATE,) the unit of each state value in the residual and the
+        finite differences: L for p, 1 for R, E I / L^2 for n, E I / L for m, L / s for q,
+        1 / s for w
+    :ivar bounds: (K + 1,) node index where each shooting segment starts, then the tip's
+    :ivar guide_nodes, cable_last_guide, hole_offsets, base_axis, compliance: the cables' paths
+        and stretch, as the statics' (``tendon_kernel.path_stretch``)
+    :ivar kappa: m per N in the cable rows' min(kappa t, gap); ``radius`` (m) their unit
+    :ivar tension_scale: N, the unit of the tension unknowns' finite differences
     """
 
     s_grid: np.ndarray
@@ -129,3 +138,25 @@ class DynamicsModel(NamedTuple):
     cable_offsets: np.ndarray
     cable_end_node: np.ndarray
     scales: np.ndarray
+    bounds: np.ndarray
+    guide_nodes: np.ndarray
+    cable_last_guide: np.ndarray
+    hole_offsets: np.ndarray
+    base_axis: np.ndarray
+    compliance: np.ndarray
+    kappa: float
+    radius: float
+    tension_scale: float
+
+
+class CableInputs(NamedTuple):
+    """What drives the cables in one time step of ``dynamics_kernel.solve_step``.
+
+    :ivar tensions: (n,) N at the end disks when tensions drive the rod (else unused)
+    :ivar free: (n,) free lengths (m) when the motors' lengths drive it, or (0,): tensions do
+    :ivar friction: (n,) capstan coefficient times each cable's direction of motion
+    """
+
+    tensions: np.ndarray
+    free: np.ndarray
+    friction: np.ndarray

@@ -142,18 +142,9 @@ class Model:
 
     # -- the rod in motion (a robot's DynamicsModel record, built by core/dynamics.py) -------
     @staticmethod
-    def dynamics_shoot(record, c0, history, base, tensions, states, left, work):
-        """Integrate one time step's IVP from the base (``dynamics_kernel.shoot``)."""
-        dynamics_kernel.shoot(record, c0, history, base, tensions, states, left, work)
-
-    @staticmethod
-    def dynamics_solve(record, c0, history, base, jacobian, tip, tensions, states, left,
-                       tolerance, max_iterations):
+    def dynamics_solve(record, c0, history, x, jacobian, pivots, tip, cables, states, left,
+                       stages, motor, tolerance, max_iterations, refresh_first):
         """Solve one time step (``dynamics_kernel.solve_step``): (converged, IVPs, refreshes)."""
-        return dynamics_kernel.solve_step(record, c0, history, base, jacobian, tip, tensions,
-                                          states, left, tolerance, max_iterations)
-
-    @staticmethod
-    def dynamics_values(record, states, left, history, c0, out):
-        """Each node's v, u, q, w on both sides (``dynamics_kernel.strains_and_velocities``)."""
-        dynamics_kernel.strains_and_velocities(record, states, left, history, c0, out)
+        return dynamics_kernel.solve_step(record, c0, history, x, jacobian, pivots, tip, cables,
+                                          states, left, stages, motor, tolerance,
+                                          max_iterations, refresh_first)

@@ -346,7 +346,7 @@ class Robot:
     def dynamics(self, dt=None, alpha=None):
         """Return the rod in motion (:class:`~continuum_statics.core.dynamics.RodDynamics`).
 
-        ``dt`` (s) and ``alpha`` (BDF-alpha, [-0.5, 0]); None: the robot file's ``dynamics``.
+        ``dt`` (s) and ``alpha`` (BDF-alpha, [-0.45, 0]); None: the robot file's ``dynamics``.
         """
         from continuum_statics.core.dynamics import RodDynamics  # its kernel compiles on use
         return RodDynamics(self, dt, alpha)
