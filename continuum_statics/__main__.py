@@ -20,6 +20,8 @@ commands:
   plot      PNG figures of a recording (backbone, tip path, cable lengths, solver)
   calibrate fit robot-file parameters (E, base orientation, ...) to measured tip positions
   fusion    what each sensor buys: simulated truth, or a recorded run with the tracker occluded
+  simulate  the robot in motion (Cosserat dynamics): a release, a motor step or a recording's
+            commands; settling time, overshoot, frequencies
   doctor    check the set-up (domain, nodes, driver, rates, /tf, sensors): what is wrong and
             what to do (--namespace NS)
 """
@@ -58,6 +60,8 @@ def main(argv=None):
         from continuum_statics.tools.record import main as run
     elif command == 'plot':
         from continuum_statics.tools.plot import main as run
+    elif command == 'simulate':
+        from continuum_statics.tools.simulate import main as run
     elif command == 'calibrate':
         from continuum_statics.tools.calibrate import main as run
     elif command == 'fusion':

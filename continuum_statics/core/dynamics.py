@@ -114,9 +114,10 @@ class RodDynamics:
     :param robot: the :class:`~continuum_statics.core.robot.Robot`
     :param dt: time step (s); None: the robot file's ``dynamics.dt``
     :param alpha: BDF-alpha in [-0.45, 0]; None: the robot file's ``dynamics.alpha``
+    :param tip_mass: kg of payload at the tip (its weight and inertia; rotary inertia ignored)
     """
 
-    def __init__(self, robot, dt=None, alpha=None):
+    def __init__(self, robot, dt=None, alpha=None, tip_mass=0.0):
         settings = robot.description.dynamics
         self.dt, self.alpha = check_dynamics(
             settings.dt if dt is None else dt, settings.alpha if alpha is None else alpha,
@@ -126,7 +127,11 @@ class RodDynamics:
                                       'yet (point_moment is)' % robot.cable_model)
         self.robot = robot
         self.c0, self.c1, self.c2, self.d1 = bdf_alpha(self.dt, self.alpha)
-        self.record = dynamics_model(robot, self.dt, self.c0)
+        tip_mass = float(tip_mass)
+        if not (np.isfinite(tip_mass) and tip_mass >= 0.0):
+            raise ValueError('tip_mass must be finite and >= 0 kg, got %r' % tip_mass)
+        self.tip_mass = tip_mass
+        self.record = dynamics_model(robot, self.dt, self.c0, tip_mass)
         self.segments = len(self.record.bounds) - 1
         self._model = robot.model
         self._friction = problem_constants(robot).friction
@@ -159,9 +164,11 @@ class RodDynamics:
             raise NotImplementedError('dynamics: lengths drive real tendons (a tendons block: '
                                       'stretch, pretension); ideal cables take tensions')
         tip = _tip(tip_force, tip_moment)
+        # the statics carry the payload as a tip force: its weight
+        weight = self.tip_mass * np.asarray(robot.gravity, dtype=float)
         if self.driven_by_lengths:
             lengths = as_vector(lengths, len(robot.cable_names), 'lengths')
-            static = robot.solve_lengths(lengths, tip[:3], tip[3:])
+            static = robot.solve_lengths(lengths, tip[:3] + weight, tip[3:])
             if not static.converged:
                 raise ValueError('dynamics: no static equilibrium at these lengths: %s'
                                  % static.message)
@@ -170,8 +177,8 @@ class RodDynamics:
             shape = static.shape
         else:
             end_tensions = self._tensions(tensions)
-            shape = robot.solve_tensions(end_tensions, tip[:3], tip[3:]) if len(end_tensions) \
-                else robot.solve_bvp(tip[:3], tip[3:])
+            shape = robot.solve_tensions(end_tensions, tip[:3] + weight, tip[3:]) \
+                if len(end_tensions) else robot.solve_bvp(tip[:3] + weight, tip[3:])
         # the unknowns: n(0), m(0), the state at each later segment's start, then (driven by
         # lengths) each cable's end tension
         rest = _unknowns_at_rest(robot, self.record, shape, tip)
@@ -293,13 +300,15 @@ def _tip(tip_force, tip_moment):
     return tip
 
 
-def dynamics_model(robot, dt, c0):
+def dynamics_model(robot, dt, c0, tip_mass=0.0):
     """Return the robot's :class:`DynamicsModel` (what the kernel reads) for this time step."""
     n = len(robot.s_grid)
     scale = robot.interval_scale
     constants = problem_constants(robot)
+    masses = _node_masses(robot)
+    masses[-1] += tip_mass
     return DynamicsModel(
-        robot.s_grid, dynamics_params(robot), _node_masses(robot),
+        robot.s_grid, dynamics_params(robot), masses,
         np.ones(n - 1) if scale is None else np.asarray(scale, dtype=float),
         np.ascontiguousarray(robot.cable_offsets, dtype=float).reshape(-1, 3),
         robot.cable_end_node, _scales(robot, dt), _bounds(robot, c0), robot.guide_nodes,

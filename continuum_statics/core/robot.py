@@ -343,13 +343,14 @@ class Robot:
         state = bvp.solve_loaded(self, self.passive_state(), None, tip_force, tip_moment, start)
         return self.make_shape(state, tip_force, self.integrate_state(state, tip_force))
 
-    def dynamics(self, dt=None, alpha=None):
+    def dynamics(self, dt=None, alpha=None, tip_mass=0.0):
         """Return the rod in motion (:class:`~continuum_statics.core.dynamics.RodDynamics`).
 
         ``dt`` (s) and ``alpha`` (BDF-alpha, [-0.45, 0]); None: the robot file's ``dynamics``.
+        ``tip_mass``: kg of payload at the tip.
         """
         from continuum_statics.core.dynamics import RodDynamics  # its kernel compiles on use
-        return RodDynamics(self, dt, alpha)
+        return RodDynamics(self, dt, alpha, tip_mass)
 
     def solve_tensions(self, tensions, tip_force=(0.0, 0.0, 0.0), tip_moment=(0.0, 0.0, 0.0),
                        warm_start=None) -> Shape:

@@ -15,11 +15,13 @@ import numpy as np
 from continuum_statics.core.load_estimation import plausible_tip_load
 from continuum_statics.drivers.base import (
     OK,
+    WARN,
     BackendOption,
     BackendStatus,
     CableBackend,
     CableReading,
 )
+from continuum_statics.drivers.sim_dynamics import SimulatedRod
 
 
 class SimulatedCableBackend(CableBackend):
@@ -31,7 +33,10 @@ class SimulatedCableBackend(CableBackend):
     ``initial_lengths`` (the straight-rod lengths in the node).
 
     Options: ``time_constant`` (s, >= 0; 0 = no lag), ``max_speed`` (m/s, > 0),
-    ``noise_std`` (m, >= 0), ``seed`` (int; negative = not reproducible).
+    ``noise_std`` (m, >= 0), ``seed`` (int; negative = not reproducible), ``dynamics`` (the rod
+    in motion behind the motors, :mod:`~continuum_statics.drivers.sim_dynamics`),
+    ``motor_bandwidth`` (Hz; > 0 sets the time constant 1 / (2 pi bandwidth)), ``tip_mass``
+    (kg of payload, with ``dynamics``).
     """
 
     name = 'sim'
@@ -43,6 +48,13 @@ class SimulatedCableBackend(CableBackend):
                       0.0, 0.01),
         BackendOption('seed', -1, 'noise random seed (negative: not reproducible)',
                       -1, 2 ** 31 - 1, read_only=True),
+        BackendOption('dynamics', False, 'simulate the rod in motion: the motors drive its '
+                      "real tendons at the robot file's dynamics.dt, in real time",
+                      read_only=True),
+        BackendOption('motor_bandwidth', 0.0, 'motor bandwidth, Hz (> 0: the time constant '
+                      'is 1 / (2 pi bandwidth); 0: time_constant)', 0.0, 1000.0),
+        BackendOption('tip_mass', 0.0, 'payload at the tip with dynamics, kg', 0.0, 1.0,
+                      read_only=True),
     )
 
     #: the node passes ``robot=`` (its :class:`Robot`) to backends that set this
@@ -56,7 +68,7 @@ class SimulatedCableBackend(CableBackend):
         self._statics = None  # the last solve_lengths result: friction history, warm start
         self._tip_wrench = np.zeros(6)  # hidden tip load (N, N m), base frame
         merged = self.options
-        for key in ('time_constant', 'max_speed', 'noise_std'):
+        for key in ('time_constant', 'max_speed', 'noise_std', 'motor_bandwidth'):
             self.set_option(key, merged[key])
         seed = int(merged['seed'])
         self._rng = np.random.default_rng(None if seed < 0 else seed)
@@ -65,6 +77,11 @@ class SimulatedCableBackend(CableBackend):
         self._targets = self._lengths.copy()
         self._velocities = np.zeros_like(self._lengths)
         self._time = None
+        self._rod = None  # the rod in motion (option dynamics)
+        if merged['dynamics']:
+            if robot is None:
+                raise ValueError('sim.dynamics needs the robot (the node passes it)')
+            self._rod = SimulatedRod(robot, self._lengths, float(merged['tip_mass']))
 
     def set_option(self, key, value):
         """Change ``time_constant``, ``max_speed`` or ``noise_std`` at run time."""
@@ -81,6 +98,11 @@ class SimulatedCableBackend(CableBackend):
             if not (math.isfinite(value) and value >= 0.0):
                 raise ValueError('noise_std must be finite and >= 0 m, got %r' % value)
             self.noise_std = value
+        elif key == 'motor_bandwidth':
+            if not (math.isfinite(value) and value >= 0.0):
+                raise ValueError('motor_bandwidth must be finite and >= 0 Hz, got %r' % value)
+            if value > 0.0:
+                self.time_constant = 1.0 / (2.0 * math.pi * value)
         else:
             super().set_option(key, value)
         self.options[key] = value
@@ -105,6 +127,8 @@ class SimulatedCableBackend(CableBackend):
     def start(self, now):
         """Start the simulation clock at ``now`` (monotonic s)."""
         self._time = float(now)
+        if self._rod is not None:
+            self._rod.time = float(now)
 
     def command(self, target_lengths, now):
         """Advance to ``now`` and follow the new targets from there."""
@@ -127,8 +151,15 @@ class SimulatedCableBackend(CableBackend):
         return CableReading(lengths=lengths.copy(), velocities=self._velocities.copy(),
                             tensions=tensions)
 
+    @property
+    def true_tip_pose(self):
+        """With ``dynamics``: the rod's true tip (position (3,) m, rotation (3, 3)), else None."""
+        return None if self._rod is None else self._rod.tip_pose()
+
     def _tensions(self, lengths):
         """Motor-side tensions (N) of the tendon model at the true lengths, or None."""
+        if self._rod is not None:
+            return self._rod.tensions
         if self._robot is None:
             return None
         solution = self._robot.solve_lengths(lengths, self._tip_wrench[:3], self._tip_wrench[3:],
@@ -139,14 +170,27 @@ class SimulatedCableBackend(CableBackend):
         return solution.tensions.copy()
 
     def status(self):
-        """Report the largest distance between a cable and its target."""
+        """Report the largest distance between a cable and its target (and the rod's pace)."""
         tracking = float(np.max(np.abs(self._targets - self._lengths), initial=0.0))
-        return BackendStatus(OK, 'simulated cables', {
+        values = {
             'max_tracking_error_m': '%.6f' % tracking,
             'time_constant_s': '%g' % self.time_constant,
             'max_speed_m_per_s': '%g' % self.max_speed,
             'noise_std_m': '%g' % self.noise_std,
-        })
+        }
+        if self._rod is None:
+            return BackendStatus(OK, 'simulated cables', values)
+        rod = self._rod
+        values.update({'real_time_factor': '%.2f' % rod.real_time_factor,
+                       'step_time_ms': '%.3f' % (1e3 * rod.step_time),
+                       'dt_s': '%g' % rod.dt, 'steps': str(rod.steps),
+                       'failed_steps': str(rod.failed_steps),
+                       'dropped_time_s': '%.3f' % rod.dropped_time})
+        if rod.dropped_time > 0.0 or rod.failed_steps:
+            return BackendStatus(WARN, 'simulated rod in motion slower than real time or '
+                                 'stalled (%.3f s dropped, %d failed steps)'
+                                 % (rod.dropped_time, rod.failed_steps), values)
+        return BackendStatus(OK, 'simulated cables and rod in motion', values)
 
     @property
     def targets(self):
@@ -155,6 +199,9 @@ class SimulatedCableBackend(CableBackend):
 
     def _advance(self, now):
         now = float(now)
+        if self._rod is not None:  # motors and rod together, at the rod's fixed step
+            self._rod.advance(now, self._motor_step, self._tip_wrench)
+            return
         if self._time is None:
             self._time = now
         dt = now - self._time
@@ -165,6 +212,15 @@ class SimulatedCableBackend(CableBackend):
         self._lengths = self.step(before, self._targets, dt, self.time_constant, self.max_speed)
         self._lengths = np.clip(self._lengths, self.length_limits[:, 0], self.length_limits[:, 1])
         self._velocities = (self._lengths - before) / dt
+
+    def _motor_step(self, dt):
+        """Move the motors over ``dt`` s; return their lengths (m)."""
+        before = self._lengths
+        self._lengths = np.clip(self.step(before, self._targets, dt, self.time_constant,
+                                          self.max_speed),
+                                self.length_limits[:, 0], self.length_limits[:, 1])
+        self._velocities = (self._lengths - before) / dt
+        return self._lengths
 
     @staticmethod
     def step(lengths, targets, dt, time_constant, max_speed):

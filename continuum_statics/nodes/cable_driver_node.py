@@ -25,11 +25,15 @@ parameters ``<backend>.<option>``.
 - Simulated backend only: ``sim_tip_wrench`` (parameter [fx, fy, fz, mx, my, mz] and a
   geometry_msgs/WrenchStamped topic of that name, base frame) is a tip load on the simulated
   robot that no other node is told about (tensions change under it; the motors hold).
+- Simulated backend with ``sim.dynamics``: the rod moves behind the motors in real time
+  (:mod:`~continuum_statics.drivers.sim_dynamics`); its true tip is published on
+  ``sim/tip_pose_true`` (geometry_msgs/PoseStamped, base frame) with every reading, and the real-
+  time factor and step time are on /diagnostics.
 """
 import sys
 from types import SimpleNamespace
 
-from geometry_msgs.msg import WrenchStamped
+from geometry_msgs.msg import PoseStamped, WrenchStamped
 import numpy as np
 from rclpy.lifecycle import LifecycleNode, TransitionCallbackReturn
 from rclpy.qos import qos_profile_sensor_data
@@ -39,6 +43,7 @@ from std_srvs.srv import Trigger
 from continuum_statics.control.actuators import Actuators
 from continuum_statics.control.command_gate import CommandGate
 from continuum_statics.control.health import DriverHealth
+from continuum_statics.core.rotations import rotation_to_quaternion
 from continuum_statics.drivers import backend_class
 from continuum_statics.drivers.home_file import load_home_file, write_home_file
 from continuum_statics.nodes import diagnostics_util as diag
@@ -55,6 +60,7 @@ from continuum_statics.nodes.ros_conversions import (
     cable_index,
     joint_positions,
     joint_state,
+    set_pose,
     tip_load,
 )
 from continuum_statics.nodes.ros_topic_backend import lend_topics
@@ -120,6 +126,12 @@ class CableDriverNode(LifecycleNode):
 
         self._publisher = self.create_publisher(JointState, 'cable_states',
                                                 qos_profile_sensor_data)
+        self._true_tip = None  # sim.dynamics: the simulated rod's true tip
+        if options.get('dynamics'):
+            self._true_tip = self.create_publisher(PoseStamped, 'sim/tip_pose_true',
+                                                   qos_profile_sensor_data)
+            self._true_tip_msg = PoseStamped()
+            self._true_tip_msg.header.frame_id = self.robot.base_frame_id
         # raw: a malformed or empty payload is then seen (and counted), not dropped by rclpy
         self.create_subscription(JointState, 'cable_commands', self._on_raw_command,
                                  COMMAND_QOS, raw=True)
@@ -264,6 +276,19 @@ class CableDriverNode(LifecycleNode):
         if self.actuators.step(self._params['command_timeout'], fill) is not None:
             self._publisher.publish(self._state_msg)
             self.health.rate.tick()
+            if self._true_tip is not None:
+                self._publish_true_tip()
+
+    def _publish_true_tip(self):
+        pose = getattr(self.backend, 'true_tip_pose', None)
+        if pose is None:
+            return
+        position, rotation = pose
+        msg = self._true_tip_msg
+        msg.header.stamp = self._state_msg.header.stamp
+        set_pose(msg.pose, [float(v) for v in position],
+                 [float(v) for v in rotation_to_quaternion(rotation)])
+        self._true_tip.publish(msg)
 
     # -- services -----------------------------------------------------------------------------
     def _on_reset(self, request, response):

@@ -1,0 +1,67 @@
+"""What a step or release response tells: settling time, overshoot and frequencies.
+
+Used by ``simulate`` and by the damping fit; times in s, positions in m.
+"""
+import numpy as np
+
+#: the settling band: this fraction of the move, and never under SETTLE_FLOOR (m)
+SETTLE_FRACTION = 0.02
+SETTLE_FLOOR = 1e-4
+
+
+def settling_time(times, path, final=None):
+    """Time (s) after which the path (T, 3) stays within the band around ``final`` (its end).
+
+    The band is 2 % of the move from the start, at least 0.1 mm; None if it never settles
+    inside the record (the last sample is outside).
+    """
+    path = np.asarray(path, dtype=float)
+    final = path[-1] if final is None else np.asarray(final, dtype=float)
+    band = max(SETTLE_FRACTION * np.linalg.norm(final - path[0]), SETTLE_FLOOR)
+    outside = np.nonzero(np.linalg.norm(path - final, axis=1) > band)[0]
+    if not len(outside):
+        return float(times[0])
+    if outside[-1] == len(path) - 1:
+        return None
+    return float(times[outside[-1] + 1])
+
+
+def overshoot(path, final=None):
+    """Overshoot (% of the move) beyond ``final`` along the move's direction (0 if none)."""
+    path = np.asarray(path, dtype=float)
+    final = path[-1] if final is None else np.asarray(final, dtype=float)
+    move = final - path[0]
+    size = np.linalg.norm(move)
+    if size == 0.0:
+        return 0.0
+    beyond = (path - final) @ (move / size)
+    return float(max(0.0, beyond.max()) / size * 100.0)
+
+
+def spectrum_peaks(times, path, count=3, final=None):
+    """Frequencies (Hz) of the ``count`` largest peaks of the motion's spectrum, low to high.
+
+    The power spectra of the path's deviation from ``final`` (its end) along x, y and z,
+    Hann-windowed and zero-padded 16 times, are summed; a peak is a local maximum at least
+    1 / duration above zero frequency.
+    """
+    path = np.asarray(path, dtype=float)
+    final = path[-1] if final is None else np.asarray(final, dtype=float)
+    deviation = path - final
+    if len(times) < 8:
+        return []
+    dt = float(np.median(np.diff(times)))
+    size = 16 * len(times)
+    window = np.hanning(len(times))
+    power = np.zeros(size // 2 + 1)
+    for axis in range(3):
+        signal = deviation[:, axis] - deviation[:, axis].mean()
+        power += np.abs(np.fft.rfft(signal * window, size)) ** 2
+    freq = np.fft.rfftfreq(size, dt)
+    low = 1.0 / (times[-1] - times[0])
+    inner = (power[1:-1] > power[:-2]) & (power[1:-1] >= power[2:]) & (freq[1:-1] >= low)
+    index = np.nonzero(inner)[0] + 1
+    if not len(index):
+        return []
+    strongest = index[np.argsort(power[index])[::-1][:count]]
+    return sorted(float(freq[i]) for i in strongest)

@@ -1,0 +1,87 @@
+"""The simulated robot in motion: the rod's dynamics behind the simulated motors (issue 36).
+
+With ``sim.dynamics: true`` the simulated driver's cables are the motors' lengths driving
+:class:`~continuum_statics.core.dynamics.RodDynamics` (real tendons: stretch, slack, friction)
+at the robot file's fixed time step, in real time: each reading first integrates the motors and
+the rod up to the clock. What the driver reports is what a real one reads (the motors' lengths
+and the tensions at the motors); the true tip pose is there for tests and the view.
+"""
+import time
+
+import numpy as np
+
+#: most simulated time (s) one reading integrates; beyond it the simulation drops the backlog
+#: (slower than real time: counted, and the real-time factor on /diagnostics says so)
+MAX_CATCH_UP = 0.05
+
+
+class SimulatedRod:
+    """The rod of a simulated driver, stepped at a fixed dt up to the clock.
+
+    :param robot: the robot (its ``tendons`` block: lengths drive real tendons)
+    :param lengths: (n,) m, the motors' lengths at the start (the rod starts at rest there)
+    :param tip_mass: kg of payload at the tip (weight and inertia)
+    """
+
+    def __init__(self, robot, lengths, tip_mass=0.0):
+        if robot.tendons.is_ideal:
+            raise ValueError('sim.dynamics needs real tendons (a tendons block in the robot '
+                             'file: stiffness, pretension): the motors drive the rod through '
+                             'their stretch; robot %r has ideal cables' % robot.name)
+        self.robot = robot
+        self.dynamics = robot.dynamics(tip_mass=tip_mass)
+        self.dt = self.dynamics.dt
+        self.state = self.dynamics.start(lengths=lengths)
+        self.time = None  # the clock (s) the simulation has reached
+        self.steps = 0
+        self.failed_steps = 0
+        self.dropped_time = 0.0  # s of backlog dropped (slower than real time)
+        self._compute = 0.0  # s of CPU spent stepping
+        self._simulated = 0.0
+
+    def advance(self, now, motors, wrench):
+        """Integrate up to ``now`` (s): ``motors(dt)`` steps the motors, returns their lengths.
+
+        ``wrench`` (6,) is the hidden tip load (N, N m, base frame).
+        """
+        if self.time is None:
+            self.time = now
+            return
+        behind = now - self.time
+        if behind > MAX_CATCH_UP:  # slower than real time: keep up with the clock
+            dropped = behind - MAX_CATCH_UP
+            self.dropped_time += dropped
+            self.time += dropped
+        began = time.perf_counter()
+        while self.time + self.dt <= now:
+            lengths = motors(self.dt)
+            state = self.dynamics.step(lengths=lengths, tip_force=wrench[:3],
+                                       tip_moment=wrench[3:])
+            if state.converged:
+                self.state = state
+            else:
+                self.failed_steps += 1
+            self.time += self.dt
+            self.steps += 1
+            self._simulated += self.dt
+        self._compute += time.perf_counter() - began
+
+    @property
+    def real_time_factor(self):
+        """Simulated seconds per second of computing, over the run (inf before any step)."""
+        return self._simulated / self._compute if self._compute > 0.0 else float('inf')
+
+    @property
+    def step_time(self):
+        """Mean compute time of one step (s)."""
+        return self._compute / self.steps if self.steps else 0.0
+
+    @property
+    def tensions(self):
+        """(n,) N at the motors (what a load cell or the motor current reads)."""
+        return self.state.tensions.copy()
+
+    def tip_pose(self):
+        """Return the true tip: position (3,) m and rotation (3, 3), base frame."""
+        shape = self.state.shape
+        return shape.tip_position.copy(), np.array(shape.rotations[-1])

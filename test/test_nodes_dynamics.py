@@ -1,0 +1,73 @@
+"""The nodes against the robot in motion (issue 36): ``sim.dynamics`` over DDS.
+
+The simulated driver integrates the rod's dynamics behind its motors in real time; the statics
+node only sees the motors' lengths and tensions. The true tip on ``sim/tip_pose_true`` must
+come to rest on the goals the controller says it reached.
+"""
+from conftest import REPO
+from nodes_helpers import (
+    LATCHED,
+    Collector,
+    call,
+    diagnostic_values,
+    pose_xyz,
+    wait_until,
+)
+import numpy as np
+import pytest
+
+from continuum_statics import load_robot
+
+rclpy = pytest.importorskip('rclpy')
+from diagnostic_msgs.msg import DiagnosticArray  # noqa: E402
+from geometry_msgs.msg import PoseStamped  # noqa: E402
+from nav_msgs.srv import GetPlan  # noqa: E402
+from rclpy.qos import qos_profile_sensor_data  # noqa: E402
+
+from continuum_statics.nodes.cable_driver_node import CableDriverNode  # noqa: E402
+from continuum_statics.nodes.statics_node import StaticsNode  # noqa: E402
+from continuum_statics.nodes.tip_controller_node import TipControllerNode  # noqa: E402
+
+DYNAMIC_FILE = str(REPO / 'config' / 'tendon_robot_dynamic.yaml')
+ROBOT = load_robot(DYNAMIC_FILE)
+TOLERANCE = 1e-3  # m, the goals'
+
+
+@pytest.mark.ros
+def test_goals_on_the_robot_in_motion_come_to_rest_where_the_controller_says(harness):
+    common = {'robot_file': DYNAMIC_FILE}
+    harness.add(CableDriverNode, **common, **{'sim.dynamics': True})
+    harness.add(StaticsNode, marker_rate=0.0, **common)
+    controller = harness.add(TipControllerNode, **common)
+    client = harness.client()
+    true_tips = Collector(client, PoseStamped, 'sim/tip_pose_true', qos_profile_sensor_data)
+    diagnostics = Collector(client, DiagnosticArray, '/diagnostics', 10)
+    estimates = Collector(client, PoseStamped, 'tip_pose', LATCHED)
+    wait_until(lambda: len(true_tips) >= 10 and len(estimates) >= 1, 60.0,
+               'the true tip and the estimate')
+    service = client.create_client(GetPlan, 'tip_goal')
+    assert service.wait_for_service(timeout_sec=10.0)
+    rest = []
+    for bending in ([3.0, 0.0], [0.0, -4.0], [-2.5, 2.5]):
+        goal = ROBOT.solve_ivp([bending[0], bending[1], 0.0]).tip_position
+        request = GetPlan.Request(tolerance=TOLERANCE)
+        request.goal.header.frame_id = ROBOT.base_frame_id
+        p = request.goal.pose.position
+        p.x, p.y, p.z = (float(v) for v in goal)
+        assert call(service, request, 60.0).plan.poses, controller.control.last_outcome
+
+        def true_error():
+            return np.linalg.norm(pose_xyz(true_tips.last.pose) - goal)
+
+        # it swings after the motors stop (5 % of critical damping): it comes to rest on the
+        # goal, within the tolerance and the statics' friction resolution
+        wait_until(lambda: true_error() < TOLERANCE + 0.5e-3, 10.0,
+                   'the true tip at rest on the goal (%.2f mm away)' % (1e3 * true_error()))
+        rest.append(true_error())
+    values = diagnostic_values(diagnostics, 'cable_driver')[0]
+    print('true tip at rest %s mm from the goals; driver: real-time factor %s, step %s ms, '
+          '%s s dropped, %s failed steps' % (
+              np.round(1e3 * np.array(rest), 2).tolist(), values.get('real_time_factor'),
+              values.get('step_time_ms'), values.get('dropped_time_s'),
+              values.get('failed_steps')))
+    assert values['failed_steps'] == '0'
