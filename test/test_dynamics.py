@@ -160,10 +160,11 @@ def test_a_large_release_swings_as_a_chain_of_another_formulation():
     """A released rod swings as a chain of links: within 1 mm over its first swing.
 
     One full swing (0.1 s, 57 mm each way) under gravity, against a planar discrete elastica
-    integrated by RK4 (test/chain_reference.py), and closer as dt falls. Measured 2026-11-26 over the first 0.1 s (20 / 40 links): 2.1 / 2.8 mm at dt = 1 ms,
-    0.9 / 1.2 at 0.5 ms, 0.56 / 0.51 at 0.25 ms (the release's high modes, which BDF-alpha damps,
-    converge with dt). Over 1 s at 0.25 ms: 1.5 mm from the 40-link chain, whose own change
-    from 20 links is 8.7 mm there: beyond 0.1 s the reference, not the rod, limits the check.
+    integrated by RK4 (test/chain_reference.py), and closer as dt falls. Measured 2026-11-26
+    over the first 0.1 s (20 / 40 links): 2.1 / 2.8 mm at dt = 1 ms, 0.9 / 1.2 at 0.5 ms,
+    0.56 / 0.51 at 0.25 ms (the release's high modes, which BDF-alpha damps, converge with dt).
+    Over 1 s at 0.25 ms: 1.5 mm from the 40-link chain, whose own change from 20 links is
+    8.7 mm there: beyond 0.1 s the reference, not the rod, limits the check.
     """
     robot = load_robot(ROBOT_FILE)
     rod = robot.description.rod
