@@ -30,7 +30,7 @@ ROD_KERNELS = {
     'goal_tracking': ('goal_solve',),
     'length_tracking': ('evaluate_at', 'jacobian_pieces', 'chord'),
     'tendon_kernel': ('path_stretch',),
-    'dynamics_kernel': ('solve_step',),
+    'dynamics_kernel': ('solve_step', 'advance'),
 }
 
 

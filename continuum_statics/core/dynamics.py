@@ -15,8 +15,7 @@ Scope today: the rod with gravity, a tip load, guide-disk masses and the point-m
 model driven by tensions (the paper's model). Lengths as inputs (real tendons: slack, stretch,
 friction) and the distributed cable model are refused with a message, not approximated.
 """
-import dataclasses
-from dataclasses import dataclass
+import functools
 from typing import NamedTuple
 
 import numpy as np
@@ -48,33 +47,61 @@ MAX_ITERATIONS = 30
 TOLERANCE = 1e-8
 
 
-@dataclass(frozen=True)
 class DynamicState:
-    """The rod at one instant of :class:`RodDynamics`.
+    """The rod at one instant of :class:`RodDynamics` (its arrays are built when read).
 
     :ivar time: s since ``start``
     :ivar shape: the backbone (positions, rotations, strains) as the statics' :class:`Shape`
     :ivar velocity: (N, 3) m/s of every node, global frame
     :ivar angular_velocity: (N, 3) rad/s of every node, global frame
-    :ivar tensions: (n_cables,) N, what the cables pulled with
+    :ivar tensions: (n_cables,) N at the motors (driven by lengths) or as given
+    :ivar end_tensions: (n_cables,) N at the end disks, what bends the rod
     :ivar converged: the step's shooting problem was solved
-    :ivar iterations: forward integrations the step took
+    :ivar iterations: forward integrations the step took (a Jacobian refresh counts its cost)
     :ivar states: (N, 24) the node states (:mod:`layout`'s ``DYNAMIC_STATE``)
     """
 
-    time: float
-    shape: Shape
-    velocity: np.ndarray
-    angular_velocity: np.ndarray
-    tensions: np.ndarray
-    converged: bool
-    iterations: int
-    states: np.ndarray
+    def __init__(self, robot, time, states, nodes, base_force, tensions, end_tensions,
+                 converged, iterations):
+        self._robot, self._nodes, self._base_force = robot, nodes, base_force
+        self.time, self.states, self.tensions = time, states, tensions
+        self.end_tensions, self.converged, self.iterations = end_tensions, converged, iterations
+
+    @functools.cached_property
+    def shape(self):
+        """The backbone as a :class:`Shape` (strains: each node's left limit)."""
+        states, nodes, robot = self.states, self._nodes, self._robot
+        static = np.empty((len(states), STATE_SIZE))
+        static[:, POSITION] = states[:, DYN_POSITION_AT:DYN_POSITION_AT + 3]
+        static[:, ROTATION] = states[:, DYN_ROTATION_AT:DYN_ROTATION_AT + 9]
+        static[:, STRETCH] = nodes[:, 0:3] - np.array([0.0, 0.0, 1.0])
+        static[:, BENDING] = nodes[:, 3:6]
+        static[:, MOMENT] = states[:, DYN_MOMENT_AT:DYN_MOMENT_AT + 3]
+        return Shape(robot.s_grid, static, nodes[0, 3:6].copy(), self._base_force,
+                     robot.node_c, robot.d, fixed_tensions=self.end_tensions)
+
+    @functools.cached_property
+    def velocity(self):
+        """(N, 3) m/s, global."""
+        return np.einsum('nij,nj->ni', self._rotations(), self._nodes[:, 6:9])
+
+    @functools.cached_property
+    def angular_velocity(self):
+        """(N, 3) rad/s, global."""
+        return np.einsum('nij,nj->ni', self._rotations(), self._nodes[:, 9:12])
 
     @property
     def tip_position(self):
         """(3,) m, global."""
-        return self.shape.tip_position
+        return self.states[-1, DYN_POSITION_AT:DYN_POSITION_AT + 3]
+
+    def _rotations(self):
+        return self.states[:, DYN_ROTATION_AT:DYN_ROTATION_AT + 9].reshape(-1, 3, 3)
+
+    def failed(self, iterations):
+        """Return this state as kept by a step that failed after ``iterations``."""
+        return DynamicState(self._robot, self.time, self.states, self._nodes, self._base_force,
+                            self.tensions, self.end_tensions, False, iterations)
 
 
 def bdf_alpha(dt, alpha):
@@ -127,6 +154,7 @@ class RodDynamics:
                                       'yet (point_moment is)' % robot.cable_model)
         self.robot = robot
         self.c0, self.c1, self.c2, self.d1 = bdf_alpha(self.dt, self.alpha)
+        self._coefficients = (self.c0, self.c1, self.c2, self.d1)
         tip_mass = float(tip_mass)
         if not (np.isfinite(tip_mass) and tip_mass >= 0.0):
             raise ValueError('tip_mass must be finite and >= 0 kg, got %r' % tip_mass)
@@ -145,6 +173,7 @@ class RodDynamics:
         self._current = np.zeros_like(self._stages)
         self._rate = np.zeros_like(self._stages)
         self._history = np.zeros_like(self._stages)
+        self._memory = (self._previous, self._current, self._rate, self._history)
         self.driven_by_lengths = False
         self._motion = None  # length-driven: each cable's friction state (length_statics)
         self.time = None
@@ -214,21 +243,12 @@ class RodDynamics:
                                 else ('tensions', 'tensions')))
         tip = _tip(tip_force, tip_moment)
         cables = self._cables(lengths, tensions)
-        # y_h = c1 y(t_i-1) + c2 y(t_i-2) + d1 y_t(t_i-1) (eq. 13)
-        self._history[:] = (self.c1 * self._current + self.c2 * self._previous
-                            + self.d1 * self._rate)
-        saved = (self._x.copy(), self._states.copy(), self._left.copy(),
-                 self._stages.copy(), self._motor.copy())
-        # predictor: the unknowns extrapolated from the last two steps
-        self._x += self._x - self._last_x
-        converged, ivps = self._solve(self.c0, cables, tip)
-        if not converged:
-            self._x[:], self._states[:], self._left[:], self._stages[:], self._motor[:] = saved
-            return dataclasses.replace(self.state, converged=False, iterations=ivps)
-        self._last_x[:] = saved[0]
-        self._rate[:] = self.c0 * self._stages + self._history
-        self._previous[:] = self._current
-        self._current[:] = self._stages
+        converged, ivps, _ = self._model.dynamics_advance(
+            self.record, self._coefficients, self._memory, self._x, self._last_x,
+            self._jacobian, self._pivots, tip, cables, self._states, self._left, self._stages,
+            self._motor, TOLERANCE, MAX_ITERATIONS)
+        if not converged:  # every array as before the step: the last state stands
+            return self.state.failed(ivps)
         self.time += self.dt
         self.state = self._state(True, ivps)
         return self.state
@@ -262,25 +282,13 @@ class RodDynamics:
         return converged, ivps
 
     def _state(self, converged, ivps):
-        states = self._states.copy()
-        rotations = states[:, DYN_ROTATION_AT:DYN_ROTATION_AT + 9].reshape(-1, 3, 3)
         # each node's v, u, q, w: the first stage at the base, the last of the interval before
         # elsewhere (the strains' left limit, as the statics' shapes keep them)
         nodes = np.concatenate([self._current[:1, 0], self._current[:, 3]])
-        static = np.empty((len(states), STATE_SIZE))
-        static[:, POSITION] = states[:, DYN_POSITION_AT:DYN_POSITION_AT + 3]
-        static[:, ROTATION] = states[:, DYN_ROTATION_AT:DYN_ROTATION_AT + 9]
-        static[:, STRETCH] = nodes[:, 0:3] - np.array([0.0, 0.0, 1.0])
-        static[:, BENDING] = nodes[:, 3:6]
-        static[:, MOMENT] = states[:, DYN_MOMENT_AT:DYN_MOMENT_AT + 3]
         n_cables = len(self.robot.cable_names)
         end = self._x[len(self._x) - n_cables:] if self.driven_by_lengths else self._motor
-        shape = Shape(self.robot.s_grid, static, nodes[0, 3:6].copy(), self._x[:3].copy(),
-                      self.robot.node_c, self.robot.d, fixed_tensions=end.copy())
-        velocity = np.einsum('nij,nj->ni', rotations, nodes[:, 6:9])
-        angular = np.einsum('nij,nj->ni', rotations, nodes[:, 9:12])
-        return DynamicState(self.time, shape, velocity, angular, self._motor.copy(), converged,
-                            ivps, states)
+        return DynamicState(self.robot, self.time, self._states.copy(), nodes,
+                            self._x[:3].copy(), self._motor.copy(), end.copy(), converged, ivps)
 
 
 class _Motion(NamedTuple):
@@ -317,8 +325,8 @@ def dynamics_model(robot, dt, c0, tip_mass=0.0):
         float(constants.radius), float(constants.t_ref))
 
 
-#: growth of a perturbation along one shooting segment, e-folds (exp(3) = 20)
-SEGMENT_GROWTH = 3.0
+#: growth of a perturbation along one shooting segment, e-folds (exp(4) = 55)
+SEGMENT_GROWTH = 4.0
 
 
 def _bounds(robot, c0):

@@ -518,3 +518,38 @@ def solve_step(model, c0, history, x, inverse, pivots, tip, cables, states, left
     else:
         motor[:] = cables.tensions
     return converged, ivps, refreshes
+
+
+@numba.njit(cache=True, nogil=True)
+def advance(model, coefficients, memory, x, last_x, inverse, pivots, tip, cables, states,
+            left, stages, motor, tolerance, max_iterations):
+    """One time step: BDF-alpha history, predictor, :func:`solve_step`, memory moved on.
+
+    :param coefficients: (c0, c1, c2, d1) of BDF-alpha (``dynamics.bdf_alpha``)
+    :param memory: (previous, current, rate, history), each (N - 1, 4, 12): y(t_i-1), y(t_i),
+        y_t(t_i) at every RK4 stage, and the history's scratch
+    :param last_x: the unknowns a step before (the predictor extrapolates x from it)
+    A step that fails keeps every array as it was. Returns (converged, IVPs, refreshes).
+    """
+    c0, c1, c2, d1 = coefficients
+    previous, current, rate, history = memory
+    # y_h = c1 y(t_i-1) + c2 y(t_i-2) + d1 y_t(t_i-1) (Till et al. 2019, eq. 13)
+    history[:] = c1 * current + c2 * previous + d1 * rate
+    saved = (x.copy(), states.copy(), left.copy(), stages.copy(), motor.copy())
+    for i in range(x.shape[0]):
+        x[i] += x[i] - last_x[i]
+    converged, ivps, refreshes = solve_step(model, c0, history, x, inverse, pivots, tip, cables,
+                                            states, left, stages, motor, tolerance,
+                                            max_iterations, False)
+    if not converged:
+        x[:] = saved[0]
+        states[:, :] = saved[1]
+        left[:, :] = saved[2]
+        stages[:, :, :] = saved[3]
+        motor[:] = saved[4]
+        return converged, ivps, refreshes
+    last_x[:] = saved[0]
+    rate[:] = c0 * stages + history
+    previous[:] = current
+    current[:] = stages
+    return converged, ivps, refreshes

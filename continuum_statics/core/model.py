@@ -148,3 +148,11 @@ class Model:
         return dynamics_kernel.solve_step(record, c0, history, x, jacobian, pivots, tip, cables,
                                           states, left, stages, motor, tolerance,
                                           max_iterations, refresh_first)
+
+    @staticmethod
+    def dynamics_advance(record, coefficients, memory, x, last_x, inverse, pivots, tip, cables,
+                         states, left, stages, motor, tolerance, max_iterations):
+        """One time step with its history (``dynamics_kernel.advance``)."""
+        return dynamics_kernel.advance(record, coefficients, memory, x, last_x, inverse, pivots,
+                                       tip, cables, states, left, stages, motor, tolerance,
+                                       max_iterations)
