@@ -47,6 +47,9 @@ def write_robot_file(output, robot_file, robot, fit, header, uncertainty=None):
     if 'section_bending' in fit:
         for holder, section in zip(holders, robot.sections):
             holder['bending_scale'] = _number(section.bending_scale)
+    if 'damping' in fit:
+        document['rod']['damping'] = {'bending': _number(rod.bending_damping),
+                                      'shear': _number(rod.shear_damping)}
     if 'disk_mass' in fit:
         for holder, section in zip(holders, robot.sections):
             holder['disk_mass'] = _number(section.disk_mass)

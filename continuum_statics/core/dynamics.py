@@ -212,7 +212,7 @@ class RodDynamics:
         # lengths) each cable's end tension
         rest = _unknowns_at_rest(robot, self.record, shape, tip)
         self._x = np.concatenate([rest, end_tensions]) if self.driven_by_lengths else rest
-        self._last_x = self._x.copy()  # the step before's (the predictor's)
+        self._last_x = np.array([self._x, self._x])  # the two steps before (the predictor's)
         self._jacobian = np.zeros((len(self._x), len(self._x)))  # its inverse (Broyden)
         self._pivots = np.zeros(len(self._x), dtype=np.int64)
         # the static solution starts Newton's method at c0 = 0 (no time derivative: the same
@@ -221,7 +221,7 @@ class RodDynamics:
         converged, _ = self._solve(0.0, self._cables(lengths, end_tensions), tip, refresh=True)
         if not converged:
             raise ValueError('dynamics: no static equilibrium to start from under these loads')
-        self._last_x[:] = self._x
+        self._last_x[:] = self._x[None, :]
         self._previous[:] = self._stages
         self._current[:] = self._stages
         self._rate[:] = 0.0

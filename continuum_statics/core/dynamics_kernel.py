@@ -528,7 +528,7 @@ def advance(model, coefficients, memory, x, last_x, inverse, pivots, tip, cables
     :param coefficients: (c0, c1, c2, d1) of BDF-alpha (``dynamics.bdf_alpha``)
     :param memory: (previous, current, rate, history), each (N - 1, 4, 12): y(t_i-1), y(t_i),
         y_t(t_i) at every RK4 stage, and the history's scratch
-    :param last_x: the unknowns a step before (the predictor extrapolates x from it)
+    :param last_x: (2, M) the unknowns one and two steps before (the predictor's)
     A step that fails keeps every array as it was. Returns (converged, IVPs, refreshes).
     """
     c0, c1, c2, d1 = coefficients
@@ -536,8 +536,8 @@ def advance(model, coefficients, memory, x, last_x, inverse, pivots, tip, cables
     # y_h = c1 y(t_i-1) + c2 y(t_i-2) + d1 y_t(t_i-1) (Till et al. 2019, eq. 13)
     history[:] = c1 * current + c2 * previous + d1 * rate
     saved = (x.copy(), states.copy(), left.copy(), stages.copy(), motor.copy())
-    for i in range(x.shape[0]):
-        x[i] += x[i] - last_x[i]
+    for i in range(x.shape[0]):  # quadratic extrapolation of the last three steps' unknowns
+        x[i] = 3.0 * (x[i] - last_x[0, i]) + last_x[1, i]
     converged, ivps, refreshes = solve_step(model, c0, history, x, inverse, pivots, tip, cables,
                                             states, left, stages, motor, tolerance,
                                             max_iterations, False)
@@ -548,7 +548,8 @@ def advance(model, coefficients, memory, x, last_x, inverse, pivots, tip, cables
         stages[:, :, :] = saved[3]
         motor[:] = saved[4]
         return converged, ivps, refreshes
-    last_x[:] = saved[0]
+    last_x[1] = last_x[0]
+    last_x[0] = saved[0]
     rate[:] = c0 * stages + history
     previous[:] = current
     current[:] = stages

@@ -12,6 +12,7 @@ import sys
 
 import numpy as np
 
+from continuum_statics.calibration.damping import calibrate_damping
 from continuum_statics.calibration.error_budget import format_budget
 from continuum_statics.calibration.parameters import (
     DEFAULT_FIT,
@@ -67,9 +68,9 @@ def main(argv=None):
                              'columns; see the column options) or a rosbag2 directory')
     parser.add_argument('--fit', action='extend', nargs='+', metavar='PARAM', default=None,
                         help='parameter(s) to fit: %s (default youngs_modulus); recorded runs: '
-                             '%s (default %s)' % (', '.join(TIP_LOAD_PARAMETERS),
-                                                  ', '.join(RUN_PARAMETERS),
-                                                  ' '.join(DEFAULT_FIT)))
+                             '%s (default %s); damping: a recorded step or release, alone'
+                             % (', '.join(TIP_LOAD_PARAMETERS), ', '.join(RUN_PARAMETERS),
+                                ' '.join(DEFAULT_FIT)))
     parser.add_argument('--output', '-o', default=None,
                         help='calibrated robot file to write (default: none, report only)')
     parser.add_argument('--validate', default=None, metavar='FILE',
@@ -94,6 +95,14 @@ def main(argv=None):
     args = parser.parse_args(list(sys.argv[1:] if argv is None else argv))
     try:
         column_map = column_map_from_args(args)
+        if args.fit and 'damping' in args.fit:  # a step or release: the rod in motion
+            if set(args.fit) != {'damping'}:
+                raise ValueError('--fit damping is fitted alone, on a recorded step or release '
+                                 '(the static parameters first, on a slow run)')
+            summary = calibrate_damping(args.robot, args.data, column_map, args.output,
+                                        args.tip_topic)
+            print(json.dumps(summary) if args.json else _damping_report(summary))
+            return 0
         if is_recorded_run(args.data, column_map):
             log = (lambda text: print(text, file=sys.stderr)) if args.json else print
             summary = calibrate_run(
@@ -125,6 +134,19 @@ def main(argv=None):
     if args.output:
         print('wrote %s' % args.output)
     return 0
+
+
+def _damping_report(summary):
+    fitted = summary['fitted']['damping']
+    lines = ['calibrate: damping from %s (%d samples, %d simulations)' % (
+        summary['data'], summary['samples'], summary['evaluations']),
+        '  rod.damping.bending %.4g -> %.4g N m^2 s (first-mode damping ratio %.4f)' % (
+            fitted['before'], fitted['after'], fitted['first_mode_damping_ratio']),
+        '  tip displacement rms %.3f mm -> %.3f mm' % (1e3 * summary['rms_before'],
+                                                        1e3 * summary['rms_after'])]
+    if summary['output']:
+        lines.append('wrote %s' % summary['output'])
+    return '\n'.join(lines)
 
 
 def _coupled_notes(fitted):
