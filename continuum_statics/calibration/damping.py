@@ -6,8 +6,9 @@ tip) starts at rest. Its motor lengths, monotone cubic between samples, drive
 sample; the Kelvin-Voigt bending damping B (N m^2 s, ``rod.damping.bending``) minimises the
 root-mean-square distance between the measured tips and the simulated tip displacements from
 that first sample plus the constant offset that fits best (a tracker registered up to a
-translation is enough; its rotation must be the base frame's). One parameter, searched on log B between damping ratios 1e-4 and 2 of the first
-bending mode (zeta = B omega_1 / (2 E I), Euler-Bernoulli's omega_1), by golden section.
+translation is enough; its rotation must be the base frame's). One parameter, searched on
+log B between damping ratios 1e-4 and 2 of the first bending mode (zeta = B omega_1 / (2 E I),
+Euler-Bernoulli's omega_1), by golden section.
 """
 from dataclasses import dataclass, replace
 import math
