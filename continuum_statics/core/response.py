@@ -42,8 +42,9 @@ def spectrum_peaks(times, path, count=3, final=None):
     """Frequencies (Hz) of the ``count`` largest peaks of the motion's spectrum, low to high.
 
     The power spectra of the path's deviation from ``final`` (its end) along x, y and z,
-    Hann-windowed and zero-padded 16 times, are summed; a peak is a local maximum at least
-    1 / duration above zero frequency.
+    Hann-windowed and zero-padded 16 times, are summed; a peak is the largest value within
+    1 / duration either side (the window's main lobe is 2 / duration wide: its side lobes and
+    the decay's low-frequency skirt are no peaks) and at least 2 / duration above zero.
     """
     path = np.asarray(path, dtype=float)
     final = path[-1] if final is None else np.asarray(final, dtype=float)
@@ -58,9 +59,13 @@ def spectrum_peaks(times, path, count=3, final=None):
         signal = deviation[:, axis] - deviation[:, axis].mean()
         power += np.abs(np.fft.rfft(signal * window, size)) ** 2
     freq = np.fft.rfftfreq(size, dt)
-    low = 1.0 / (times[-1] - times[0])
-    inner = (power[1:-1] > power[:-2]) & (power[1:-1] >= power[2:]) & (freq[1:-1] >= low)
-    index = np.nonzero(inner)[0] + 1
+    duration = times[-1] - times[0]
+    reach = 16  # bins in 1 / duration
+    index = [i for i in range(1, len(power) - 1)
+             if freq[i] >= 2.0 / duration
+             and power[i] > power[i - 1]
+             and power[i] == power[max(0, i - reach):i + reach + 1].max()]
+    index = np.array(index, dtype=int)
     if not len(index):
         return []
     strongest = index[np.argsort(power[index])[::-1][:count]]
