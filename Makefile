@@ -34,6 +34,7 @@ bench: venv
 	.venv/bin/python -m continuum_statics.tools.bench_load
 	.venv/bin/python -m continuum_statics.tools.bench_noisy
 	.venv/bin/python -m continuum_statics.tools.bench_fusion
+	.venv/bin/python -m continuum_statics.tools.bench_dynamics
 
 bench-nodes: venv
 	scripts/ros_env.sh --private .venv/bin/python -m continuum_statics bench --nodes
