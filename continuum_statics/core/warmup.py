@@ -186,6 +186,26 @@ def _exercise_tendons(robot, lengths, goal):
         command_for(each, goal.shape, min_tension=0.1)
 
 
+def warm_up_dynamics(log=None):
+    """Compile the rod-in-motion kernels (a start and a step driven by lengths); return s.
+
+    Not part of :func:`warm_up`: only the simulated driver with ``sim.dynamics``, ``simulate``
+    and ``calibrate --fit damping`` step the rod; the venv setup fills the cache with both.
+    """
+    from continuum_statics.config_paths import config_file
+    from continuum_statics.core.robot import load_robot
+
+    start = time.perf_counter()
+    robot = load_robot(config_file('tendon_robot_dynamic.yaml'))
+    sim = robot.dynamics()
+    sim.start(lengths=robot.straight_cable_lengths)
+    sim.step(lengths=robot.straight_cable_lengths - 1e-4)
+    seconds = time.perf_counter() - start
+    if log is not None:
+        log('dynamics kernels ready in %.2f s' % seconds)
+    return seconds
+
+
 def kernel_signatures():
     """Return {kernel name: number of compiled signatures} over :data:`KERNEL_MODULES`.
 

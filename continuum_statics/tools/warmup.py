@@ -5,7 +5,7 @@ The venv setup runs it once, so that no node compiles at first use
 """
 import argparse
 
-from continuum_statics.core.warmup import warm_up
+from continuum_statics.core.warmup import warm_up, warm_up_dynamics
 
 
 def main(argv=None):
@@ -17,5 +17,7 @@ def main(argv=None):
     parser.add_argument('--robot', default=None, help='robot file (default: the bundled one)')
     options = parser.parse_args(argv)
     robot = None if options.robot is None else load_robot(options.robot)
-    warm_up(robot, log=lambda line: print('warmup: %s' % line, flush=True))
+    log = lambda line: print('warmup: %s' % line, flush=True)  # noqa: E731
+    warm_up(robot, log=log)
+    warm_up_dynamics(log=log)
     return 0
