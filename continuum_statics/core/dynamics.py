@@ -43,8 +43,9 @@ from continuum_statics.core.shape import Shape
 
 #: Newton iterations per step at most (a warm step takes one or two)
 MAX_ITERATIONS = 30
-#: residual of a solved step, each value in its unit (DynamicsModel.scales): ~1e-9 m at the tip
-TOLERANCE = 1e-8
+#: residual of a solved step, each value in its unit (DynamicsModel.scales): ~1e-8 m at the
+#: tip (1e-8 took a fourth evaluation in the median step for 1e-9 m)
+TOLERANCE = 1e-7
 
 
 class DynamicState:
@@ -163,6 +164,9 @@ class RodDynamics:
         self.segments = len(self.record.bounds) - 1
         self._model = robot.model
         self._friction = problem_constants(robot).friction
+        # free length = motor length + this (Tendons.free_lengths, fixed per robot)
+        self._free_offset = robot.tendons.free_lengths(np.zeros(len(robot.cable_names)),
+                                                       robot.straight_cable_lengths)
         n = len(robot.s_grid)
         self._states = np.zeros((n, DYNAMIC_STATE))
         self._left = np.zeros((n, 6))
@@ -268,8 +272,7 @@ class RodDynamics:
         if not self.driven_by_lengths:
             tensions = self._tensions(tensions)
             return CableInputs(tensions, _NONE, np.zeros(len(tensions)))
-        lengths = as_vector(lengths, len(robot.cable_names), 'lengths')
-        free = robot.tendons.free_lengths(lengths, robot.straight_cable_lengths)
+        free = as_vector(lengths, len(robot.cable_names), 'lengths') + self._free_offset
         motion, reference = motion_since(robot, free, self._motion)
         self._motion = _Motion(free, reference, motion)
         return CableInputs(_NONE, free, self._friction * motion + 0.0)

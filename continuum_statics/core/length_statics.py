@@ -251,6 +251,8 @@ def motion_since(robot, free_lengths, warm_start, threshold=MOTION_THRESHOLD):
         return motion, free_lengths.copy()
     change = free_lengths - previous
     moved = np.abs(change) > threshold
+    if not moved.any():  # the common case at rest: nothing turns (half the cost)
+        return motion, np.array(previous, dtype=float)
     stick = robot.tendons.stick_length
     # a full turn, +1 to -1, over the stick length
     turned = np.where(stick > 0.0, np.clip(
