@@ -71,3 +71,56 @@ def test_goals_on_the_robot_in_motion_come_to_rest_where_the_controller_says(har
               values.get('step_time_ms'), values.get('dropped_time_s'),
               values.get('failed_steps')))
     assert values['failed_steps'] == '0'
+
+
+@pytest.mark.ros
+def test_a_fast_goal_overshoots_and_settles_as_simulate_predicts(harness):
+    """The driver's rod in real time against ``simulate`` replaying the same cable_commands."""
+    from sensor_msgs.msg import JointState
+
+    from continuum_statics.core.response import overshoot, settling_time
+    from continuum_statics.tools.simulate import run
+
+    common = {'robot_file': DYNAMIC_FILE}
+    speed = 0.2  # m/s: motors and ramps ten times the defaults, a goal in ~0.1 s
+    harness.add(CableDriverNode, **common, **{'sim.dynamics': True, 'sim.max_speed': speed})
+    harness.add(StaticsNode, marker_rate=0.0, **common)
+    harness.add(TipControllerNode, max_cable_speed=speed, **common)
+    client = harness.client()
+    true_tips = Collector(client, PoseStamped, 'sim/tip_pose_true', qos_profile_sensor_data)
+    commands = Collector(client, JointState, 'cable_commands', 100)
+    wait_until(lambda: len(true_tips) >= 10, 60.0, 'the true tip')
+    service = client.create_client(GetPlan, 'tip_goal')
+    assert service.wait_for_service(timeout_sec=10.0)
+    goal = ROBOT.solve_ivp([0.0, -6.0, 0.0]).tip_position
+    request = GetPlan.Request(tolerance=TOLERANCE)
+    request.goal.header.frame_id = ROBOT.base_frame_id
+    p = request.goal.pose.position
+    p.x, p.y, p.z = (float(v) for v in goal)
+    first = len(true_tips)
+    assert call(service, request, 60.0).plan.poses
+    wait_until(lambda: len(true_tips) > first + 400, 10.0, '2 s of the true tip after the goal')
+
+    def stamp(msg):
+        return msg.header.stamp.sec + 1e-9 * msg.header.stamp.nanosec
+
+    names = list(ROBOT.cable_names)
+    sent = [(stamp(m), [m.position[list(m.name).index(n)] for n in names])
+            for m in commands.messages]
+    start = sent[0][0]
+    times = np.array([t for t, _ in sent]) - start
+    targets = np.array([lengths for _, lengths in sent])
+    observed = [(stamp(m) - start, pose_xyz(m.pose)) for m in true_tips.messages
+                if stamp(m) >= start - 0.05]
+    observed_t = np.array([t for t, _ in observed])
+    observed_tip = np.array([xyz for _, xyz in observed])
+    predicted = run(ROBOT, observed_t[-1], commands=(times, targets),
+                    motor_bandwidth=1.0 / (2.0 * np.pi * 0.02), max_speed=speed)
+    figures = {}
+    for name, t, tips in (('nodes', observed_t, observed_tip),
+                          ('simulate', predicted['time'], predicted['tip'])):
+        figures[name] = (overshoot(tips), settling_time(t, tips))
+    print('overshoot %%, settling time s: %s' % figures)
+    assert abs(figures['nodes'][0] - figures['simulate'][0]) < 3.0
+    assert figures['nodes'][1] is not None and figures['simulate'][1] is not None
+    assert abs(figures['nodes'][1] - figures['simulate'][1]) < 0.1
