@@ -23,6 +23,8 @@ def robot_with(tmp_path, **changes):
     for key, value in changes.items():
         if key == 'damping':
             data['rod']['damping'] = value
+        elif key == 'solver':
+            data['solver'] = dict(data.get('solver') or {}, **value)
         else:
             data[key] = value
     path = tmp_path / 'robot.yaml'
@@ -44,29 +46,35 @@ def spectrum_peaks(signal, dt, near):
 
 
 def test_small_free_vibration_has_euler_bernoulli_frequencies(tmp_path):
-    robot = robot_with(tmp_path, gravity=[0.0, 0.0, 0.0])
+    """The first three bending frequencies, converging in dt and in the number of points."""
+    robots = {steps: robot_with(tmp_path, gravity=[0.0, 0.0, 0.0], solver={'steps': steps})
+              for steps in (24, 48)}
+    robot = robots[24]
     rod = robot.description.rod
     exact = EB_ROOTS ** 2 * np.sqrt(robot.c[0] / (rod.mass_per_length * robot.length ** 4)) \
         / (2.0 * np.pi)
     errors = {}
-    for dt in (1e-3, 5e-4):
-        sim = robot.dynamics(dt=dt, alpha=-0.45)  # the least numerical damping allowed
+    for steps, dt in ((24, 1e-3), (24, 5e-4), (24, 2.5e-4), (48, 2.5e-4)):
+        sim = robots[steps].dynamics(dt=dt, alpha=-0.45)  # the least numerical damping allowed
         sim.start(tip_force=(1e-3, 0.0, 0.0))  # 0.2 mm of static tip deflection, released
         tips = []
         for _ in range(int(round(3.0 / dt))):
             state = sim.step()
             assert state.converged
             tips.append(state.tip_position[0])
-        errors[dt] = spectrum_peaks(np.array(tips), dt, exact) / exact - 1.0
-        print('dt %g s: frequencies %s Hz, exact %s, errors %s %%'
-              % (dt, np.round((1 + errors[dt]) * exact, 2), np.round(exact, 2),
-                 np.round(100 * errors[dt], 2)))
-    # the first two modes within 1 % at dt = 0.5 ms (3 s of motion reads them to ~0.3 %)
-    assert np.all(np.abs(errors[5e-4][:2]) < 0.01)
-    # the trapezoidal rule's period error is second order, (w dt)^2 / 12: halving dt divides
-    # the third mode's error (7.5 % at 1 ms) by about four
-    ratio = errors[1e-3][2] / errors[5e-4][2]
-    assert 3.0 < ratio < 5.0, ratio
+        errors[steps, dt] = spectrum_peaks(np.array(tips), dt, exact) / exact - 1.0
+        print('%d steps, dt %g s: frequencies %s Hz, exact %s, errors %s %%'
+              % (steps, dt, np.round((1 + errors[steps, dt]) * exact, 2), np.round(exact, 2),
+                 np.round(100 * errors[steps, dt], 2)))
+    # all three within 1 % at dt = 0.25 ms (3 s of motion reads them to ~0.2 %)
+    assert np.all(np.abs(errors[24, 2.5e-4]) < 0.01)
+    # BDF-alpha's period error is second order in dt: halving dt divides the third mode's error
+    # (9.2 % at 1 ms) by about four each time
+    for coarse, fine in ((1e-3, 5e-4), (5e-4, 2.5e-4)):
+        ratio = errors[24, coarse][2] / errors[24, fine][2]
+        assert 3.0 < ratio < 5.0, (coarse, ratio)
+    # and the grid (RK4 in s, 24 steps) is converged: twice the points change nothing we read
+    assert np.all(np.abs(errors[48, 2.5e-4] - errors[24, 2.5e-4]) < 0.001)
 
 
 def test_the_start_is_the_static_equilibrium_of_the_other_formulation():
