@@ -22,7 +22,7 @@ from continuum_statics.drivers.sim import SimulatedCableBackend
 
 def run(robot, duration, release_force=None, step=None, commands=None, dt=None, alpha=None,
         motor_bandwidth=8.0, max_speed=0.05, tip_mass=0.0):
-    """Simulate; return {'time', 'tip', 'tensions', 'failed_steps', 'compute_s', 'dt'}.
+    """Simulate; return {'time', 'tip', 'tensions', 'motors', 'failed_steps', ...}.
 
     ``step`` is (cable index, dl m); ``commands`` (times (T,) s, targets (T, n) m), held
     between samples. Real tendons are driven by the motors' lengths, ideal cables (release
@@ -46,6 +46,7 @@ def run(robot, duration, release_force=None, step=None, commands=None, dt=None, 
         targets[step[0]] += step[1]
     steps = int(round(duration / sim.dt))
     times, tips, tensions, failed = [0.0], [sim.state.tip_position.copy()], [sim.state.tensions], 0
+    lengths = [motors.copy()]
     began = time.perf_counter()
     for i in range(steps):
         t = (i + 1) * sim.dt
@@ -63,7 +64,9 @@ def run(robot, duration, release_force=None, step=None, commands=None, dt=None, 
         times.append(t)
         tips.append(state.tip_position.copy())
         tensions.append(state.tensions)
+        lengths.append(motors.copy())
     return {'time': np.array(times), 'tip': np.array(tips), 'tensions': np.array(tensions),
+            'motors': np.array(lengths),
             'failed_steps': failed, 'compute_s': time.perf_counter() - began, 'dt': sim.dt,
             'alpha': sim.alpha, 'segments': sim.segments}
 
