@@ -63,6 +63,8 @@ def test_slower_than_the_clock_drops_the_backlog_and_says_so():
     assert float(status.values['dropped_time_s']) == pytest.approx(10.0 - 0.001 - MAX_CATCH_UP,
                                                                    abs=2e-3)
     assert status.level == 1 and 'slower than real time' in status.message
+    sim.read(10.005)
+    assert sim.status().level == 0  # keeping up again: no warning for what is past
 
 
 def test_ideal_cables_are_refused_by_name():

@@ -78,6 +78,7 @@ class SimulatedCableBackend(CableBackend):
         self._velocities = np.zeros_like(self._lengths)
         self._time = None
         self._rod = None  # the rod in motion (option dynamics)
+        self._reported = (0.0, 0)  # its dropped time and failed steps at the last status()
         if merged['dynamics']:
             if robot is None:
                 raise ValueError('sim.dynamics needs the robot (the node passes it)')
@@ -186,10 +187,14 @@ class SimulatedCableBackend(CableBackend):
                        'dt_s': '%g' % rod.dt, 'steps': str(rod.steps),
                        'failed_steps': str(rod.failed_steps),
                        'dropped_time_s': '%.3f' % rod.dropped_time})
-        if rod.dropped_time > 0.0 or rod.failed_steps:
+        # what happened since the last report: a start-up hiccup does not warn for ever
+        dropped = rod.dropped_time - self._reported[0]
+        failed = rod.failed_steps - self._reported[1]
+        self._reported = (rod.dropped_time, rod.failed_steps)
+        if dropped > 0.0 or failed:
             return BackendStatus(WARN, 'simulated rod in motion slower than real time or '
-                                 'stalled (%.3f s dropped, %d failed steps)'
-                                 % (rod.dropped_time, rod.failed_steps), values)
+                                 'stalled (%.3f s dropped, %d failed steps since the last '
+                                 'report)' % (dropped, failed), values)
         return BackendStatus(OK, 'simulated cables and rod in motion', values)
 
     @property
