@@ -22,10 +22,11 @@ ROSDEP_KEYS = {
     'python-can': 'python3-can',
     'pytest': 'python3-pytest',
 }
-#: Development tools of the pip route only (lint, fuzzing, bag tests): not needed on a robot.
+#: Development tools of the pip route only (lint, fuzzing, bag tests, the dynamics benchmark's
+#: PyElastica baseline): not needed on a robot.
 DEVELOPMENT_ONLY = {'hypothesis', 'ruff', 'mcap', 'mcap-ros2-support', 'playwright', 'sphinx',
                     'myst-parser', 'colcon-core', 'colcon-ros', 'colcon-cmake',
-                    'colcon-python-setup-py', 'urdf-parser-py'}
+                    'colcon-python-setup-py', 'urdf-parser-py', 'pyelastica'}
 #: Optional on a robot computer (no rosdep key exists): `pip install viser` for `view`.
 OPTIONAL_PIP = {'viser'}
 #: ROS wheels that are the middleware, not a package dependency.
