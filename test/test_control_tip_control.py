@@ -4,6 +4,8 @@ Time is simulated (a settable clock); waiting for state is an awaitable that, wh
 condition does not hold, lets the clock run to the deadline (nothing arrived meanwhile).
 """
 import asyncio
+import sys
+import threading
 
 from conftest import REPO
 import numpy as np
@@ -249,3 +251,46 @@ def test_shutdown_ends_the_running_goal():
     assert goal.done.is_set() and goal.reason == 'shutting down'
     assert goal.outcome is Outcome.FAILED and control.closing
     assert isinstance(goal, Goal)
+
+
+def test_goals_are_judged_while_another_thread_takes_tip_poses_at_full_speed():
+    """The intake thread appends tips while the loop judges a goal over them (the demo's race).
+
+    The judge once iterated the deque the intake appends to: ``RuntimeError: deque mutated
+    during iteration`` about one ``make demo`` in seven. Here the feeder appends as fast as it
+    can (far above a tracker's 2 kHz) for every tick of four goals, the threads switching every
+    microsecond (the race then shows in every run).
+    """
+    control, clock, _ = make(tip_average_time=0.2)
+    lengths = np.array(ROBOT.straight_cable_lengths, dtype=float)
+    feed(control, lengths)
+    stop, fed = threading.Event(), [0]
+
+    def intake():
+        while not stop.is_set():
+            tip = control.tip
+            control.on_tip_pose(tip.position, control._tip_rotation, tip.stamp_ns)
+            control.on_tip_pose_measured(tip.position, tip.stamp_ns)
+            fed[0] += 1
+
+    feeder = threading.Thread(target=intake, daemon=True)
+    interval = sys.getswitchinterval()
+    sys.setswitchinterval(1e-6)  # threads interleave as on a loaded machine
+    feeder.start()
+    try:
+        for target in (TARGET, OTHER, TARGET, OTHER):
+            goal = start(control, target, tolerance=5e-3)
+            for _ in range(3000):
+                clock.now += DT
+                command = control.tick()
+                if command is not None:
+                    lengths = lengths + (command - lengths) * (1.0 - np.exp(-1.0))
+                feed(control, lengths)
+                if goal.done.is_set():
+                    break
+            assert goal.outcome is Outcome.REACHED, goal.reason
+    finally:
+        stop.set()
+        feeder.join()
+        sys.setswitchinterval(interval)
+    assert fed[0] > 1000  # the feeder ran throughout (about 10,000 times seen)

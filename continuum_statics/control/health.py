@@ -100,6 +100,7 @@ class ValueWindow:
     """Values collected since the last report (e.g. residuals, m): count, median and max."""
 
     def __init__(self, capacity=5000):
+        self._capacity = capacity
         self._samples = deque(maxlen=capacity)
 
     def add(self, value):
@@ -108,8 +109,9 @@ class ValueWindow:
 
     def report(self):
         """Return (count, median, max) and start a new window; (0, nan, nan) when empty."""
-        samples = np.fromiter(self._samples, dtype=float)
-        self._samples.clear()
+        # handed over, not iterated: another thread may be adding to the window
+        window, self._samples = self._samples, deque(maxlen=self._capacity)
+        samples = np.array(window, dtype=float)
         if samples.size == 0:
             return 0, math.nan, math.nan
         return samples.size, float(np.median(samples)), float(samples.max())

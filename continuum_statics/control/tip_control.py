@@ -101,6 +101,9 @@ class TipControl:
         self.tip_source = 'tip_pose'
         self._twist = None  # the newest Twist
         self._last_tick = None
+        # The intake thread appends to these deques while the control loop judges a goal: the
+        # loop takes a snapshot under this lock (never iterates a deque being appended to).
+        self._samples_lock = threading.Lock()
         self._tips = deque(maxlen=4000)  # recent TipSamples, for the judgement of a goal
         self._recent_lengths = deque(maxlen=64)  # recent Measurements, for a low-noise mean
         self.measurement = None  # newest Measurement (one assignment: always consistent)
@@ -157,9 +160,10 @@ class TipControl:
     # -- state inputs (already parsed and checked by the node) ------------------------------
     def on_tip_pose(self, position, rotation, stamp_ns) -> None:
         """Take the model tip: position (3,) m and rotation (3, 3) in the base frame."""
-        self.tip = TipSample(position, stamp_ns, self.clock())
-        self._tips.append(self.tip)
-        self._tip_rotation = rotation
+        tip = TipSample(position, stamp_ns, self.clock())
+        with self._samples_lock:
+            self._tips.append(tip)
+        self.tip, self._tip_rotation = tip, rotation
 
     def on_tip_pose_measured(self, marker_position, stamp_ns, age=0.0) -> None:
         """Take a tracker's marker position (3,) m, base frame (ignored before a tip_pose).
@@ -169,13 +173,17 @@ class TipControl:
         if self._tip_rotation is None:
             return  # the marker's offset needs the model's tip frame: wait for tip_pose
         tip = tracked_tip(marker_position, self._tip_rotation, self.robot.tip_marker)
-        self.measured_tip = TipSample(tip, stamp_ns, self.clock() - age)
-        self._measured_tips.append(self.measured_tip)
+        sample = TipSample(tip, stamp_ns, self.clock() - age)
+        with self._samples_lock:
+            self._measured_tips.append(sample)
+        self.measured_tip = sample
 
     def on_cable_states(self, lengths, stamp_ns) -> None:
         """Measured cable lengths (n,) m in robot order."""
-        self.measurement = Measurement(lengths, stamp_ns, self.clock())
-        self._recent_lengths.append(self.measurement)
+        measurement = Measurement(lengths, stamp_ns, self.clock())
+        with self._samples_lock:
+            self._recent_lengths.append(measurement)
+        self.measurement = measurement
 
     def on_backbone(self, stamp_ns, data) -> None:
         """Keep the newest backbone serialized (only the one that answers a goal is read)."""
@@ -225,8 +233,9 @@ class TipControl:
 
     def _mean_lengths(self, newest):
         """Mean of the measurements of the last MEAN_WINDOW_S s: encoder noise averaged out."""
-        recent = [m.lengths for m in list(self._recent_lengths)
-                  if newest.received - m.received <= MEAN_WINDOW_S]
+        with self._samples_lock:
+            recent = tuple(self._recent_lengths)
+        recent = [m.lengths for m in recent if newest.received - m.received <= MEAN_WINDOW_S]
         return np.mean(recent, axis=0) if recent else newest.lengths.copy()
 
     # -- what goal interfaces ask -----------------------------------------------------------
@@ -503,8 +512,10 @@ class TipControl:
             self._report(goal)
             measurement = self.measurement  # hold where the cables are
             return None if measurement is None else measurement.lengths.copy()
+        with self._samples_lock:
+            tips, measured_tips = tuple(self._tips), tuple(self._measured_tips)
         tip, tips, self.tip_source, warning = self.tracker.judged(
-            now, self.measured_tip, self._measured_tips, self.tip, self._tips,
+            now, self.measured_tip, measured_tips, self.tip, tips,
             self.params['max_state_age'], self.params['use_measured_tip'])
         if warning:
             self.problems.add('tip_pose_measured', warning)
