@@ -4,8 +4,8 @@ The numeric core (no ROS imports): ``load_robot(path)`` returns a :class:`Robot`
 ``solve_ivp``, ``solve_bvp``, ``cable_lengths``, ``jacobian``, ``cable_jacobian``,
 ``estimate_shape`` and ``solve_tip_goal``.
 """
-from continuum_statics.core.bvp import ConvergenceError
 from continuum_statics.core.robot import Robot, load_robot
-from continuum_statics.core.shape import Shape
+from continuum_statics.core.rod.shape import Shape
+from continuum_statics.core.statics.bvp import ConvergenceError
 
 __all__ = ['load_robot', 'Robot', 'Shape', 'ConvergenceError']

@@ -4,8 +4,8 @@ import copy
 from conftest import REPO
 
 from continuum_statics import load_robot
+from continuum_statics.core.description.robot_file import parse_robot_description
 from continuum_statics.core.robot import Robot
-from continuum_statics.core.robot_file import parse_robot_description
 
 PAPER_ROD = REPO / 'config' / 'jones2009_nitinol_rod.yaml'
 TENDON_ROBOT = REPO / 'config' / 'tendon_robot.yaml'

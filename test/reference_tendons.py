@@ -1,7 +1,7 @@
 """Slow, independent reference for displacement-driven statics with real (elastic) tendons.
 
 The equilibrium of rod and frictionless cables when the motors hold cable lengths, solved in a
-formulation of its own, for checking ``robot.solve_lengths`` (``core/length_statics.py``):
+formulation of its own, for checking ``robot.solve_lengths`` (``core/statics/length_statics.py``):
 
 - the unknowns are the cable tensions t (N), nothing else: the rod's boundary-value problem for
   given tensions is ``robot.solve_tensions`` (shooting on u(0)), the cable paths p(t) (m) are
@@ -15,7 +15,8 @@ formulation of its own, for checking ``robot.solve_lengths`` (``core/length_stat
   path = stretched length; slack: t = 0, path <= free length) and ``kkt_error`` says by how much
   it misses.
 
-The free length follows the contract (docs, ``core/tendons.py``), computed here from the tendon
+The free length follows the contract (docs, ``core/description/tendons.py``), computed here from
+the tendon
 parameters: a cable homed at the straight pose spans ``straight`` under its pretension, so
 Lf = (length - straight) + straight / (1 + pretension / EA) + zero_offset, where ``straight``,
 the straight-rod path of a cable, is the arc length of its end disk (its holes then lie on one

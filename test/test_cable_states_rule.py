@@ -13,7 +13,7 @@ from nav_msgs.msg import Path  # noqa: E402
 from rclpy.serialization import serialize_message  # noqa: E402
 from sensor_msgs.msg import JointState  # noqa: E402
 
-from continuum_statics.core.rotations import quaternion_direction  # noqa: E402
+from continuum_statics.core.rod.rotations import quaternion_direction  # noqa: E402
 from continuum_statics.nodes.joint_state_parser import (  # noqa: E402
     CableStatesReader,
     header_stamp_ns,

@@ -23,7 +23,7 @@ from continuum_statics.calibration.recorded_run import RecordedRun
 from continuum_statics.calibration.replay import replay
 from continuum_statics.calibration.run_model import RunModel
 from continuum_statics.calibration.sensitivities import point_sensitivities, stencil
-from continuum_statics.core import length_statics
+from continuum_statics.core.statics import length_statics
 
 #: Every physical fit name (cable_stiffness replaces stiffness: a case of its own).
 NAMES = ['section_rotation', 'cable_angle', 'cable_zero', 'stiffness', 'pretension', 'friction',

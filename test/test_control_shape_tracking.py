@@ -98,7 +98,7 @@ def test_without_a_tip_load_a_model_failure_is_left_to_the_caller():
 
 def test_sensor_inbox_fuses_each_reading_once_and_counts_verdicts():
     from continuum_statics.control.sensor_readings import SensorInbox
-    from continuum_statics.core.sensors import SensorVerdict
+    from continuum_statics.core.description.sensors import SensorVerdict
 
     inbox = SensorInbox(['tip_tracker', 'coil'], timeout=0.5)
     assert inbox.take(0.0) is None

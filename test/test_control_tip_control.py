@@ -15,7 +15,7 @@ from continuum_statics import load_robot
 from continuum_statics.control.goal_run import Goal, Outcome, Phase
 from continuum_statics.control.health import OK, STARTING, WARN, ControllerHealth
 from continuum_statics.control.tip_control import TipControl
-from continuum_statics.core.tendon_commands import command_for
+from continuum_statics.core.statics.tendon_commands import command_for
 
 ROBOT = load_robot(REPO / 'config' / 'tendon_robot.yaml')
 TENDONS = load_robot(REPO / 'config' / 'tendon_robot_real_tendons.yaml')

@@ -1,4 +1,4 @@
-"""The rod in motion (issue 36, first part: core/dynamics.py) against independent truths.
+"""The rod in motion (issue 36: core/dynamics/rod_dynamics.py) against independent truths.
 
 - Euler-Bernoulli's cantilever frequencies, (1.875, 4.694, 7.855)^2 sqrt(E I / (rho A L^4)) / 2 pi,
   from the spectrum of a small free vibration without gravity, with the trapezoidal rule's

@@ -18,9 +18,9 @@ import yaml
 
 from continuum_statics.calibration.parameters import candidate_robot
 from continuum_statics.calibration.robot_writer import write_robot_file
-from continuum_statics.core.layout import BENDING
+from continuum_statics.core.description.layout import BENDING
+from continuum_statics.core.description.robot_file import parse_robot_description
 from continuum_statics.core.robot import Robot
-from continuum_statics.core.robot_file import parse_robot_description
 
 LENGTH, DIAMETER, YOUNGS, NU, DENSITY = 0.25, 1.4e-3, 54.0e9, 0.3, 6450.0
 RADIUS = 0.008  # hole radius, m

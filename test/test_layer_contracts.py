@@ -32,6 +32,11 @@ ROS_FREE = ('core', 'control', 'calibration', 'drivers')
 LAYERS = {'': 0, 'config_paths': 0, 'core': 0, 'control': 1, 'calibration': 1, 'drivers': 1,
           'nodes': 2, 'tools': 3, '__main__': 4}
 
+#: The floors of ``core/`` (core/__init__.py, the map), in rank order: a core module imports
+#: its own floor or lower ones. ``core`` itself (the map) and the facade sit on top.
+FLOORS = {'core.description': 0, 'core.rod': 1, 'core.statics': 2, 'core.estimation': 3,
+          'core.dynamics': 3, 'core.robot': 4, 'core.warmup': 4, 'core': 5}
+
 #: Imports of private names allowed: none (the last two, the kernel's section tensions and its
 #: parameter layout, became kernel.section_tensions and layout.py names). Never extend it:
 #: (importing module, imported module, name).
@@ -124,6 +129,34 @@ def test_a_module_imports_its_own_layer_or_lower_ones(name, path):
     assert not above, '%s imports a higher layer: %s' % (name, ', '.join(above))
 
 
+def floor(module):
+    """Return the floor of a core module ('core.rod.kernel' -> 'core.rod'), or None."""
+    parts = module.split('.')
+    if parts[0] != 'core':
+        return None
+    return '.'.join(parts[:2]) if '.'.join(parts[:2]) in FLOORS else parts[0]
+
+
+def floor_back_edges():
+    """Return 'importer imports module (line)' for each import of a higher floor of core."""
+    found = []
+    for name, path in modules():
+        if floor(name) is None:
+            continue
+        rank = FLOORS[floor(name)]
+        found += ['%s imports %s (line %d)' % (name, module, line)
+                  for module, _, line in imports(name, path)
+                  if floor(module) is not None and _is_package_module(module)
+                  and FLOORS[floor(module)] > rank]
+    return found
+
+
+def test_core_is_in_floors_and_no_floor_imports_a_higher_one():
+    flat = [name for name, _ in ALL if name.startswith('core.') and floor(name) == 'core']
+    assert not flat, 'core modules outside a floor (core/__init__.py lists them): %s' % flat
+    assert not floor_back_edges(), '\n'.join(floor_back_edges())
+
+
 def private_imports():
     """Return (importer, module, name, line) of each private name imported from elsewhere."""
     found = []
@@ -176,5 +209,13 @@ def test_the_checker_sees_each_kind_of_violation(tmp_path):
         assert ('nodes', 'qos') in drivers and ('core.a', '_HIDDEN') in drivers
         assert {entry[:3] for entry in private_imports()} == {
             ('core.b', 'core.a', '_HIDDEN'), ('drivers.d', 'core.a', '_HIDDEN')}
+        # a back edge between floors: the rod importing statics
+        for folder in ('rod', 'statics'):
+            (package / 'core' / folder).mkdir()
+            (package / 'core' / folder / '__init__.py').write_text('')
+        (package / 'core' / 'statics' / 'bvp.py').write_text('')
+        (package / 'core' / 'rod' / 'kernel.py').write_text(
+            'from continuum_statics.core.statics import bvp\n')
+        assert floor_back_edges() == ['core.rod.kernel imports core.statics (line 1)']
     finally:
         PACKAGE = saved

@@ -1,4 +1,4 @@
-"""The kernel contracts are stated once (core/layout.py) and the kernels follow them."""
+"""The kernel contracts are stated once (core/description/layout.py); the kernels follow them."""
 import ast
 import inspect
 from pathlib import Path
@@ -7,8 +7,7 @@ from conftest import REPO
 import numpy as np
 
 from continuum_statics import load_robot
-from continuum_statics.core import model as model_module
-from continuum_statics.core.layout import (
+from continuum_statics.core.description.layout import (
     BENDING,
     MOMENT,
     POSITION,
@@ -17,12 +16,13 @@ from continuum_statics.core.layout import (
     KernelModel,
     ProbeRows,
 )
+from continuum_statics.core.rod import model as model_module
 from continuum_statics.core.warmup import KERNEL_MODULES
 
 PACKAGE = REPO / 'continuum_statics'
 #: Modules of compiled code: their kernels call each other inside numba
 COMPILED = {name.rsplit('.', 1)[1] for name in KERNEL_MODULES}
-#: The rod model's kernels: Python calls each one through core/model.py only
+#: The rod model's kernels: Python calls each one through core/rod/model.py only
 ROD_KERNELS = {
     'kernel': ('integrate_batch', 'cable_lengths_batch', 'loads_from_state', 'section_tensions',
                'probe', 'tip_jacobian'),
@@ -51,7 +51,7 @@ def test_python_calls_each_rod_kernel_from_the_model_object_only():
     outside = []
     for path in PACKAGE.rglob('*.py'):
         name = path.stem
-        if path.parent.name == 'core' and (name in COMPILED or name == 'model'):
+        if path.parent.name == 'rod' and (name in COMPILED or name == 'model'):
             continue
         outside += ['%s: %s.%s' % (path.relative_to(REPO), *use)
                     for use in kernel_uses(ast.parse(path.read_text()))]

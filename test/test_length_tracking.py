@@ -1,4 +1,4 @@
-"""The compiled warm solve of the displacement-driven statics (core/length_tracking.py).
+"""The compiled warm solve of the displacement-driven statics (core/rod/length_tracking.py).
 
 Against independent references: the Jacobian pieces of one compiled batch equal plain forward
 differences through the public probe, one column at a time in Python (the formulation the solver
@@ -13,9 +13,9 @@ import numpy as np
 import pytest
 
 from continuum_statics import load_robot
-from continuum_statics.core import length_statics
-from continuum_statics.core.layout import ProbeRows
+from continuum_statics.core.description.layout import ProbeRows
 from continuum_statics.core.robot import Robot
+from continuum_statics.core.statics import length_statics
 
 CONFIG = Path(__file__).resolve().parents[1] / 'config'
 

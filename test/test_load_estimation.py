@@ -13,9 +13,9 @@ import numpy as np
 import pytest
 
 from continuum_statics import load_robot
-from continuum_statics.core.load_estimation import DEFAULT_NOISE, plausible_tip_load
+from continuum_statics.core.description.tendons import full_circle_tension
+from continuum_statics.core.estimation.load_estimation import DEFAULT_NOISE, plausible_tip_load
 from continuum_statics.core.robot import Robot
-from continuum_statics.core.tendons import full_circle_tension
 
 EXAMPLES = sorted(path.name for path in (REPO / 'config').glob('*.yaml')
                   if not path.name.endswith('params.yaml'))

@@ -14,7 +14,7 @@ from continuum_statics import load_robot
 from continuum_statics.control.contact import ContactDetector
 from continuum_statics.control.load_watch import Inputs, LoadWatch, Verdict
 from continuum_statics.control.stamps import StampRule
-from continuum_statics.core.load_estimation import DEFAULT_NOISE
+from continuum_statics.core.estimation.load_estimation import DEFAULT_NOISE
 
 LOAD = np.array([0.12, -0.08, 0.0])  # N: the README's hidden sim load
 NS = 1_000_000_000

@@ -25,7 +25,7 @@ from rclpy.qos import qos_profile_sensor_data  # noqa: E402
 from sensor_msgs.msg import JointState  # noqa: E402
 
 from continuum_statics import load_robot  # noqa: E402
-from continuum_statics.core.workspace import reachable_tips  # noqa: E402
+from continuum_statics.core.statics.workspace import reachable_tips  # noqa: E402
 
 pytestmark = pytest.mark.ros
 ROBOT_FILE = REPO / 'config' / 'two_section_robot.yaml'

@@ -33,8 +33,8 @@ from scipy.spatial.transform import Rotation
 import yaml
 
 from continuum_statics import load_robot
+from continuum_statics.core.description.robot_file import parse_robot_description
 from continuum_statics.core.robot import Robot
-from continuum_statics.core.robot_file import parse_robot_description
 
 TWO_SECTION = REPO / 'config' / 'two_section_robot.yaml'
 THREE_SECTION = REPO / 'config' / 'three_section_robot.yaml'

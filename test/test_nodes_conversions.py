@@ -17,8 +17,8 @@ from std_msgs.msg import Header  # noqa: E402
 from visualization_msgs.msg import MarkerArray  # noqa: E402
 
 from continuum_statics import load_robot  # noqa: E402
-from continuum_statics.core.backbone_sampling import BackboneSampler  # noqa: E402
-from continuum_statics.core.rotations import (  # noqa: E402
+from continuum_statics.core.rod.backbone_sampling import BackboneSampler  # noqa: E402
+from continuum_statics.core.rod.rotations import (  # noqa: E402
     quaternion_to_rotation,
     rotation_to_quaternion,
 )

@@ -79,7 +79,7 @@ def test_a_fast_goal_overshoots_and_settles_as_simulate_predicts(harness):
     """The driver's rod in real time against ``simulate`` replaying the same cable_commands."""
     from sensor_msgs.msg import JointState
 
-    from continuum_statics.core.response import overshoot, settling_time
+    from continuum_statics.core.dynamics.response import overshoot, settling_time
     from continuum_statics.tools.simulate import run
 
     common = {'robot_file': DYNAMIC_FILE}

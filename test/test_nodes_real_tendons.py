@@ -31,8 +31,8 @@ from rclpy.qos import qos_profile_sensor_data  # noqa: E402
 from sensor_msgs.msg import JointState  # noqa: E402
 
 from continuum_statics import load_robot  # noqa: E402
-from continuum_statics.core import estimation  # noqa: E402
-from continuum_statics.core.tendon_commands import command_for  # noqa: E402
+from continuum_statics.core.estimation import shape_estimation  # noqa: E402
+from continuum_statics.core.statics.tendon_commands import command_for  # noqa: E402
 from continuum_statics.nodes.cable_driver_node import CableDriverNode  # noqa: E402
 from continuum_statics.nodes.statics_node import StaticsNode  # noqa: E402
 from continuum_statics.nodes.tip_controller_node import TipControllerNode  # noqa: E402
@@ -67,12 +67,12 @@ def status_of(diagnostics, suffix):
 
 def least_squares_fit(robot, lengths):
     """Return the least-squares fit alone (what statics published before slack cables)."""
-    saved = estimation.SLACK_RESIDUAL
-    estimation.SLACK_RESIDUAL = math.inf  # never try the tendon statics
+    saved = shape_estimation.SLACK_RESIDUAL
+    shape_estimation.SLACK_RESIDUAL = math.inf  # never try the tendon statics
     try:
         return robot.estimate_shape(lengths)
     finally:
-        estimation.SLACK_RESIDUAL = saved
+        shape_estimation.SLACK_RESIDUAL = saved
 
 
 def test_a_paid_out_cable_is_slack_and_the_tip_is_the_shape_without_its_tension(harness):

@@ -11,7 +11,7 @@ import numpy as np
 import pytest
 
 from continuum_statics import load_robot
-from continuum_statics.core.rotations import quaternion_to_rotation
+from continuum_statics.core.rod.rotations import quaternion_to_rotation
 from continuum_statics.nodes.tf_frames import FramePoses, frames
 
 rclpy = pytest.importorskip('rclpy')

@@ -26,7 +26,7 @@ from sensor_msgs.msg import JointState  # noqa: E402
 from visualization_msgs.msg import MarkerArray  # noqa: E402
 
 from continuum_statics import load_robot  # noqa: E402
-from continuum_statics.core.rotations import (  # noqa: E402
+from continuum_statics.core.rod.rotations import (  # noqa: E402
     quaternion_to_rotation,
     rotation_to_quaternion,
 )

@@ -13,9 +13,9 @@ import numpy as np
 import pytest
 
 from continuum_statics import load_robot
-from continuum_statics.core.estimation import Tracking
+from continuum_statics.core.estimation.shape_estimation import Tracking
 from continuum_statics.core.robot import Robot
-from continuum_statics.core.tracking import TRACK_RUNS
+from continuum_statics.core.rod.tracking import TRACK_RUNS
 from continuum_statics.tools.bench_noisy import motion, scipy_estimate
 
 CONFIG = Path(__file__).resolve().parents[1] / 'config'

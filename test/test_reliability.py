@@ -22,7 +22,7 @@ import pytest
 from scipy.optimize import brentq
 
 from continuum_statics import load_robot
-from continuum_statics.core.rotations import quaternion_to_rotation
+from continuum_statics.core.rod.rotations import quaternion_to_rotation
 
 rclpy = pytest.importorskip('rclpy')
 from diagnostic_msgs.msg import DiagnosticArray  # noqa: E402

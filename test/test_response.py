@@ -1,7 +1,7 @@
 """Settling time, overshoot and spectrum peaks against a second-order system's closed forms."""
 import numpy as np
 
-from continuum_statics.core.response import overshoot, settling_time, spectrum_peaks
+from continuum_statics.core.dynamics.response import overshoot, settling_time, spectrum_peaks
 
 ZETA, FREQUENCY = 0.1, 9.3  # damping ratio, natural frequency (Hz)
 

@@ -13,7 +13,7 @@ import pytest
 import yaml
 
 from continuum_statics import load_robot
-from continuum_statics.core.rotations import quaternion_to_rotation
+from continuum_statics.core.rod.rotations import quaternion_to_rotation
 from continuum_statics.nodes.robot_description import (
     disk_diameter,
     link_names,

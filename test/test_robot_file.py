@@ -4,7 +4,7 @@ import numpy as np
 import pytest
 
 from continuum_statics import load_robot
-from continuum_statics.core.robot_file import parse_robot_description
+from continuum_statics.core.description.robot_file import parse_robot_description
 
 ROD = description()['rod']
 CABLE = {'name': 'a', 'offset': [0.01, 0.0, 0.0]}

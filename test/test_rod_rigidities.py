@@ -18,7 +18,7 @@ from continuum_statics.calibration.fit import fit, standard_errors
 from continuum_statics.calibration.parameters import candidate_robot, scaled_rod
 from continuum_statics.calibration.robot_writer import write_robot_file
 from continuum_statics.calibration.run_model import RunModel
-from continuum_statics.core.robot_file import parse_robot_description
+from continuum_statics.core.description.robot_file import parse_robot_description
 
 AXIAL, SHEAR = 2.0e3, 1.0  # N: far below the solid rod's E A, G A (the shear term is large)
 

@@ -23,7 +23,7 @@ from continuum_statics.calibration.robot_writer import write_robot_file
 from continuum_statics.calibration.run_model import RunModel
 from continuum_statics.calibration.runs import calibrate_run
 from continuum_statics.calibration.selection import moves_the_tips, select
-from continuum_statics.core.tendons import Tendons
+from continuum_statics.core.description.tendons import Tendons
 from continuum_statics.tools import calibrate
 
 V6 = REPO / 'config' / 'ftdcr_v6_robot.yaml'

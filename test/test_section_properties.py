@@ -12,8 +12,8 @@ import numpy as np
 import pytest
 
 from continuum_statics.calibration.parameters import candidate_robot
+from continuum_statics.core.description.robot_file import parse_robot_description
 from continuum_statics.core.robot import Robot
-from continuum_statics.core.robot_file import parse_robot_description
 
 LENGTH, SPLIT = 0.30, 0.12  # m: the proximal section ends at SPLIT
 

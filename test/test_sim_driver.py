@@ -135,7 +135,7 @@ def test_a_hidden_load_beyond_the_rod_is_refused_and_the_last_one_kept():
     from conftest import REPO
 
     from continuum_statics import load_robot
-    from continuum_statics.core.load_estimation import plausible_tip_load
+    from continuum_statics.core.estimation.load_estimation import plausible_tip_load
 
     robot = load_robot(REPO / 'config' / 'tendon_robot_real_tendons.yaml')
     backend = SimulatedCableBackend(robot.cable_names, robot.cable_length_limits,

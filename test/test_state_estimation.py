@@ -21,9 +21,9 @@ from continuum_statics.calibration import model_uncertainty
 from continuum_statics.calibration.occlusion import occlusion_replay
 from continuum_statics.calibration.recorded_run import RecordedRun
 from continuum_statics.calibration.runs import read_run
+from continuum_statics.core.description.robot_file import parse_robot_description
+from continuum_statics.core.description.sensors import ModelUncertainty, SensorReading
 from continuum_statics.core.robot import Robot
-from continuum_statics.core.robot_file import parse_robot_description
-from continuum_statics.core.sensors import ModelUncertainty, SensorReading
 from continuum_statics.tools.bench_calibration import V6_COLUMNS
 from continuum_statics.tools.fusion import simulated_truth
 

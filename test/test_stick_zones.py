@@ -22,8 +22,8 @@ from continuum_statics.calibration.recorded_run import RecordedRun
 from continuum_statics.calibration.replay import replay
 from continuum_statics.calibration.robot_writer import write_robot_file
 from continuum_statics.calibration.run_model import RunModel
-from continuum_statics.core.length_statics import motion_since, solve_lengths
-from continuum_statics.core.robot_file import parse_robot_description
+from continuum_statics.core.description.robot_file import parse_robot_description
+from continuum_statics.core.statics.length_statics import motion_since, solve_lengths
 
 STICK = 1.7e-3  # m (not a multiple of the runs' steps: no state lands on +-1 by accident)
 

@@ -16,8 +16,8 @@ import yaml
 from continuum_statics import Robot, load_robot
 from continuum_statics.control.goal_run import GoalRun, RunSettings
 from continuum_statics.control.teleop import TeleopRun, TeleopSettings, Twist
-from continuum_statics.core.robot_file import parse_robot_description
-from continuum_statics.core.tendon_commands import command_for, shape_tensions
+from continuum_statics.core.description.robot_file import parse_robot_description
+from continuum_statics.core.statics.tendon_commands import command_for, shape_tensions
 from continuum_statics.drivers.sim import SimulatedCableBackend
 
 REAL = REPO / 'config' / 'tendon_robot_real_tendons.yaml'

@@ -19,8 +19,8 @@ import reference_tendons as ref
 from scipy.optimize import brentq
 import yaml
 
+from continuum_statics.core.description.robot_file import parse_robot_description
 from continuum_statics.core.robot import Robot
-from continuum_statics.core.robot_file import parse_robot_description
 
 CONFIG = REPO / 'config'
 TWO = 'two_section_robot.yaml'      # distributed

@@ -2,7 +2,8 @@
 
 The run (CSV or bag, as any recorded run: timestamps, the motors' cable lengths, the measured
 tip) starts at rest. Its motor lengths, monotone cubic between samples, drive
-:class:`~continuum_statics.core.dynamics.RodDynamics` from the static equilibrium at the first
+:class:`~continuum_statics.core.dynamics.rod_dynamics.RodDynamics` from the static equilibrium at
+the first
 sample; the Kelvin-Voigt bending damping B (N m^2 s, ``rod.damping.bending``) minimises the
 root-mean-square distance between the measured tips and the simulated tip displacements from
 that first sample plus the constant offset that fits best (a tracker registered up to a

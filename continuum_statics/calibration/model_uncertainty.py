@@ -1,7 +1,8 @@
 """The model's own error as unmodelled loads, measured on a recorded run (no ROS).
 
 A calibrated model still misses the tracker by what it does not model (friction history,
-drift, the tracker's own noise). :mod:`continuum_statics.core.state_estimation` carries that
+drift, the tracker's own noise). :mod:`continuum_statics.core.estimation.state_estimation` carries
+that
 error as unmodelled loads d with prior N(0, P0), P0 = diag(sigma_group^2). This module measures
 sigma_group and the correlation time from the run's residuals:
 
@@ -19,8 +20,8 @@ import math
 import numpy as np
 from scipy.optimize import minimize
 
-from continuum_statics.core.sensors import ModelUncertainty, default_model_uncertainty
-from continuum_statics.core.state_estimation import GROUPS, decayed, fused
+from continuum_statics.core.description.sensors import ModelUncertainty, default_model_uncertainty
+from continuum_statics.core.estimation.state_estimation import GROUPS, decayed, fused
 
 #: Occlusion patterns of the fit: (rows seen, rows occluded), repeated over the run.
 OCCLUSION_PATTERNS = ((1, 1), (5, 5), (20, 40))

@@ -18,8 +18,8 @@ from scipy.stats import chi2 as chi2_distribution
 
 from continuum_statics.calibration.model_uncertainty import seen_mask
 from continuum_statics.calibration.replay import replay
-from continuum_statics.core.sensors import SensorReading
-from continuum_statics.core.state_estimation import point_covariance
+from continuum_statics.core.description.sensors import SensorReading
+from continuum_statics.core.estimation.state_estimation import point_covariance
 
 #: The baseline's decay (s): the last tracker residual added to the model, fading.
 BASELINE_DECAY = 10.0

@@ -37,9 +37,9 @@ import math
 
 import numpy as np
 
+from continuum_statics.core.description.robot_file import BENDING_SCALE_RANGE
+from continuum_statics.core.description.tendons import Tendons
 from continuum_statics.core.robot import Robot
-from continuum_statics.core.robot_file import BENDING_SCALE_RANGE
-from continuum_statics.core.tendons import Tendons
 
 RUN_PARAMETERS = ('registration', 'base_position', 'section_rotation', 'cable_angle',
                   'cable_zero', 'stiffness', 'pretension', 'friction', 'youngs_modulus',

@@ -6,7 +6,7 @@ import math
 
 import numpy as np
 
-from continuum_statics.core.length_statics import MOTION_THRESHOLD, solve_lengths
+from continuum_statics.core.statics.length_statics import MOTION_THRESHOLD, solve_lengths
 
 #: Error (m, per axis) of a row whose model point is not finite: large, so a fit moves away.
 FAILED_ROW_ERROR = 1.0

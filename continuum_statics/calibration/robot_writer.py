@@ -8,7 +8,7 @@ import datetime
 import numpy as np
 import yaml
 
-from continuum_statics.core.routing import GuideOffsets, Helix
+from continuum_statics.core.description.routing import GuideOffsets, Helix
 
 #: Fit names that change the ``tendons`` blocks.
 TENDON_NAMES = ('cable_zero', 'stiffness', 'cable_stiffness', 'pretension', 'friction',

@@ -1,7 +1,8 @@
 """Exact tip sensitivities of a replay: the implicit-function theorem on each row's equilibrium.
 
 A row of :func:`replay.replay_solutions` solves ``solve_lengths``' equations E(z, p) = 0
-(:mod:`continuum_statics.core.length_statics`): the tip moment balance (3 rows) and, per taut
+(:mod:`continuum_statics.core.statics.length_statics`): the tip moment balance (3 rows) and, per
+taut
 cable, its gap Lf - consumed = 0; a slack cable's end tension is 0 whatever p. The
 unknowns z are u(0) and the taut cables' end tensions, p the fit's variables. With E_z
 invertible (the Jacobian every Newton step of the row already uses),
@@ -27,9 +28,13 @@ from types import SimpleNamespace
 import numpy as np
 
 from continuum_statics.calibration.pool import fork_pool
-from continuum_statics.core.layout import POSITION, ROTATION
-from continuum_statics.core.length_statics import motion_since, problem_constants, warm_unknowns
-from continuum_statics.core.length_tracking import TendonArgs
+from continuum_statics.core.description.layout import POSITION, ROTATION
+from continuum_statics.core.rod.length_tracking import TendonArgs
+from continuum_statics.core.statics.length_statics import (
+    motion_since,
+    problem_constants,
+    warm_unknowns,
+)
 
 #: Central-difference step of u(0) (times 1/L) and of an end tension (times E I / (L r)).
 STATE_STEP = 1e-5

@@ -22,7 +22,7 @@ from continuum_statics.calibration.parameters import SearchVector, check_names
 from continuum_statics.calibration.recorded_run import check_tip_units
 from continuum_statics.calibration.replay import FAILED_ROW_ERROR, error_statistics
 from continuum_statics.calibration.robot_writer import write_robot_file
-from continuum_statics.core.bvp import ConvergenceError
+from continuum_statics.core.statics.bvp import ConvergenceError
 
 FORCE_COLUMNS = ('tip_force_x', 'tip_force_y', 'tip_force_z')
 MOMENT_COLUMNS = ('tip_moment_x', 'tip_moment_y', 'tip_moment_z')

@@ -29,7 +29,7 @@ import threading
 
 import numpy as np
 
-from continuum_statics.core.tendon_commands import command_for
+from continuum_statics.core.statics.tendon_commands import command_for
 
 #: Measured lengths further than this from the last command (m) are not where the controller put
 #: them: a goal then starts from the estimate of the measurement and moves onto it first.

@@ -14,7 +14,8 @@ One entry point per timer tick, :meth:`LoadWatch.step`, given the newest inputs 
 4. the solve, warm-started from the last *published* estimate only (a set-aside one would keep
    the next on its branch);
 5. gates after it: not finite, not converged (a capped or failed solve), or the chi-square gate
-   (:meth:`~continuum_statics.core.load_estimation.WrenchEstimate.explains`: measurements the
+   (:meth:`~continuum_statics.core.estimation.load_estimation.WrenchEstimate.explains`:
+   measurements the
    model cannot explain at their stated noise, e.g. a tracker the tensions contradict) -> set
    aside with the reason, never published as a load;
 6. contact (:class:`~continuum_statics.control.contact.ContactDetector`): a consistent force
@@ -26,7 +27,7 @@ import enum
 import numpy as np
 
 from continuum_statics.control.contact import ContactDetector
-from continuum_statics.core.load_estimation import tension_sigma
+from continuum_statics.core.estimation.load_estimation import tension_sigma
 
 #: An input closer than this many of its noise standard deviations to the one last solved is
 #: unchanged: re-solving it could only move the estimate by noise of noise.

@@ -1,10 +1,12 @@
 """The sensors' readings between their topics and the estimator (no ROS).
 
-Each sensor of the robot file (:mod:`continuum_statics.core.sensors`) delivers readings at its
+Each sensor of the robot file (:mod:`continuum_statics.core.description.sensors`) delivers
+readings at its
 own rate (an optical tracker 120 Hz, EM coils 40 Hz) while statics estimates at the encoders'
 (1 kHz). A reading is fused once, by its stamp, at the first estimate after it arrived; one
 older than ``timeout`` when that estimate comes is not used (a stalled stream must not pin the
-shape). What the estimator made of each (:class:`~continuum_statics.core.sensors.SensorVerdict`)
+shape). What the estimator made of each
+(:class:`~continuum_statics.core.description.sensors.SensorVerdict`)
 is counted here per sensor, for ``/diagnostics``: statics, and every node that follows statics'
 fused estimate, judge a sensor by this one verdict.
 """
@@ -13,7 +15,7 @@ import math
 
 import numpy as np
 
-from continuum_statics.core.sensors import SensorReading
+from continuum_statics.core.description.sensors import SensorReading
 
 
 @dataclass

@@ -11,9 +11,9 @@ import math
 
 import numpy as np
 
-from continuum_statics.core.estimation import Tracking
-from continuum_statics.core.length_statics import MOTION_THRESHOLD
-from continuum_statics.core.tracking import TRACK_RUNS
+from continuum_statics.core.estimation.shape_estimation import Tracking
+from continuum_statics.core.rod.tracking import TRACK_RUNS
+from continuum_statics.core.statics.length_statics import MOTION_THRESHOLD
 
 
 @dataclass(frozen=True)

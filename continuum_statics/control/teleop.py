@@ -17,9 +17,9 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from continuum_statics.core.layout import ProbeRows
-from continuum_statics.core.rotations import rotation_vector_matrix
-from continuum_statics.core.tendon_commands import command_for_state
+from continuum_statics.core.description.layout import ProbeRows
+from continuum_statics.core.rod.rotations import rotation_vector_matrix
+from continuum_statics.core.statics.tendon_commands import command_for_state
 
 
 @dataclass(frozen=True)

@@ -14,17 +14,8 @@ import math
 
 import numpy as np
 
-from continuum_statics.core import (
-    bvp,
-    estimation,
-    length_statics,
-    load_estimation,
-    state_estimation,
-    tip_goal,
-)
-from continuum_statics.core.inputs import as_vector
-from continuum_statics.core.kernel import DISTRIBUTED, POINT_MOMENT, pack_params
-from continuum_statics.core.layout import (
+from continuum_statics.core.description.inputs import as_vector
+from continuum_statics.core.description.layout import (
     POSITION,
     ROTATION,
     STATE_SIZE,
@@ -32,13 +23,16 @@ from continuum_statics.core.layout import (
     Probe,
     ProbeRows,
 )
-from continuum_statics.core.model import Model
-from continuum_statics.core.robot_file import read_robot_description
-from continuum_statics.core.rotations import quaternion_to_rotation
-from continuum_statics.core.routing import Routing
-from continuum_statics.core.sensors import default_model_uncertainty
-from continuum_statics.core.shape import Shape
-from continuum_statics.core.tendons import Tendons
+from continuum_statics.core.description.robot_file import read_robot_description
+from continuum_statics.core.description.routing import Routing
+from continuum_statics.core.description.sensors import default_model_uncertainty
+from continuum_statics.core.description.tendons import Tendons
+from continuum_statics.core.estimation import load_estimation, shape_estimation, state_estimation
+from continuum_statics.core.rod.kernel import DISTRIBUTED, POINT_MOMENT, pack_params
+from continuum_statics.core.rod.model import Model
+from continuum_statics.core.rod.rotations import quaternion_to_rotation
+from continuum_statics.core.rod.shape import Shape
+from continuum_statics.core.statics import bvp, length_statics, tip_goal
 
 
 def load_robot(path) -> 'Robot':
@@ -335,7 +329,7 @@ class Robot:
         """Shape of the rod with slack cables under a tip force F (N) and moment (N m), global.
 
         ``warm_start``: a previous result whose u(0) starts the solve. See
-        :func:`continuum_statics.core.bvp.solve_loaded`; raises ``ConvergenceError``.
+        :func:`continuum_statics.core.statics.bvp.solve_loaded`; raises ``ConvergenceError``.
         """
         tip_force = as_vector(tip_force, 3, 'tip_force')
         tip_moment = as_vector(tip_moment, 3, 'tip_moment')
@@ -349,7 +343,9 @@ class Robot:
         ``dt`` (s) and ``alpha`` (BDF-alpha, [-0.45, 0]); None: the robot file's ``dynamics``.
         ``tip_mass``: kg of payload at the tip.
         """
-        from continuum_statics.core.dynamics import RodDynamics  # its kernel compiles on use
+        from continuum_statics.core.dynamics.rod_dynamics import (
+            RodDynamics,  # its kernel compiles on use
+        )
         return RodDynamics(self, dt, alpha, tip_mass)
 
     def solve_tensions(self, tensions, tip_force=(0.0, 0.0, 0.0), tip_moment=(0.0, 0.0, 0.0),
@@ -444,11 +440,12 @@ class Robot:
     def estimate_shape(self, cable_lengths, tip_force=(0.0, 0.0, 0.0),
                        tip_moment=(0.0, 0.0, 0.0), tensions=None, warm_start=None,
                        u0_guess=None, tracking=None, exact=False, sensors=None,
-                       stamp=None) -> estimation.ShapeEstimate:
+                       stamp=None) -> shape_estimation.ShapeEstimate:
         """Shape from measured cable lengths (m) and a tip load (N, N m); :mod:`estimation`.
 
         Warm-started (``warm_start`` the previous estimate), a call does bounded work, as the
-        statics node's: the :class:`estimation.Tracking` given, or its defaults; an unfinished
+        statics node's: the :class:`shape_estimation.Tracking` given, or its defaults; an
+        unfinished
         estimate is ``capped`` and the next call, warm-started from it, goes on. A cold call
         (no ``warm_start``) and ``exact=True`` are solved to the solver's tolerances, whatever
         that costs (on noisy lengths 2-5x the median and up to 10x the slowest tracked call).
@@ -466,14 +463,14 @@ class Robot:
         if exact:
             tracking = None
         elif tracking is None and warm_start is not None:
-            tracking = estimation.DEFAULT_TRACKING
+            tracking = shape_estimation.DEFAULT_TRACKING
         if self.model_uncertainty is not None or sensors:
             return state_estimation.estimate_state(
                 self, cable_lengths, tip_force, tip_moment, tensions, sensors, stamp,
                 _warm_or_guess(self, warm_start, u0_guess), jacobians, warm_start, tracking)
-        return estimation.estimate_shape(self, cable_lengths, tip_force, tip_moment, tensions,
-                                         _warm_or_guess(self, warm_start, u0_guess), jacobians,
-                                         warm_start, tracking)
+        return shape_estimation.estimate_shape(
+            self, cable_lengths, tip_force, tip_moment, tensions,
+            _warm_or_guess(self, warm_start, u0_guess), jacobians, warm_start, tracking)
 
     def estimate_tip_wrench(self, lengths=None, tensions=None, tip_position=None,
                             tip_rotation=None, noise=None, moment=False,

@@ -23,35 +23,35 @@ _DONE = False
 #: The kernels Python calls (the others are compiled into them): each must have a signature
 #: after the warm-up (``test/test_warmup.py``).
 ENTRY_POINTS = (
-    'continuum_statics.core.kernel.integrate_batch',
-    'continuum_statics.core.kernel.integrate_passive',
-    'continuum_statics.core.kernel.cable_lengths_batch',
-    'continuum_statics.core.kernel.loads_from_state',
-    'continuum_statics.core.kernel.probe',
-    'continuum_statics.core.kernel.tip_jacobian',
-    'continuum_statics.core.tracking.track',
-    'continuum_statics.core.goal_tracking.goal_solve',
-    'continuum_statics.core.length_tracking.chord',
-    'continuum_statics.core.length_tracking.jacobian_pieces',
-    'continuum_statics.core.least_squares.constrained_step',
-    'continuum_statics.core.rotations._quaternions',
-    'continuum_statics.core.state_estimation.move_states',
-    'continuum_statics.core.backbone_sampling._sample',
-    'continuum_statics.core.tendon_kernel.path_stretch',
-    'continuum_statics.core.kernel.section_tensions',
+    'continuum_statics.core.rod.kernel.integrate_batch',
+    'continuum_statics.core.rod.kernel.integrate_passive',
+    'continuum_statics.core.rod.kernel.cable_lengths_batch',
+    'continuum_statics.core.rod.kernel.loads_from_state',
+    'continuum_statics.core.rod.kernel.probe',
+    'continuum_statics.core.rod.kernel.tip_jacobian',
+    'continuum_statics.core.rod.tracking.track',
+    'continuum_statics.core.rod.goal_tracking.goal_solve',
+    'continuum_statics.core.rod.length_tracking.chord',
+    'continuum_statics.core.rod.length_tracking.jacobian_pieces',
+    'continuum_statics.core.rod.least_squares.constrained_step',
+    'continuum_statics.core.rod.rotations._quaternions',
+    'continuum_statics.core.estimation.state_estimation.move_states',
+    'continuum_statics.core.rod.backbone_sampling._sample',
+    'continuum_statics.core.rod.tendon_kernel.path_stretch',
+    'continuum_statics.core.rod.kernel.section_tensions',
 )
 #: Modules whose numba dispatchers the warm-up must cover (see :func:`kernel_signatures`).
 KERNEL_MODULES = (
-    'continuum_statics.core.kernel',
-    'continuum_statics.core.tracking',
-    'continuum_statics.core.goal_tracking',
-    'continuum_statics.core.length_tracking',
-    'continuum_statics.core.least_squares',
-    'continuum_statics.core.rotations',
-    'continuum_statics.core.backbone_sampling',
-    'continuum_statics.core.tendon_kernel',
-    'continuum_statics.core.state_estimation',
-    'continuum_statics.core.dynamics_kernel',
+    'continuum_statics.core.rod.kernel',
+    'continuum_statics.core.rod.tracking',
+    'continuum_statics.core.rod.goal_tracking',
+    'continuum_statics.core.rod.length_tracking',
+    'continuum_statics.core.rod.least_squares',
+    'continuum_statics.core.rod.rotations',
+    'continuum_statics.core.rod.backbone_sampling',
+    'continuum_statics.core.rod.tendon_kernel',
+    'continuum_statics.core.estimation.state_estimation',
+    'continuum_statics.core.rod.dynamics_kernel',
 )
 
 
@@ -95,18 +95,18 @@ _CABLE_ROBOT = {
 
 
 def _bundled_robot():
+    from continuum_statics.core.description.robot_file import parse_robot_description
     from continuum_statics.core.robot import Robot
-    from continuum_statics.core.robot_file import parse_robot_description
 
     return Robot(parse_robot_description(_CABLE_ROBOT, 'warm-up robot'))
 
 
 def _exercise(robot):
     """Make every call the nodes and tools make, with their argument types."""
-    from continuum_statics.core.backbone_sampling import BackboneSampler
-    from continuum_statics.core.estimation import Tracking
-    from continuum_statics.core.rotations import rotation_to_quaternion
-    from continuum_statics.core.state_estimation import move_states
+    from continuum_statics.core.estimation.shape_estimation import Tracking
+    from continuum_statics.core.estimation.state_estimation import move_states
+    from continuum_statics.core.rod.backbone_sampling import BackboneSampler
+    from continuum_statics.core.rod.rotations import rotation_to_quaternion
 
     zero = np.zeros(3)
     load = np.zeros(6)  # the nodes pass slices of a 6-vector as tip force and moment
@@ -148,8 +148,8 @@ def _exercise(robot):
 
 def _exercise_python_newton(robot, lengths):
     """Run the Python Gauss-Newton (an estimate's last resort) with its compiled step."""
-    from continuum_statics.core.layout import ProbeRows
-    from continuum_statics.core.least_squares import constrained_gauss_newton
+    from continuum_statics.core.description.layout import ProbeRows
+    from continuum_statics.core.rod.least_squares import constrained_gauss_newton
 
     rows, zero = ProbeRows(len(lengths)), np.zeros(3)
 
@@ -166,9 +166,9 @@ def _exercise_tendons(robot, lengths, goal):
     """Real tendons: solve_lengths (friction, chord steps), commands with min_tension."""
     import dataclasses
 
+    from continuum_statics.core.description.tendons import Tendons
     from continuum_statics.core.robot import Robot
-    from continuum_statics.core.tendon_commands import command_for
-    from continuum_statics.core.tendons import Tendons
+    from continuum_statics.core.statics.tendon_commands import command_for
 
     n = len(robot.cable_names)
     real = Robot(dataclasses.replace(robot.description, tendons=dataclasses.replace(

@@ -12,7 +12,7 @@ import math
 
 import numpy as np
 
-from continuum_statics.core.load_estimation import plausible_tip_load
+from continuum_statics.core.estimation.load_estimation import plausible_tip_load
 from continuum_statics.drivers.base import (
     OK,
     WARN,

@@ -1,7 +1,8 @@
 """The simulated robot in motion: the rod's dynamics behind the simulated motors (issue 36).
 
 With ``sim.dynamics: true`` the simulated driver's cables are the motors' lengths driving
-:class:`~continuum_statics.core.dynamics.RodDynamics` (real tendons: stretch, slack, friction)
+:class:`~continuum_statics.core.dynamics.rod_dynamics.RodDynamics` (real tendons: stretch, slack,
+friction)
 at the robot file's fixed time step, in real time: each reading first integrates the motors and
 the rod up to the clock. What the driver reports is what a real one reads (the motors' lengths
 and the tensions at the motors); the true tip pose is there for tests and the view.

@@ -43,7 +43,7 @@ from std_srvs.srv import Trigger
 from continuum_statics.control.actuators import Actuators
 from continuum_statics.control.command_gate import CommandGate
 from continuum_statics.control.health import DriverHealth
-from continuum_statics.core.rotations import rotation_to_quaternion
+from continuum_statics.core.rod.rotations import rotation_to_quaternion
 from continuum_statics.drivers import backend_class
 from continuum_statics.drivers.home_file import load_home_file, write_home_file
 from continuum_statics.nodes import diagnostics_util as diag

@@ -1,7 +1,7 @@
 """Where to draw guide disks and cables for a solved shape (numpy only, for RViz markers)."""
 import numpy as np
 
-from continuum_statics.core.routing import holes_at
+from continuum_statics.core.description.routing import holes_at
 
 
 def nearest_nodes(s_nodes, s_values):

@@ -152,9 +152,9 @@ def tip_wrench_limit_specs():
 def tip_wrench_limits(robot, params):
     """Return (force N, torque N m) limits: the parameters, or the rod's defaults where 0.
 
-    The defaults are :func:`~continuum_statics.core.load_estimation.plausible_tip_load`.
+    The defaults are :func:`~continuum_statics.core.estimation.load_estimation.plausible_tip_load`.
     """
-    from continuum_statics.core.load_estimation import plausible_tip_load
+    from continuum_statics.core.estimation.load_estimation import plausible_tip_load
     force, torque = plausible_tip_load(robot)
     return params['max_tip_force'] or force, params['max_tip_torque'] or torque
 

@@ -11,7 +11,7 @@ from geometry_msgs.msg import PoseStamped
 import numpy as np
 from sensor_msgs.msg import JointState
 
-from continuum_statics.core.rotations import quaternion_direction
+from continuum_statics.core.rod.rotations import quaternion_direction
 
 #: Quaternion of the identity rotation, [x, y, z, w].
 IDENTITY_QUATERNION = (0.0, 0.0, 0.0, 1.0)

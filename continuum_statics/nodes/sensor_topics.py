@@ -24,7 +24,7 @@ from geometry_msgs.msg import Pose, PoseStamped, PoseWithCovarianceStamped
 import numpy as np
 
 from continuum_statics.control.sensor_readings import SensorInbox
-from continuum_statics.core.rotations import quaternion_to_rotation
+from continuum_statics.core.rod.rotations import quaternion_to_rotation
 from continuum_statics.nodes.qos import LATCHED_QOS, LATEST_SENSOR_QOS
 
 

@@ -12,7 +12,7 @@ import time
 
 from visualization_msgs.msg import MarkerArray
 
-from continuum_statics.core.rotations import rotation_to_quaternion
+from continuum_statics.core.rod.rotations import rotation_to_quaternion
 from continuum_statics.nodes.marker_geometry import (
     guide_and_cable_points,
     section_layout,

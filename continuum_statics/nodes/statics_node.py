@@ -60,8 +60,8 @@ from continuum_statics.control.health import OK, WARN, StaticsHealth, load_value
 from continuum_statics.control.records import TipLoad, current_load
 from continuum_statics.control.shape_tracking import ShapeTracker, Thresholds, passive_shape
 from continuum_statics.control.stamps import StampRule
-from continuum_statics.core.backbone_sampling import BackboneSampler
-from continuum_statics.core.tendons import full_circle_tension
+from continuum_statics.core.description.tendons import full_circle_tension
+from continuum_statics.core.rod.backbone_sampling import BackboneSampler
 from continuum_statics.core.warmup import warm_up
 from continuum_statics.nodes import diagnostics_util as diag
 from continuum_statics.nodes.dedicated_intake import make_intake

@@ -14,7 +14,7 @@ tip frame: ``<tip frame>_marker`` on /tf_static.
 """
 import numpy as np
 
-from continuum_statics.core.rotations import rotation_to_quaternion
+from continuum_statics.core.rod.rotations import rotation_to_quaternion
 from continuum_statics.nodes.marker_geometry import nearest_nodes, section_layout
 
 

@@ -48,9 +48,9 @@ from visualization_msgs.msg import MarkerArray
 from continuum_statics.control.health import ControllerHealth
 from continuum_statics.control.stamps import StampRule
 from continuum_statics.control.tip_control import TipControl
-from continuum_statics.core.rotations import quaternion_to_rotation
+from continuum_statics.core.rod.rotations import quaternion_to_rotation
+from continuum_statics.core.statics.workspace import reachable_tips
 from continuum_statics.core.warmup import warm_up
-from continuum_statics.core.workspace import reachable_tips
 from continuum_statics.nodes import diagnostics_util as diag
 from continuum_statics.nodes.dedicated_intake import make_intake
 from continuum_statics.nodes.joint_state_parser import CableStatesReader, header_stamp_ns

@@ -37,8 +37,8 @@ from std_msgs.msg import Bool
 from continuum_statics.control.contact import force_along
 from continuum_statics.control.load_watch import Inputs, LoadWatch, Verdict
 from continuum_statics.control.stamps import StampRule
-from continuum_statics.core.load_estimation import load_model, plausible_tip_load
-from continuum_statics.core.rotations import quaternion_to_rotation
+from continuum_statics.core.estimation.load_estimation import load_model, plausible_tip_load
+from continuum_statics.core.rod.rotations import quaternion_to_rotation
 from continuum_statics.core.warmup import warm_up
 from continuum_statics.nodes import diagnostics_util as diag
 from continuum_statics.nodes.joint_state_parser import CableStatesReader

@@ -25,7 +25,7 @@ from scipy.integrate import solve_ivp as scipy_solve_ivp
 
 from continuum_statics import load_robot
 from continuum_statics.config_paths import config_file
-from continuum_statics.core.layout import MOMENT, POSITION, ROTATION
+from continuum_statics.core.description.layout import MOMENT, POSITION, ROTATION
 
 
 def timings(call, repeat, warmup=20):
@@ -306,8 +306,8 @@ THREE_CABLE_ROD = {
 
 def bench_three_cable_rod(repeat):
     """Print shape and cold-estimate times of :data:`THREE_CABLE_ROD` (not an example file)."""
+    from continuum_statics.core.description.robot_file import parse_robot_description
     from continuum_statics.core.robot import Robot
-    from continuum_statics.core.robot_file import parse_robot_description
 
     robot = Robot(parse_robot_description(THREE_CABLE_ROD, 'bench'))
     force = np.array([0.0, 0.0, -0.02 * 9.81])

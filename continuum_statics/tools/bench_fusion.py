@@ -18,10 +18,10 @@ import numpy as np
 
 from continuum_statics import load_robot
 from continuum_statics.config_paths import config_file
-from continuum_statics.core.estimation import Tracking
+from continuum_statics.core.description.robot_file import parse_robot_description
+from continuum_statics.core.description.sensors import SensorReading
+from continuum_statics.core.estimation.shape_estimation import Tracking
 from continuum_statics.core.robot import Robot
-from continuum_statics.core.robot_file import parse_robot_description
-from continuum_statics.core.sensors import SensorReading
 from continuum_statics.core.warmup import warm_up
 from continuum_statics.tools.bench_noisy import motion
 

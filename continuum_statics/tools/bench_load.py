@@ -17,8 +17,8 @@ import numpy as np
 from scipy.optimize import least_squares
 
 from continuum_statics import ConvergenceError, load_robot
+from continuum_statics.core.description.tendons import full_circle_tension
 from continuum_statics.core.robot import Robot
-from continuum_statics.core.tendons import full_circle_tension
 
 #: The example robot files (a source checkout).
 CONFIG = Path(__file__).resolve().parents[2] / 'config'

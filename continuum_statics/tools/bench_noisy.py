@@ -22,10 +22,10 @@ from scipy.optimize import least_squares
 from continuum_statics import load_robot
 from continuum_statics.config_paths import config_file
 from continuum_statics.control.shape_tracking import Thresholds
-from continuum_statics.core.estimation import Tracking
-from continuum_statics.core.layout import ProbeRows
+from continuum_statics.core.description.layout import ProbeRows
+from continuum_statics.core.estimation.shape_estimation import Tracking
 from continuum_statics.core.robot import Robot
-from continuum_statics.core.tracking import TRACK_RUNS
+from continuum_statics.core.rod.tracking import TRACK_RUNS
 from continuum_statics.core.warmup import warm_up
 
 ROBOT_FILES = ('jones2009_nitinol_rod.yaml', 'tendon_robot.yaml', 'tendon_robot_real_tendons.yaml',

@@ -16,9 +16,9 @@ from scipy.optimize import root
 
 from continuum_statics import load_robot
 from continuum_statics.config_paths import config_file
-from continuum_statics.core import length_statics
+from continuum_statics.core.description.tendons import Tendons
 from continuum_statics.core.robot import Robot
-from continuum_statics.core.tendons import Tendons
+from continuum_statics.core.statics import length_statics
 from continuum_statics.tools.bench import row
 
 

@@ -22,9 +22,9 @@ from continuum_statics.calibration.occlusion import occlusion_replay
 from continuum_statics.calibration.recorded_run import add_column_arguments, column_map_from_args
 from continuum_statics.calibration.replay import replay
 from continuum_statics.calibration.runs import read_run
-from continuum_statics.core import estimation
-from continuum_statics.core.sensors import SensorReading
-from continuum_statics.core.state_estimation import prior_scales, split_loads
+from continuum_statics.core.description.sensors import SensorReading
+from continuum_statics.core.estimation import shape_estimation
+from continuum_statics.core.estimation.state_estimation import prior_scales, split_loads
 
 #: Arc-length fractions the simulated table reports the backbone error at.
 TABLE_S = (0.25, 0.5, 0.75, 1.0)
@@ -76,7 +76,7 @@ def simulated_truth(robot, cases, seed=0):
 
 def _truth(robot, lengths, force, moment, offset):
     """Return the true shape: the model's under the hidden loads, moved by the hidden offset."""
-    shape = estimation.estimate_shape(robot, lengths, force, moment, None, None, None, None,
+    shape = shape_estimation.estimate_shape(robot, lengths, force, moment, None, None, None, None,
                                       None).shape
     states = shape.states.copy()
     states[:, :3] += offset

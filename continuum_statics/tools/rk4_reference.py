@@ -7,8 +7,8 @@ classical-RK4 figure, in the same run"): RK4 on the 18 components r, R, v - e3, 
 import numba
 import numpy as np
 
-from continuum_statics.core.inputs import as_vector
-from continuum_statics.core.layout import (
+from continuum_statics.core.description.inputs import as_vector
+from continuum_statics.core.description.layout import (
     BASE_POSITION_AT,
     BASE_ROTATION_AT,
     BODY_FORCE_AT,
@@ -17,7 +17,7 @@ from continuum_statics.core.layout import (
     D_AT,
     D_INV_AT,
 )
-from continuum_statics.core.shape import Shape
+from continuum_statics.core.rod.shape import Shape
 
 STATE_SIZE = 18
 

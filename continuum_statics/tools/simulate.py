@@ -16,7 +16,7 @@ import time
 import numpy as np
 
 from continuum_statics import load_robot
-from continuum_statics.core.response import overshoot, settling_time, spectrum_peaks
+from continuum_statics.core.dynamics.response import overshoot, settling_time, spectrum_peaks
 from continuum_statics.drivers.sim import SimulatedCableBackend
 
 
@@ -160,7 +160,7 @@ def main(argv=None):
         robot = load_robot(args.robot)
         step = commands = force = None
         if args.release:
-            from continuum_statics.core.load_estimation import plausible_tip_load
+            from continuum_statics.core.estimation.load_estimation import plausible_tip_load
             force = (np.array(args.force) if args.force is not None
                      else np.array([0.1 * plausible_tip_load(robot)[0], 0.0, 0.0]))
         elif args.step:

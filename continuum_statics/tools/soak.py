@@ -19,7 +19,7 @@ import time
 import numpy as np
 
 from continuum_statics.config_paths import default_robot_file
-from continuum_statics.core.workspace import reachable_tips
+from continuum_statics.core.statics.workspace import reachable_tips
 from continuum_statics.tools.processes import ros_environment, stop
 
 

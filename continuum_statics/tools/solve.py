@@ -16,7 +16,7 @@ import sys
 import time
 
 from continuum_statics import ConvergenceError, load_robot
-from continuum_statics.core.rotations import rotation_to_quaternion
+from continuum_statics.core.rod.rotations import rotation_to_quaternion
 
 
 def solve_main(argv=None):

@@ -12,14 +12,14 @@ from typing import NamedTuple
 import numba
 import numpy as np
 
-from continuum_statics.core.kernel import (
+from continuum_statics.core.description.layout import LENGTH_ROWS_AT, MOMENT_AT
+from continuum_statics.core.rod.kernel import (
     POINT_MOMENT,
     batch_loads,
     integrate_with_lengths,
     probe,
 )
-from continuum_statics.core.layout import LENGTH_ROWS_AT, MOMENT_AT
-from continuum_statics.core.tendon_kernel import path_stretch
+from continuum_statics.core.rod.tendon_kernel import path_stretch
 
 #: Balance tolerance (relative) of a converged solve; cable rows: the estimate tolerance (m).
 BALANCE_TOLERANCE = 1e-9
@@ -122,7 +122,8 @@ def _solve_linear(matrix, rhs):
 def evaluate_at(model, tip_force, tip_moment, z, tendon):
     """Return the residual F(z) and the model there: an :class:`Evaluation`.
 
-    ``model`` the robot's :class:`~continuum_statics.core.layout.KernelModel`, ``tendon`` a
+    ``model`` the robot's :class:`~continuum_statics.core.description.layout.KernelModel`,
+    ``tendon`` a
     :class:`TendonArgs`; ``Evaluation.mean`` is each cable's mean tension (N), what its stretch
     follows; ``model_values`` what the residual at any free lengths follows from.
     """
@@ -278,7 +279,8 @@ def chord(model, tip_force, tip_moment, z0, tendon, scale, pieces, limits, start
           start_states):
     """Chord steps from ``z0``; returns a :class:`Chorded`.
 
-    ``model`` the robot's :class:`~continuum_statics.core.layout.KernelModel`; ``z0`` = [u(0)
+    ``model`` the robot's :class:`~continuum_statics.core.description.layout.KernelModel`; ``z0``
+    = [u(0)
     (1/m); end tensions (N)]; ``tendon`` the problem's :class:`TendonArgs`; ``scale`` (3 + n)
     its scales of z; ``pieces`` the previous Jacobian :class:`Pieces` (m per unscaled z),
     returned Broyden-updated; ``limits`` a :class:`ChordLimits`. A step that gains less than

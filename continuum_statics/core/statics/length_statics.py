@@ -4,7 +4,8 @@ Unknowns z = [u(0) (3, 1/m); t (n_cables, N), each cable's tension at its end di
 - the tip moment balance (:func:`kernel.probe` rows ``balance``, three equations), the shooting
   condition of every solver here (paper sec. III.E);
 - per cable, the complementarity of a cable that cannot push
-  (:mod:`continuum_statics.core.tendons`): t >= 0, g = Lf - sum_i p_i / (1 + T_i / EA) >= 0,
+  (:mod:`continuum_statics.core.description.tendons`): t >= 0, g = Lf - sum_i p_i / (1 + T_i / EA)
+  >= 0,
   t g = 0, where p_i are the straight hole-to-hole spans of its path (eq. 11 with the errata)
   and T_i their tensions. Written as the
   semismooth equation min(kappa t, g) = 0 (kappa scales N to m), solved by Newton's method with a
@@ -31,18 +32,18 @@ from typing import NamedTuple
 
 import numpy as np
 
-from continuum_statics.core import bvp
-from continuum_statics.core.attempts import first_answer
-from continuum_statics.core.inputs import as_vector
-from continuum_statics.core.kernel import POINT_MOMENT
-from continuum_statics.core.layout import ProbeRows
-from continuum_statics.core.length_tracking import (
+from continuum_statics.core.description.inputs import as_vector
+from continuum_statics.core.description.layout import ProbeRows
+from continuum_statics.core.rod.kernel import POINT_MOMENT
+from continuum_statics.core.rod.length_tracking import (
     BALANCE_TOLERANCE,
     ChordLimits,
     Pieces,
     TendonArgs,
 )
-from continuum_statics.core.shape import Shape
+from continuum_statics.core.rod.shape import Shape
+from continuum_statics.core.statics import bvp
+from continuum_statics.core.statics.attempts import first_answer
 
 _NO_VALUES, _NO_STATES = np.zeros(0), np.zeros((0, 0))  # tell chord to integrate at its start
 #: Capstan coefficient below which a cable is taken as frictionless (exp(2 pi mu) - 1 < 1e-8).

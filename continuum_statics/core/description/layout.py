@@ -79,7 +79,7 @@ class ProbeRows:
 class KernelModel(NamedTuple):
     """Everything the compiled solvers read of one robot, passed to them as one argument.
 
-    Built once per robot (:class:`continuum_statics.core.model.Model`); a solve under other rod
+    Built once per robot (:class:`continuum_statics.core.rod.model.Model`); a solve under other rod
     constants (gravity continuation, calibration) passes ``_replace(params=...)``. Numba types a
     record of this shape in ~2.5 us per call (flat arrays: ~1.5 us), so only
     ``kernel.integrate_batch``, the single IVP of ``Robot.solve_ivp``, keeps flat arguments.

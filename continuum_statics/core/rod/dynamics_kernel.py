@@ -11,7 +11,8 @@ State along the unstretched arc length s (m), SI units, per node (:mod:`layout`'
 with the Kelvin-Voigt laws (Till eq. 3, 4; the paper's eqs. 6, 7 plus damping)
   R^T n = K_se (v - e3) + B_se v_t,   R^T m = K_bt u + B_bt u_t
 and every time derivative by BDF-alpha (Till eq. 13): y_t = c0 y + y_h, the history y_h from the
-two steps before (:mod:`continuum_statics.core.dynamics`). The strains are therefore algebraic:
+two steps before (:mod:`continuum_statics.core.dynamics.rod_dynamics`). The strains are therefore
+algebraic:
   v = (K_se + c0 B_se)^-1 (R^T n + K_se e3 - B_se v_h)
   u = (K_bt + c0 B_bt)^-1 (R^T m - B_bt u_h).
 
@@ -28,7 +29,7 @@ forward differences only when a chord step does not reduce the residual.
 import numba
 import numpy as np
 
-from continuum_statics.core.layout import (
+from continuum_statics.core.description.layout import (
     DYN_B_BT_AT,
     DYN_B_SE_AT,
     DYN_BASE_POSITION_AT,
@@ -40,7 +41,7 @@ from continuum_statics.core.layout import (
     DYN_RHO_J_AT,
     DYNAMIC_STATE,
 )
-from continuum_statics.core.tendon_kernel import path_stretch
+from continuum_statics.core.rod.tendon_kernel import path_stretch
 
 _SIXTH = 1.0 / 6.0
 HALVINGS = 12  # of a fresh Newton step at most
@@ -237,7 +238,7 @@ def shoot(model, c0, history, x, tensions, tip, states, left, stages, work, resi
     statics' single shooting; more keep the growth of a perturbation along a segment small
     (it grows like exp(s (rho A c0^2 / E I)^(1/4)) in the time-discretised equations).
 
-    :param model: the robot's :class:`~continuum_statics.core.layout.DynamicsModel`
+    :param model: the robot's :class:`~continuum_statics.core.description.layout.DynamicsModel`
     :param history: (N - 1, 4, 12) v_h, u_h, q_h, w_h at each interval's four RK4 stages
         (``DYN_HISTORY_SIZE``): every point the equations are evaluated at keeps its own
         history, so BDF-alpha applies to the discrete system exactly (a history interpolated

@@ -14,9 +14,9 @@ from typing import NamedTuple
 import numba
 import numpy as np
 
-from continuum_statics.core.kernel import probe
-from continuum_statics.core.layout import AXIS_ROWS_AT, LENGTH_ROWS_AT, TIP_ROWS_AT
-from continuum_statics.core.least_squares import constrained_step
+from continuum_statics.core.description.layout import AXIS_ROWS_AT, LENGTH_ROWS_AT, TIP_ROWS_AT
+from continuum_statics.core.rod.kernel import probe
+from continuum_statics.core.rod.least_squares import constrained_step
 
 
 class GoalRows(NamedTuple):
@@ -117,7 +117,8 @@ def _rows(model, tip_force, tip_moment, fixed, x, rows, length):
 def goal_solve(model, tip_force, tip_moment, fixed, x0, rows, limits):
     """Solve min |res(x)|^2 s.t. con(x) = 0 from ``x0``: a :class:`GoalSolved`.
 
-    ``model`` the robot's :class:`~continuum_statics.core.layout.KernelModel`, ``rows`` a
+    ``model`` the robot's :class:`~continuum_statics.core.description.layout.KernelModel`,
+    ``rows`` a
     :class:`GoalRows`, ``limits`` a :class:`GoalLimits`; ``fixed`` the fixed tensions (N).
     """
     length = limits.constraint_weight

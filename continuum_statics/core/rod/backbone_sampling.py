@@ -7,7 +7,7 @@ nodes are computed once per (grid, count) and each shape is then sampled in one 
 import numba
 import numpy as np
 
-from continuum_statics.core.rotations import quaternion_into
+from continuum_statics.core.rod.rotations import quaternion_into
 
 
 @numba.njit(cache=True, nogil=True)

@@ -29,7 +29,7 @@ import math
 import numba
 import numpy as np
 
-from continuum_statics.core.layout import POSITION_AT, ROTATION_AT
+from continuum_statics.core.description.layout import POSITION_AT, ROTATION_AT
 
 
 @dataclass(frozen=True)
@@ -146,7 +146,7 @@ class Routing:
 def hole_in(y, offset):
     """Eq. 11 (with the errata): the hole r + R l of local ``offset`` l (3,) at node state ``y``.
 
-    ``y`` is one node row (layout ``core/layout.py``): r at POSITION_AT, R row-major at
+    ``y`` is one node row (layout ``core/description/layout.py``): r at POSITION_AT, R row-major at
     ROTATION_AT; returns the global point as a 3-tuple (m).
     """
     r, q = POSITION_AT, ROTATION_AT

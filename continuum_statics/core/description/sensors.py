@@ -2,7 +2,8 @@
 
 A robot file may list ``sensors:`` (a tip tracker, EM coils at disks, a point of an FBG fibre)
 and ``model_uncertainty:`` (the model's error as unmodelled loads, written by ``calibrate``);
-:mod:`continuum_statics.core.state_estimation` fuses both into the shape estimate. This module
+:mod:`continuum_statics.core.estimation.state_estimation` fuses both into the shape estimate. This
+module
 holds their validated records and the readings and verdicts that pass through the API.
 """
 from dataclasses import dataclass

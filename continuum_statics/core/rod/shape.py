@@ -1,9 +1,9 @@
 """The solved backbone: a small immutable record of arrays, base to tip."""
 import numpy as np
 
-from continuum_statics.core.backbone_sampling import BackboneSampler
-from continuum_statics.core.layout import BENDING, POSITION, ROTATION, STRETCH
-from continuum_statics.core.rotations import rotation_to_quaternion
+from continuum_statics.core.description.layout import BENDING, POSITION, ROTATION, STRETCH
+from continuum_statics.core.rod.backbone_sampling import BackboneSampler
+from continuum_statics.core.rod.rotations import rotation_to_quaternion
 
 
 class Shape:

@@ -1,16 +1,18 @@
 """The engine room: the one place Python calls each compiled kernel of the rod model.
 
 A :class:`Model` is built once per robot. It holds the robot's
-:class:`~continuum_statics.core.layout.KernelModel` (everything the compiled solvers read, one
+:class:`~continuum_statics.core.description.layout.KernelModel` (everything the compiled solvers
+read, one
 argument) and has one method per kernel; the solvers above (shape estimation, tendon statics,
 tip goals, load estimation, calibration) call these methods and read the named records they
-return (:class:`~continuum_statics.core.layout.Probe`, :class:`tracking.Tracked`,
+return (:class:`~continuum_statics.core.description.layout.Probe`, :class:`tracking.Tracked`,
 :class:`length_tracking.Chorded`, ...), never a kernel's argument list or a result by position.
 ``test/test_layout.py`` checks that each kernel is called here and nowhere else.
 """
 import numpy as np
 
-from continuum_statics.core import (
+from continuum_statics.core.description.layout import KernelModel, Probe
+from continuum_statics.core.rod import (
     dynamics_kernel,
     goal_tracking,
     kernel,
@@ -18,7 +20,6 @@ from continuum_statics.core import (
     tendon_kernel,
     tracking,
 )
-from continuum_statics.core.layout import KernelModel, Probe
 
 
 class Model:
@@ -140,7 +141,8 @@ class Model:
         return length_tracking.chord(self.record, tip_force, tip_moment, z0, tendon, scale,
                                      pieces, limits, start_values, start_states)
 
-    # -- the rod in motion (a robot's DynamicsModel record, built by core/dynamics.py) -------
+    # -- the rod in motion (a robot's DynamicsModel record, built by
+    # core/dynamics/rod_dynamics.py) -------
     @staticmethod
     def dynamics_solve(record, c0, history, x, jacobian, pivots, tip, cables, states, left,
                        stages, motor, tolerance, max_iterations, refresh_first):

@@ -10,7 +10,7 @@ so at the homed pose a cable of stiffness EA carries its pretension (a path ``st
 Lf (1 + t / EA)). A cable is taut (tension t = EA (p / Lf - 1) > 0 for its path p, uniform
 without friction) or slack (t = 0, p <= Lf): cables cannot push. An inextensible cable (EA = inf,
 the default) is taut with p = Lf and any tension >= 0. The equilibrium of rod and cables for given
-lengths is :mod:`continuum_statics.core.length_statics`.
+lengths is :mod:`continuum_statics.core.statics.length_statics`.
 """
 from dataclasses import dataclass
 import functools

@@ -9,7 +9,7 @@ each solve warm-started from the previous one.
 """
 import numpy as np
 
-from continuum_statics.core.layout import ProbeRows
+from continuum_statics.core.description.layout import ProbeRows
 
 
 class ConvergenceError(RuntimeError):

@@ -4,7 +4,8 @@ A controller plans in the model's unknowns (section moments); the motors hold le
 planned shape each section's cables must apply its moment: the least-norm tensions t >= t_min
 (``min_tension``, so antagonists stay taut when asked) with sum_j t_j (e3 x l_j) = the section's
 moment; each cable's motor then holds the free length that spans its path at that tension,
-Lf = p / (1 + t / EA) (:mod:`continuum_statics.core.tendons`), converted to the motor-side length.
+Lf = p / (1 + t / EA) (:mod:`continuum_statics.core.description.tendons`), converted to the
+motor-side length.
 Ideal cables (inextensible) with ``min_tension`` 0 command exactly the paths, as before. The
 tensions are checked against ``tension_limits``: a shape that needs more is refused, naming the
 cable. Friction is left to the closed loop (the frictionless stretch is commanded); with the
@@ -15,7 +16,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from continuum_statics.core.kernel import DISTRIBUTED
+from continuum_statics.core.rod.kernel import DISTRIBUTED
 
 
 @dataclass(frozen=True, eq=False)

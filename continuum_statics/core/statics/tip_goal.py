@@ -21,11 +21,11 @@ import math
 
 import numpy as np
 
-from continuum_statics.core import bvp
-from continuum_statics.core.goal_tracking import GoalLimits, GoalRows
-from continuum_statics.core.inputs import as_vector
-from continuum_statics.core.layout import ProbeRows
-from continuum_statics.core.shape import Shape
+from continuum_statics.core.description.inputs import as_vector
+from continuum_statics.core.description.layout import ProbeRows
+from continuum_statics.core.rod.goal_tracking import GoalLimits, GoalRows
+from continuum_statics.core.rod.shape import Shape
+from continuum_statics.core.statics import bvp
 
 #: Slack on the length limits (m) for round-off.
 LIMIT_SLACK = 1e-9

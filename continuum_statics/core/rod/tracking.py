@@ -21,9 +21,9 @@ from typing import NamedTuple
 import numba
 import numpy as np
 
-from continuum_statics.core.kernel import probe
-from continuum_statics.core.layout import LENGTH_ROWS_AT
-from continuum_statics.core.least_squares import constrained_step
+from continuum_statics.core.description.layout import LENGTH_ROWS_AT
+from continuum_statics.core.rod.kernel import probe
+from continuum_statics.core.rod.least_squares import constrained_step
 
 #: Levenberg-Marquardt damping a solve starts with (relative to the normal matrix's diagonal).
 DAMPING = 1e-6
@@ -122,7 +122,7 @@ def _evaluate(problem, x, measured, n_free):
 def track(model, tip_force, tip_moment, fixed, measured, warm, limits):
     """Estimate from ``warm``'s state; returns a :class:`Tracked`.
 
-    :param model: the robot's :class:`~continuum_statics.core.layout.KernelModel`
+    :param model: the robot's :class:`~continuum_statics.core.description.layout.KernelModel`
     :param fixed: (n_cables,) fixed tensions (N)
     :param measured: (n_cables,) measured lengths (m)
     :param warm: a :class:`TrackStart`: the start state ``x``; ``jac``, ``con_jac`` its

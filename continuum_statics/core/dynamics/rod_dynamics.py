@@ -20,8 +20,8 @@ from typing import NamedTuple
 
 import numpy as np
 
-from continuum_statics.core.inputs import as_vector
-from continuum_statics.core.layout import (
+from continuum_statics.core.description.inputs import as_vector
+from continuum_statics.core.description.layout import (
     BENDING,
     DYN_HISTORY_SIZE,
     DYN_MOMENT_AT,
@@ -37,9 +37,9 @@ from continuum_statics.core.layout import (
     CableInputs,
     DynamicsModel,
 )
-from continuum_statics.core.length_statics import motion_since, problem_constants
-from continuum_statics.core.robot_file import check_dynamics
-from continuum_statics.core.shape import Shape
+from continuum_statics.core.description.robot_file import check_dynamics
+from continuum_statics.core.rod.shape import Shape
+from continuum_statics.core.statics.length_statics import motion_since, problem_constants
 
 #: Newton iterations per step at most (a warm step takes one or two)
 MAX_ITERATIONS = 30

@@ -27,7 +27,8 @@ estimator, IEEE T-RO 2011, on these unknowns):
 with nu = y - h(mean) the innovation. Each reading is first judged on its own: its normalised
 innovation squared nu^T S^-1 nu against the chi-square gate of its degrees of freedom
 (:data:`GATE_PROBABILITY`); a reading that fails it
-is set aside with the reason (:class:`~continuum_statics.core.sensors.SensorVerdict`). The
+is set aside with the reason (:class:`~continuum_statics.core.description.sensors.SensorVerdict`).
+The
 published covariance of each backbone point is G_r P+ G_r^T.
 
 Cost: the model's estimate plus, per call, at most one column of G (a warm-started estimate,
@@ -44,10 +45,10 @@ import numba
 import numpy as np
 from scipy.stats import chi2 as chi2_distribution
 
-from continuum_statics.core import estimation
-from continuum_statics.core.layout import POSITION_AT, ROTATION_AT
-from continuum_statics.core.rotations import rotation_vector_into
-from continuum_statics.core.sensors import SensorVerdict, as_reading
+from continuum_statics.core.description.layout import POSITION_AT, ROTATION_AT
+from continuum_statics.core.description.sensors import SensorVerdict, as_reading
+from continuum_statics.core.estimation import shape_estimation
+from continuum_statics.core.rod.rotations import rotation_vector_into
 
 #: The tip may move this fraction of the rod's length from where the load columns were made
 #: before an estimate solved to the end makes them all again (a tracking call refreshes one
@@ -186,13 +187,13 @@ def fused(mean, covariance, jac, innovation, noise):
 
 def estimate_state(robot, lengths, tip_force, tip_moment, tensions, sensors, stamp, start,
                    jacobians, previous, tracking):
-    """Return the fused estimate (an :class:`estimation.ShapeEstimate` with covariances).
+    """Return the fused estimate (an :class:`shape_estimation.ShapeEstimate` with covariances).
 
-    Arguments as :func:`estimation.estimate_shape`, plus ``sensors`` ({name: reading}) and
+    Arguments as :func:`shape_estimation.estimate_shape`, plus ``sensors`` ({name: reading}) and
     ``stamp`` (s). ``previous`` carries the unmodelled loads and the load columns.
     """
     readings = _readings(robot, sensors)
-    model = estimation.estimate_shape(robot, lengths, tip_force, tip_moment, tensions, start,
+    model = shape_estimation.estimate_shape(robot, lengths, tip_force, tip_moment, tensions, start,
                                       jacobians, previous, tracking)
     prior = propagate(robot, getattr(previous, 'unmodelled', None), stamp)
     if not len(prior.mean):
@@ -278,7 +279,7 @@ def _moved(robot, model, lengths, tip_force, tip_moment, tensions, load, trackin
     the same state with the same bound, so what one leaves unfinished the other does too.
     """
     force, moment, cable = split_loads(robot, load)
-    return estimation.estimate_shape(
+    return shape_estimation.estimate_shape(
         robot, np.asarray(lengths, dtype=float) - cable, np.asarray(tip_force) + force,
         np.asarray(tip_moment) + moment, tensions, model.shape.state, model.jacobians, model,
         tracking)

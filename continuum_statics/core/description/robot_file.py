@@ -9,9 +9,13 @@ import math
 import numpy as np
 import yaml
 
-from continuum_statics.core.routing import GuideOffsets, Helix, Straight
-from continuum_statics.core.sensors import ModelUncertainty, parse_model_uncertainty, parse_sensors
-from continuum_statics.core.tendons import TENDON_KEYS, Tendons
+from continuum_statics.core.description.routing import GuideOffsets, Helix, Straight
+from continuum_statics.core.description.sensors import (
+    ModelUncertainty,
+    parse_model_uncertainty,
+    parse_sensors,
+)
+from continuum_statics.core.description.tendons import TENDON_KEYS, Tendons
 
 #: Plausible backbone materials: Young's modulus (Pa) and density (kg/m^3).
 YOUNGS_RANGE = (1e5, 1e13)
@@ -168,7 +172,7 @@ class RobotDescription:
     ``cable_names``, ``cable_offsets`` and ``cable_length_limits`` list every cable, section by
     section; ``guides`` is every guide disk base to tip; ``warnings`` names implausible fields.
     ``cable_offsets`` is each cable's hole at its end disk; ``cable_routes`` holds, per cable,
-    its :mod:`~continuum_statics.core.routing` route when the file gives ``offsets`` or
+    its :mod:`~continuum_statics.core.description.routing` route when the file gives ``offsets`` or
     ``helix`` (None: straight at ``cable_offsets``, what calibration may change).
     """
 
@@ -194,7 +198,7 @@ class RobotDescription:
     dynamics: DynamicsSettings = DynamicsSettings()
 
     def routes(self):
-        """One route per cable (:mod:`~continuum_statics.core.routing`), straight by default."""
+        """One route per cable (:mod:`~continuum_statics.core.description.routing`), straight."""
         routes = self.cable_routes or (None,) * len(self.cable_names)
         return tuple(Straight(np.array(offset)) if route is None else route
                      for route, offset in zip(routes, self.cable_offsets))

@@ -43,9 +43,9 @@ import math
 import numpy as np
 from scipy.stats import chi2 as chi2_distribution
 
-from continuum_statics.core.bvp import ConvergenceError
-from continuum_statics.core.inputs import as_vector
-from continuum_statics.core.shape import Shape
+from continuum_statics.core.description.inputs import as_vector
+from continuum_statics.core.rod.shape import Shape
+from continuum_statics.core.statics.bvp import ConvergenceError
 
 #: Default measurement standard deviations (``noise`` keys): length m (encoder and spool),
 #: tension N (a load cell or motor current; a string 'P%' is P percent of each reading), tip

@@ -8,7 +8,8 @@ bending stays at the passive equilibrium instead of being fixed by an arbitrary 
 With measured tensions the shape is the forward statics of those tensions (the lengths then only
 measure how well model and measurement agree), for ideal cables.
 
-Real tendons (:mod:`continuum_statics.core.tendons`): a robot file with a tendon model (stiffness,
+Real tendons (:mod:`continuum_statics.core.description.tendons`): a robot file with a tendon model
+(stiffness,
 pretension, friction or zero offsets) is estimated by the displacement-driven statics
 (:func:`length_statics.solve_lengths`), which also gives each cable's tension and which are
 slack; measured tensions are then compared with the model's (the motor-held lengths decide the
@@ -24,15 +25,12 @@ import math
 
 import numpy as np
 
-from continuum_statics.core import bvp, length_statics
-from continuum_statics.core.attempts import first_answer
-from continuum_statics.core.inputs import as_vector
-from continuum_statics.core.layout import ProbeRows
-from continuum_statics.core.least_squares import constrained_gauss_newton
-from continuum_statics.core.length_statics import MOTION_THRESHOLD
-from continuum_statics.core.shape import Shape
-from continuum_statics.core.tendons import full_circle_tension
-from continuum_statics.core.tracking import (
+from continuum_statics.core.description.inputs import as_vector
+from continuum_statics.core.description.layout import ProbeRows
+from continuum_statics.core.description.tendons import full_circle_tension
+from continuum_statics.core.rod.least_squares import constrained_gauss_newton
+from continuum_statics.core.rod.shape import Shape
+from continuum_statics.core.rod.tracking import (
     DAMPING,
     SECANT_AGE,
     SECANT_FRACTION,
@@ -42,6 +40,9 @@ from continuum_statics.core.tracking import (
     TrackStart,
     WarmStart,
 )
+from continuum_statics.core.statics import bvp, length_statics
+from continuum_statics.core.statics.attempts import first_answer
+from continuum_statics.core.statics.length_statics import MOTION_THRESHOLD
 
 #: Newton iterations a node's per-cycle tendon-model estimate may take when its warm start has
 #: no Jacobian for chord steps (else the chord's refresh is the bound).

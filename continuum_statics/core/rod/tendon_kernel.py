@@ -11,7 +11,7 @@ import math
 import numba
 import numpy as np
 
-from continuum_statics.core.routing import hole_in
+from continuum_statics.core.description.routing import hole_in
 
 
 @numba.njit(cache=True, nogil=True)
@@ -19,7 +19,7 @@ def path_stretch(states, guide_nodes, cable_last_guide, hole_offsets, base_axis,
                  friction, compliance, consumed, motor, mean):
     """Fill, per cable: free length its path takes (m), motor-side and mean tension (N).
 
-    :param states: (N, 21) node states of one shape (layout ``core/layout.py``)
+    :param states: (N, 21) node states of one shape (layout ``core/description/layout.py``)
     :param hole_offsets: (n, G, 3) each cable's hole at each guide, local frame, m (routing.py)
     :param tensions: (n,) end-disk tensions (N); ``friction``: (n,) mu times the sign of motion
         (+1 pulled: tension rises toward the motor); ``compliance``: (n,) 1 / EA (1/N)

@@ -23,7 +23,8 @@ RK4 tableau applied to the twist (v, u) in the Lie algebra with dexp^-1 truncate
 commutator, then (r, R) <- (r, R) exp(Theta). A segment of constant strain (a circular arc or
 helix) is therefore integrated exactly at any step count; M is integrated by the same RK4 stages.
 
-Output node layout (:mod:`continuum_statics.core.layout`, 21 values): r (3), R row-major (9),
+Output node layout (:mod:`continuum_statics.core.description.layout`, 21 values): r (3), R
+row-major (9),
 v - e3 (3), u (3) (both the left
 limit at the node), M (3) after any point moment at the node. v - e3 is kept rather than v because
 axial strains are ~1e-5. Everything is scalar code over preallocated arrays so numba compiles it
@@ -34,7 +35,7 @@ import math
 import numba
 import numpy as np
 
-from continuum_statics.core.layout import (  # the layouts and records, stated once
+from continuum_statics.core.description.layout import (  # the layouts and records, stated once
     AXIS_ROWS_AT,
     BASE_POSITION_AT,
     BASE_ROTATION_AT,
@@ -53,7 +54,7 @@ from continuum_statics.core.layout import (  # the layouts and records, stated o
     TIP_ROWS_AT,
     Probe,
 )
-from continuum_statics.core.routing import hole_in
+from continuum_statics.core.description.routing import hole_in
 
 POINT_MOMENT, DISTRIBUTED = 0, 1
 STRAIN_ITERATIONS = 8  # Newton steps at most; 3 reach round-off at 30 N on 10 mm holes
@@ -178,7 +179,7 @@ def _strain_newton(ml, nl, u, w, c, p, tensions, routes, point, active):
 
     C u = ml - sum t l x tau, D (v - e3) = nl - sum t tau over the cables passing here, with
     tau = q / |q|, q = v + u x l + l' (R&W 2011 eq. 12 in the body frame; l, l' of cable j in
-    ``routes[point, 6 j:6 j + 6]``, :class:`~continuum_statics.core.routing.Routing`).
+    ``routes[point, 6 j:6 j + 6]``, :class:`~continuum_statics.core.description.routing.Routing`).
     ``c`` the diagonal of C here (N m^2). ``ml``, ``nl`` = R^T M, R^T N; ``u``, ``w`` the
     previous strains, the start of Newton's iteration (exact Jacobian, quadratic convergence:
     l' does not depend on u); ``active[j]``: cable j passes here.
@@ -711,12 +712,15 @@ def integrate_with_lengths(model, forces, bendings, moments, tensions):
 def probe(model, tip_force, tip_moment, fixed_tensions, x, n_free):
     """Model outputs at a solver state and their forward-difference Jacobian.
 
-    ``model`` is the robot's :class:`~continuum_statics.core.layout.KernelModel`. Integrates
+    ``model`` is the robot's :class:`~continuum_statics.core.description.layout.KernelModel`.
+    Integrates
     ``x`` and ``x + model.step e_k`` for the first ``n_free`` components in one batch (columns
     of point moments at the tip are exact and need no integration) and returns a
-    :class:`~continuum_statics.core.layout.Probe`: values = [tip position (3, m); tip z axis
+    :class:`~continuum_statics.core.description.layout.Probe`: values = [tip position (3, m); tip
+    z axis
     (3); cable lengths (n_cables, m); (M_end - tau) L / (E I) (3), the tip moment balance, zero
-    at equilibrium] (rows :class:`~continuum_statics.core.layout.ProbeRows`), their Jacobian
+    at equilibrium] (rows :class:`~continuum_statics.core.description.layout.ProbeRows`), their
+    Jacobian
     (n_free columns) and the nominal (N, 21) states. ``model.section_state_index`` = [index of
     the first moment coordinate of each section, or -1] (sections ending at the tip node have
     exact columns in the point model).
