@@ -1,6 +1,6 @@
 # The two commands of README.md: `make demo` (main job) and `make test` (whole suite).
 # Both create .venv on first use and reuse it afterwards.
-.PHONY: venv venv-jazzy demo test docs test-jazzy bench bench-nodes bench-nodes-noisy bench-drivers bench-tendons bench-calibration bench-load lint clean fuzz soak
+.PHONY: venv venv-jazzy demo test test-core docs test-jazzy bench bench-nodes bench-nodes-noisy bench-drivers bench-tendons bench-calibration bench-load lint clean fuzz soak
 
 venv:
 	@scripts/setup_venv.sh
@@ -8,13 +8,22 @@ venv:
 demo: venv
 	scripts/ros_env.sh .venv/bin/python -m continuum_statics demo
 
+# The suite in two tiers: the fast one (no DDS, no process: physics, decisions, drivers against
+# emulators, tools in-process) on both cores, then the `ros` tier (nodes over DDS, subprocesses)
+# one test at a time; each prints its ten slowest tests.
 test: venv
 	scripts/install_browser.sh
-	scripts/ros_env.sh --private .venv/bin/python -m pytest -q test
+	scripts/ros_env.sh --private .venv/bin/python -m pytest -q -n 2 -m "not ros" --durations=10 test
+	scripts/ros_env.sh --private .venv/bin/python -m pytest -q -m ros --durations=10 test
+
+# The newcomer's first command: the fast tier alone (test/core, control, calibration, drivers,
+# tools, package without DDS or processes), in about two minutes on two cores.
+test-core: venv
+	scripts/ros_env.sh --private .venv/bin/python -m pytest -q -n 2 -m "not ros" --durations=10 test
 
 # The documentation (doc/, Sphinx + MyST, what rosdoc2 builds) into build/doc/index.html; warnings
 # (a broken internal link or anchor, a bad docstring) are errors. `make test` builds it too
-# (test/test_docs_build.py).
+# (test/package/test_docs_build.py).
 docs: venv
 	.venv/bin/python -m sphinx -E -W --keep-going -q -b html doc build/doc
 	@echo "docs: build/doc/index.html"
@@ -25,16 +34,17 @@ venv-jazzy:
 
 test-jazzy: venv venv-jazzy
 	scripts/install_browser.sh
-	scripts/ros_env.sh --private .venv-jazzy/bin/python -m pytest -q test
+	scripts/ros_env.sh --private .venv-jazzy/bin/python -m pytest -q -n 2 -m "not ros" --durations=10 test
+	scripts/ros_env.sh --private .venv-jazzy/bin/python -m pytest -q -m ros --durations=10 test
 
 bench: venv
 	scripts/ros_env.sh .venv/bin/python -m continuum_statics bench
-	.venv/bin/python -m continuum_statics.tools.bench_release
-	.venv/bin/python -m continuum_statics.tools.bench_tendons
-	.venv/bin/python -m continuum_statics.tools.bench_load
-	.venv/bin/python -m continuum_statics.tools.bench_noisy
-	.venv/bin/python -m continuum_statics.tools.bench_fusion
-	.venv/bin/python -m continuum_statics.tools.bench_dynamics
+	.venv/bin/python -m benchmarks.bench_release
+	.venv/bin/python -m benchmarks.bench_tendons
+	.venv/bin/python -m benchmarks.bench_load
+	.venv/bin/python -m benchmarks.bench_noisy
+	.venv/bin/python -m benchmarks.bench_fusion
+	.venv/bin/python -m benchmarks.bench_dynamics
 
 bench-nodes: venv
 	scripts/ros_env.sh --private .venv/bin/python -m continuum_statics bench --nodes
@@ -49,18 +59,18 @@ bench-nodes-noisy: venv
 # Dynamixel backend against the Protocol 2.0 emulator on a simulated 1 Mbps wire: sync write +
 # sync read cycle and the highest cable_driver publish_rate, for 4 and 9 servos.
 bench-drivers: venv
-	scripts/ros_env.sh --private .venv/bin/python -m continuum_statics.tools.driver_bench
+	scripts/ros_env.sh --private .venv/bin/python -m benchmarks.driver_bench
 
 # Differential fuzzing of the raw CDR JointState parser against rclpy, FUZZ_EXAMPLES cases per
 # test (random each run; `make test` runs 1500 per test, derandomized).
 fuzz: venv
 	FUZZ_EXAMPLES=$${FUZZ_EXAMPLES:-50000} scripts/ros_env.sh --private .venv/bin/python -m pytest \
-	    -q -p no:cacheprovider test/test_fuzz_joint_state.py
+	    -q -p no:cacheprovider test/nodes/test_fuzz_joint_state.py
 
 # Not in CI: bringup at 1 kHz with a random reachable goal every 2 s for 10 minutes; prints goals
 # reached/answered, RSS at start and end, warnings. Options: make soak SOAK_ARGS='--minutes 3'.
 soak: venv
-	scripts/ros_env.sh --private .venv/bin/python -m continuum_statics.tools.soak $(SOAK_ARGS)
+	scripts/ros_env.sh --private .venv/bin/python -m benchmarks.soak $(SOAK_ARGS)
 
 lint: venv
 	.venv/bin/ruff check .
@@ -70,13 +80,13 @@ clean:
 
 # Real tendons: solve_lengths warm/cold beside SciPy.
 bench-load: venv
-	.venv/bin/python -m continuum_statics.tools.bench_load --plot doc/images/tip_load_noise.png
+	.venv/bin/python -m benchmarks.bench_load --plot doc/images/tip_load_noise.png
 
 bench-tendons: venv
-	.venv/bin/python -m continuum_statics.tools.bench_tendons
+	.venv/bin/python -m benchmarks.bench_tendons
 
 # The v6 calibration: replay cost, the default fit (and on a 1600-row run), train and held-out
 # RMS, the error budget (about two minutes); CANDIDATES="cable_stiffness section_length" adds
 # their cross-validation inside the training run (minutes each).
 bench-calibration: venv
-	.venv/bin/python -m continuum_statics.tools.bench_calibration --long $(if $(CANDIDATES),--select $(CANDIDATES))
+	.venv/bin/python -m benchmarks.bench_calibration --long $(if $(CANDIDATES),--select $(CANDIDATES))

@@ -30,6 +30,32 @@ def pytest_sessionstart(session):
     warm_up(load_robot(REPO / 'config' / 'tendon_robot.yaml'))
 
 
+@pytest.fixture(autouse=True)
+def _only_ros_tests_start_dds_or_a_process(request, monkeypatch):
+    """Fail a test that starts DDS or a process without the ``ros`` marker.
+
+    ``make test-core`` runs ``-m "not ros"``, the fast tier of everything that starts neither;
+    this keeps the marker true: an unmarked test that starts a subprocess or an rclpy context
+    fails with the reason (compute pools of ``multiprocessing`` are not processes a user sees).
+    """
+    if request.node.get_closest_marker('ros') is not None:
+        return
+    import subprocess
+
+    def refuse(what):
+        def refused(*args, **kwargs):
+            pytest.fail('%s starts %s without the ros marker (pytestmark = pytest.mark.ros)'
+                        % (request.node.nodeid, what), pytrace=False)
+        return refused
+
+    monkeypatch.setattr(subprocess.Popen, '__init__', refuse('a process'))
+    try:
+        import rclpy.context
+    except ImportError:  # no ROS here: nothing can start DDS either
+        return
+    monkeypatch.setattr(rclpy.context.Context, 'init', refuse('DDS (an rclpy context)'))
+
+
 @pytest.fixture
 def harness():
     """Yield a private rclpy context with its own executors for in-process node tests."""

@@ -12,6 +12,6 @@ robot.py       the facade: ``load_robot`` and :class:`~continuum_statics.core.ro
 warmup.py      compiles every kernel a node calls, before it serves
 =============  ==========================================================================
 
-``test/core/test_layer_contracts.py`` ranks the floors (:data:`FLOORS` there): an import
+``test/package/test_layer_contracts.py`` ranks the floors (:data:`FLOORS` there): an import
 from a higher floor fails it. Users import ``from continuum_statics import load_robot``.
 """

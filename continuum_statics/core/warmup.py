@@ -21,7 +21,7 @@ import numpy as np
 _LOCK = threading.Lock()
 _DONE = False
 #: The kernels Python calls (the others are compiled into them): each must have a signature
-#: after the warm-up (``test/test_warmup.py``).
+#: after the warm-up (``test/core/test_warmup.py``).
 ENTRY_POINTS = (
     'continuum_statics.core.rod.kernel.integrate_batch',
     'continuum_statics.core.rod.kernel.integrate_passive',

@@ -174,6 +174,15 @@ class CableBackend(abc.ABC):
         """Put a hidden tip load (6,) N, N m on a simulated robot (:attr:`takes_tip_wrench`)."""
         raise ValueError('backend %r has no simulated tip load' % self.name)
 
+    @property
+    def true_tip_pose(self):
+        """The robot's true tip (position (3,) m, rotation (3, 3)) where the backend knows it.
+
+        None for real actuators (only a simulated robot in motion knows its truth); the driver
+        publishes it on ``sim/tip_pose_true`` when it is not None.
+        """
+        return None
+
     def close(self) -> None:
         """Release the actuators (called once, when the node is destroyed)."""
 

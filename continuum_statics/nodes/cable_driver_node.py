@@ -280,7 +280,7 @@ class CableDriverNode(LifecycleNode):
                 self._publish_true_tip()
 
     def _publish_true_tip(self):
-        pose = getattr(self.backend, 'true_tip_pose', None)
+        pose = None if self.backend is None else self.backend.true_tip_pose
         if pose is None:
             return
         position, rotation = pose

@@ -1,7 +1,7 @@
 """Serialized sensor_msgs/JointState read without a Python message (the 1 kHz hot path).
 
 Accepts exactly what rclpy's deserializer accepts, with the same content (differential fuzzing
-in ``test/test_fuzz_joint_state.py``).
+in ``test/nodes/test_fuzz_joint_state.py``).
 """
 import struct
 

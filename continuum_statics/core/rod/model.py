@@ -7,7 +7,7 @@ argument) and has one method per kernel; the solvers above (shape estimation, te
 tip goals, load estimation, calibration) call these methods and read the named records they
 return (:class:`~continuum_statics.core.description.layout.Probe`, :class:`tracking.Tracked`,
 :class:`length_tracking.Chorded`, ...), never a kernel's argument list or a result by position.
-``test/test_layout.py`` checks that each kernel is called here and nowhere else.
+``test/core/test_layout.py`` checks that each kernel is called here and nowhere else.
 """
 import numpy as np
 

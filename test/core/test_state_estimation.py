@@ -1,0 +1,232 @@
+"""State estimation (issue 35): sensors fused into the shape, with an honest covariance.
+
+Truths: the model's own estimate (no readings: the fused estimate is it), simulated truth
+with loads the estimator does not know and sensors with noise (errors along the rod, the
+normalised estimation error squared of the 95 % ellipsoid over 500 seeded cases), truth with
+physics the robot file leaves out (guide-disk masses), the Ornstein-Uhlenbeck decay in closed
+form, a recorded real run (ftdcr_v6, calibrated on train.csv, replayed on held-out val.csv),
+and a synthetic run with a known hidden offset process that ``calibrate --model-uncertainty``
+must recover.
+"""
+import dataclasses
+import math
+from pathlib import Path
+
+import numpy as np
+import pytest
+from recorded_v6 import V6_COLUMNS
+import yaml
+
+from continuum_statics import load_robot
+from continuum_statics.calibration import model_uncertainty
+from continuum_statics.calibration.occlusion import occlusion_replay
+from continuum_statics.calibration.recorded_run import RecordedRun
+from continuum_statics.calibration.runs import read_run
+from continuum_statics.core.description.robot_file import parse_robot_description
+from continuum_statics.core.description.sensors import ModelUncertainty, SensorReading
+from continuum_statics.core.robot import Robot
+from continuum_statics.tools.fusion import simulated_truth
+
+REPO = Path(__file__).resolve().parents[2]
+SENSOR_ROBOT = REPO / 'config' / 'tendon_robot_sensors.yaml'
+V6_FUSED = REPO / 'config' / 'ftdcr_v6_fused.yaml'
+V6_VAL = REPO / 'test' / 'data' / 'ftdcr_v6' / 'val.csv'
+
+
+def _document(path=SENSOR_ROBOT):
+    with open(path, encoding='utf-8') as stream:
+        return yaml.safe_load(stream)
+
+
+def _pulled(robot, pull=0.004):
+    lengths = np.array(robot.straight_cable_lengths)
+    lengths[0] -= pull
+    return lengths
+
+
+@pytest.mark.parametrize('name', ['tendon_robot.yaml', 'tendon_robot_real_tendons.yaml',
+                                  'three_section_robot_real_tendons.yaml'])
+def test_without_readings_the_estimate_is_the_models(name):
+    """No reading yet: the fused shape is the model's estimate (1e-9 m), with a covariance."""
+    plain = load_robot(REPO / 'config' / name)
+    fused = plain.with_model_uncertainty(ModelUncertainty(0.05, 0.005, 3e-4, 5e-4, 10.0))
+    lengths = _pulled(plain)
+    a, b = plain.estimate_shape(lengths), fused.estimate_shape(lengths)
+    assert a.position_covariance is None
+    assert np.max(np.abs(a.shape.positions - b.shape.positions)) < 1e-9
+    if not plain.tendons.is_ideal:
+        exact = plain.solve_lengths(lengths).shape
+        assert np.max(np.abs(exact.positions - b.shape.positions)) < 1e-6
+    covariance = b.position_covariance
+    assert covariance.shape == (len(b.shape.s), 3, 3)
+    assert np.all(np.linalg.eigvalsh(covariance[1:]) >= -1e-15)
+    # the base is clamped: only the base offset's variance there
+    assert np.allclose(covariance[0], 5e-4 ** 2 * np.eye(3), rtol=1e-6)
+
+
+@pytest.mark.parametrize('change, field', [
+    ({'sensors': [{'name': 'x', 'at': {'disk': 99}}]}, 'sensors[0].at'),
+    ({'sensors': [{'name': 'x', 'at': 0.9}]}, 'sensors[0].at'),
+    ({'sensors': [{'name': 'x', 'kind': 'velocity'}]}, 'sensors[0].kind'),
+    ({'sensors': [{'name': 'x'}, {'name': 'x'}]}, 'used twice'),
+    ({'sensors': [{'name': 'x', 'noise': {'position': -1}}]}, 'sensors[0].noise.position'),
+    ({'sensors': [{'name': 'x', 'colour': 'red'}]}, 'unknown keys'),
+    ({'model_uncertainty': {'tip_force': 'big'}}, 'model_uncertainty.tip_force'),
+    ({'model_uncertainty': {'correlation_time': 0.0}}, 'model_uncertainty.correlation_time'),
+    ({'model_uncertainty': {'wind': 1.0}}, 'unknown keys'),
+])
+def test_robot_file_mistakes_are_named(change, field):
+    document = _document()
+    document.update(change)
+    with pytest.raises(ValueError, match=field.replace('[', r'\[').replace(']', r'\]')):
+        parse_robot_description(document)
+
+
+def test_an_unknown_sensor_or_a_bad_reading_is_named():
+    robot = load_robot(SENSOR_ROBOT)
+    lengths = _pulled(robot)
+    with pytest.raises(ValueError, match="'camera' is not in the robot file"):
+        robot.estimate_shape(lengths, sensors={'camera': np.zeros(3)})
+    with pytest.raises(ValueError, match='tip_tracker: position must be 3 finite'):
+        robot.estimate_shape(lengths, sensors={'tip_tracker': [0.0, np.nan, 0.3]})
+
+
+def test_simulated_truth_each_sensor_helps_and_the_ellipsoid_is_honest():
+    """500 seeded cases: hidden loads from the prior, sensors with their noise (NEES)."""
+    rows = simulated_truth(load_robot(SENSOR_ROBOT), 500, seed=35)
+    alone, tip, both = (row['rms'] for row in rows)
+    # the tip tracker pins the tip; the EM coil the middle of the rod
+    assert tip[-1] < 0.25 * alone[-1]
+    assert both[1] < 0.85 * tip[1] and both[1] < 0.5 * alone[1]
+    assert np.all(both <= tip * 1.05)
+    for row in rows:
+        assert 0.90 <= row['coverage'] <= 0.98, row
+
+
+def test_truth_with_disk_masses_the_file_leaves_out():
+    """Physics the estimator does not have: 10 g per guide disk under gravity, bent robots."""
+    document = _document()
+    robot = load_robot(SENSOR_ROBOT)
+    heavy = dict(document, guides=None)
+    heavy.pop('guides')
+    heavy['sections'] = [{'name': 'all', 'guides': document['guides'],
+                          'cables': document['cables'], 'disk_mass': 0.01}]
+    heavy.pop('cables')
+    heavy.pop('sensors')
+    heavy.pop('model_uncertainty')
+    truth_robot = Robot(parse_robot_description(heavy))
+    rng = np.random.default_rng(1)
+    alone, fused = [], []
+    tracker = robot.sensors[0]
+    for _ in range(20):
+        lengths = robot.straight_cable_lengths - rng.uniform(0.0, 0.012, 4)
+        truth = truth_robot.solve_lengths(lengths).shape
+        marker = truth.tip_position + truth.tip_rotation @ tracker.offset
+        reading = SensorReading(marker + rng.normal(0.0, tracker.position_sigma, 3))
+        model = robot.estimate_shape(lengths, exact=True)
+        estimate = robot.estimate_shape(lengths, exact=True, sensors={'tip_tracker': reading})
+        assert estimate.sensors['tip_tracker'].used
+        alone.append(model.shape.positions - truth.positions)
+        fused.append(estimate.shape.positions - truth.positions)
+    rms = [np.sqrt(np.mean(np.sum(np.array(e) ** 2, axis=2), axis=0)) for e in (alone, fused)]
+    print('disk masses: model alone %s mm, with the tip tracker %s mm (base to tip)'
+          % (np.round(1e3 * rms[0][::6], 2), np.round(1e3 * rms[1][::6], 2)))
+    assert rms[0][-1] > 2e-3  # the masses matter
+    assert rms[1][-1] < 0.4 * rms[0][-1]
+    middle = len(rms[0]) // 2
+    assert rms[1][middle] < 0.7 * rms[0][middle]
+
+
+def test_a_biased_reading_is_set_aside_and_changes_nothing():
+    robot = load_robot(SENSOR_ROBOT)
+    lengths = _pulled(robot)
+    model = robot.estimate_shape(lengths, exact=True)
+    tip = model.shape.tip_position + model.shape.tip_rotation @ robot.sensors[0].offset
+    biased = robot.estimate_shape(lengths, exact=True, sensors={
+        'tip_tracker': SensorReading(tip + np.array([0.03, 0.0, 0.0]))})
+    verdict = biased.sensors['tip_tracker']
+    assert not verdict.used and verdict.chi2 > 30.0
+    assert 'gate' in verdict.reason and '30.0 mm' in verdict.reason
+    assert np.array_equal(biased.shape.positions, model.shape.positions)
+    good = robot.estimate_shape(lengths, exact=True, sensors={
+        'tip_tracker': SensorReading(tip + np.array([0.002, 0.0, 0.0]))})
+    assert good.sensors['tip_tracker'].used
+    assert good.shape.tip_position[0] - model.shape.tip_position[0] > 1e-3
+
+
+def test_a_correction_fades_with_the_correlation_time():
+    """Ornstein-Uhlenbeck: the mean decays as exp(-t / tau), the variance grows back to P0."""
+    robot = load_robot(SENSOR_ROBOT)
+    tau = robot.model_uncertainty.correlation_time
+    lengths = _pulled(robot)
+    model = robot.estimate_shape(lengths, exact=True)
+    tip = model.shape.tip_position + model.shape.tip_rotation @ robot.sensors[0].offset
+    seen = robot.estimate_shape(lengths, exact=True, stamp=100.0, sensors={
+        'tip_tracker': SensorReading(tip + np.array([0.002, -0.001, 0.0]))})
+    later = robot.estimate_shape(lengths, warm_start=seen, exact=True, stamp=100.0 + tau)
+    np.testing.assert_allclose(later.unmodelled.mean, seen.unmodelled.mean * math.exp(-1.0),
+                               atol=1e-15)
+    variance = [np.trace(e.tip_covariance[:3, :3]) for e in (seen, later, model)]
+    assert variance[0] < 0.1 * variance[2]
+    assert variance[0] < variance[1] < variance[2]
+    much_later = robot.estimate_shape(lengths, warm_start=later, exact=True,
+                                      stamp=100.0 + 20 * tau)
+    np.testing.assert_allclose(much_later.shape.positions, model.shape.positions, atol=1e-9)
+    np.testing.assert_allclose(np.trace(much_later.tip_covariance[:3, :3]), variance[2],
+                               rtol=1e-6)
+
+
+def test_v6_held_out_rows_with_the_tracker_occluded():
+    """The real robot: calibrated on train.csv (with model_uncertainty), replayed on val.csv."""
+    robot = load_robot(V6_FUSED)
+    run = read_run(V6_VAL, robot, V6_COLUMNS)
+    every_other = occlusion_replay(robot, run, 1, 1)
+    blocks = occlusion_replay(robot, run, 5, 5)
+    assert every_other.fused < 0.35 * every_other.model
+    assert blocks.fused < 0.6 * blocks.model
+    assert 0.85 <= every_other.coverage <= 0.99
+
+
+def test_calibrate_recovers_a_known_hidden_offset():
+    """A synthetic run: the tracker sees the model plus an offset process of known sigma, tau."""
+    robot = load_robot(REPO / 'config' / 'tendon_robot_real_tendons.yaml')
+    rng = np.random.default_rng(7)
+    sigma, tau, noise, rows = 2e-3, 8.0, 3e-4, 400
+    times = np.cumsum(rng.uniform(0.3, 0.7, rows))
+    lengths = np.empty((rows, 4))
+    tips = np.empty((rows, 3))
+    offset = rng.normal(0.0, sigma, 3)
+    previous = None
+    for i in range(rows):
+        if i:
+            a = math.exp(-(times[i] - times[i - 1]) / tau)
+            offset = a * offset + math.sqrt(1 - a * a) * rng.normal(0.0, sigma, 3)
+        lengths[i] = robot.straight_cable_lengths - rng.uniform(0.0, 0.006, 4)
+        previous = robot.solve_lengths(lengths[i], warm_start=previous)
+        shape = previous.shape
+        tips[i] = (shape.tip_position + shape.tip_rotation @ robot.tip_marker + offset
+                   + rng.normal(0.0, noise, 3))
+    run = RecordedRun(times=times, labels=('',) * rows, lengths=lengths, tips=tips,
+                      source='synthetic')
+    measured, report = model_uncertainty.measure(robot, run, tracker_noise=noise)
+    assert 0.7 * sigma < measured.base_position < 1.4 * sigma, report
+    assert 0.5 * tau < measured.correlation_time < 2.0 * tau, report
+    # what the run does not show stays small: the loads explain nothing here
+    assert measured.tip_force < 0.3 * robot.c[0] / robot.length ** 2 * 0.1
+    assert dataclasses.asdict(measured).keys() >= {'tip_force', 'cable_length'}
+
+
+def test_an_older_reading_counts_for_less():
+    """Fused by stamp: a reading taken 5 s before the estimate's stamp moves it less."""
+    robot = load_robot(SENSOR_ROBOT)
+    lengths = _pulled(robot)
+    model = robot.estimate_shape(lengths, exact=True)
+    tip = model.shape.tip_position + model.shape.tip_rotation @ robot.sensors[0].offset
+    seen = tip + np.array([0.002, 0.0, 0.0])
+    fresh = robot.estimate_shape(lengths, exact=True, stamp=10.0, sensors={
+        'tip_tracker': SensorReading(seen, stamp=10.0)})
+    old = robot.estimate_shape(lengths, exact=True, stamp=10.0, sensors={
+        'tip_tracker': SensorReading(seen, stamp=5.0)})
+    moved = [e.shape.tip_position[0] - model.shape.tip_position[0] for e in (fresh, old)]
+    assert 0.0 < moved[1] < moved[0]
+    assert np.trace(old.tip_covariance[:3, :3]) > np.trace(fresh.tip_covariance[:3, :3])
