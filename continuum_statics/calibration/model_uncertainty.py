@@ -20,13 +20,17 @@ import math
 import numpy as np
 from scipy.optimize import minimize
 
-from continuum_statics.core.description.sensors import ModelUncertainty, default_model_uncertainty
+from continuum_statics.core.description.sensors import (
+    DEFAULT_SENSOR_NOISE,
+    ModelUncertainty,
+    default_model_uncertainty,
+)
 from continuum_statics.core.estimation.state_estimation import GROUPS, decayed, fused
 
 #: Occlusion patterns of the fit: (rows seen, rows occluded), repeated over the run.
 OCCLUSION_PATTERNS = ((1, 1), (5, 5), (20, 40))
-#: The tracker's noise (m) assumed when the robot file names no tip sensor.
-TRACKER_NOISE = 5e-4
+#: The tracker's noise (m) assumed when the robot file names no tip sensor: a sensor's default.
+TRACKER_NOISE = DEFAULT_SENSOR_NOISE['position']
 
 
 def residual_rows(robot, run):

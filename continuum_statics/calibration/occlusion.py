@@ -14,11 +14,11 @@ import math
 import time
 
 import numpy as np
-from scipy.stats import chi2 as chi2_distribution
 
 from continuum_statics.calibration.model_uncertainty import seen_mask
 from continuum_statics.calibration.replay import replay
 from continuum_statics.core.description.sensors import SensorReading
+from continuum_statics.core.estimation.gates import chi2_quantile
 from continuum_statics.core.estimation.state_estimation import point_covariance
 
 #: The baseline's decay (s): the last tracker residual added to the model, fading.
@@ -57,7 +57,7 @@ def occlusion_replay(robot, run, seen, hidden, model_points=None):
     if model_points is None:
         model_points = replay(robot, run)[0]
     mask = seen_mask(len(run), seen, hidden)
-    gate = chi2_distribution.ppf(COVERAGE, 3)
+    gate = chi2_quantile(COVERAGE, 3)
     fused, model, baseline, inside, durations = [], [], [], 0, []
     previous, last = None, None
     for i, lengths in enumerate(run.lengths):

@@ -16,7 +16,6 @@ import json
 import sys
 
 import numpy as np
-from scipy.stats import chi2 as chi2_distribution
 
 from continuum_statics.calibration.occlusion import occlusion_replay
 from continuum_statics.calibration.recorded_run import add_column_arguments, column_map_from_args
@@ -24,6 +23,7 @@ from continuum_statics.calibration.replay import replay
 from continuum_statics.calibration.runs import read_run
 from continuum_statics.core.description.sensors import SensorReading
 from continuum_statics.core.estimation import shape_estimation
+from continuum_statics.core.estimation.gates import chi2_quantile
 from continuum_statics.core.estimation.state_estimation import prior_scales, split_loads
 
 #: Arc-length fractions the simulated table reports the backbone error at.
@@ -46,7 +46,7 @@ def simulated_truth(robot, cases, seed=0):
     counts = range(len(robot.sensors) + 1)
     errors = {count: [] for count in counts}
     inside = {count: 0 for count in counts}
-    gate = chi2_distribution.ppf(0.95, 3)
+    gate = chi2_quantile(0.95, 3)
     for _ in range(cases):
         lengths = robot.straight_cable_lengths - rng.uniform(0.0, PULL * robot.length, n) * (
             rng.uniform(size=n) < 0.5)

@@ -41,9 +41,9 @@ from dataclasses import dataclass
 import math
 
 import numpy as np
-from scipy.stats import chi2 as chi2_distribution
 
 from continuum_statics.core.description.inputs import as_vector
+from continuum_statics.core.estimation import gates
 from continuum_statics.core.rod.shape import Shape
 from continuum_statics.core.statics.bvp import ConvergenceError
 
@@ -75,20 +75,12 @@ LOAD_STEP = 1e-5
 LENGTH_STEP, TENSION_STEP = 1e-6, 1e-5
 #: The smallest tension standard deviation (N) of a 'P%' noise figure (a zero reading).
 MIN_TENSION_NOISE = 1e-3
-#: The chi-square gate: a measurement set whose weighted squared residual exceeds the (1 - p)
-#: quantile of the chi-square distribution with (measurements - seen load directions) degrees
-#: of freedom is one the model cannot explain at the stated noise (a faulty sensor, a wrong
-#: unit, a tracker the tensions contradict). p = 1e-3: measurements whose noise is as stated
-#: are set aside once in a thousand; a faulty one is off by orders of magnitude more.
-CHI2_GATE_PROBABILITY = 1e-3
 #: A seen direction of the estimated force (or moment) is named as poorly seen when its standard
 #: deviation exceeds this fraction of the estimate's magnitude: worse than the accuracy force
 #: sensing publishes, 5-15 % of the magnitude (Xiao & Chen 2021, FBG; Eyberg et al. 2026, 14 %).
 #: Only while the estimate stands clear of zero (a load at all, not noise about none): its
 #: chi-square distance from zero beyond the THREE_SIGMA quantile.
 POORLY_SEEN = 0.2
-#: The probability inside 3 sigma of a Gaussian.
-THREE_SIGMA = 0.9973
 #: The load models of ``load=`` (:func:`load_model`).
 LOAD_MODELS = ('weight', 'force', 'direction', 'wrench')
 
@@ -238,14 +230,15 @@ class WrenchEstimate:
                        else self.parameter_covariance)
         return self.measurements - (unknowns - len(self.unseen))
 
-    def explains(self, probability=CHI2_GATE_PROBABILITY):
-        """Return True if the measurements pass the chi-square gate (see CHI2_GATE_PROBABILITY)."""
+    def explains(self, probability=gates.LOAD_GATE_PROBABILITY):
+        """Return True if the measurements pass the chi-square gate.
+
+        The weighted squared residual against the gate of (measurements - seen load directions)
+        degrees of freedom (:mod:`~continuum_statics.core.estimation.gates`).
+        """
         if not np.isfinite(self.chi2):
             return False
-        if self.dof <= 0:
-            return True
-        total = self.chi2 * self.measurements
-        return bool(total <= chi2_distribution.ppf(1.0 - probability, self.dof))
+        return gates.passes(self.chi2 * self.measurements, self.dof, probability)
 
     @property
     def sigma(self):
@@ -753,7 +746,7 @@ def _poorly_seen(wrench, covariance, load, mass, mass_sigma):
         kept = values > 1e-12 * max(float(values[-1]), 1e-300)
         projected = vectors[:, kept].T @ value
         distance = float(np.sum(projected ** 2 / values[kept]))  # chi-square from zero
-        if distance <= chi2_distribution.ppf(THREE_SIGMA, int(np.sum(kept))):
+        if distance <= gates.chi2_quantile(gates.THREE_SIGMA, int(np.sum(kept))):
             continue  # not a load at all: noise about none
         for variance, vector in zip(values[::-1], vectors.T[::-1]):
             sigma = math.sqrt(max(float(variance), 0.0))

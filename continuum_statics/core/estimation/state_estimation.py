@@ -26,7 +26,7 @@ estimator, IEEE T-RO 2011, on these unknowns):
 
 with nu = y - h(mean) the innovation. Each reading is first judged on its own: its normalised
 innovation squared nu^T S^-1 nu against the chi-square gate of its degrees of freedom
-(:data:`GATE_PROBABILITY`); a reading that fails it
+(:data:`~continuum_statics.core.estimation.gates.SENSOR_GATE_PROBABILITY`); a reading that fails it
 is set aside with the reason (:class:`~continuum_statics.core.description.sensors.SensorVerdict`).
 The
 published covariance of each backbone point is G_r P+ G_r^T.
@@ -43,11 +43,10 @@ import math
 
 import numba
 import numpy as np
-from scipy.stats import chi2 as chi2_distribution
 
 from continuum_statics.core.description.layout import POSITION_AT, ROTATION_AT
 from continuum_statics.core.description.sensors import SensorVerdict, as_reading
-from continuum_statics.core.estimation import shape_estimation
+from continuum_statics.core.estimation import gates, shape_estimation
 from continuum_statics.core.rod.rotations import rotation_vector_into
 
 #: The tip may move this fraction of the rod's length from where the load columns were made
@@ -68,11 +67,6 @@ COLUMN_EVERY = 150
 #: which a derivative at the estimate misses (simulated truth: 95 % ellipsoids held 98.8 % of
 #: the cases with derivatives, 94.8 % with these steps).
 COLUMN_STEP = 1e-3
-#: The chi-square gate on one reading's innovation: the probability that a reading whose noise
-#: and model error are as stated is set aside. Lower than the load estimator's 1e-3 (a model
-#: whose held-out error exceeds its calibration run's must not lose its tracker): 30 mm of bias
-#: against 4 mm of stated error is still chi2 ~ 60, beyond the 3-dof gate of 30.7.
-GATE_PROBABILITY = 1e-6
 #: Unmodelled-load groups, in the order of d: name, size (None: one per cable), unit.
 GROUPS = (('tip_force', 3, 'N'), ('section_moment', 3, 'N m'), ('cable_length', None, 'm'),
           ('base_position', 3, 'm'))
@@ -358,7 +352,7 @@ def _update(robot, shape, sensitivity, prior, readings, stamp):
             noise = noise + (1.0 - a * a) * jac @ np.diag(np.diag(covariance)) @ jac.T
         spread = jac @ covariance @ jac.T + noise
         chi2 = float(innovation @ _solve(spread, innovation))
-        gate = _gate(len(innovation))
+        gate = gates.gate(len(innovation), gates.SENSOR_GATE_PROBABILITY)
         if not chi2 <= gate:
             verdicts[sensor.name] = SensorVerdict(False, chi2, (
                 'innovation chi2 %.1f above the gate %.1f (%.1f mm from the estimate)'
@@ -373,12 +367,6 @@ def _update(robot, shape, sensitivity, prior, readings, stamp):
     mean, covariance = fused(mean, covariance, np.vstack(rows), np.concatenate(residuals),
                              _block_diagonal(noises))
     return dataclasses.replace(prior, mean=mean, covariance=covariance), verdicts
-
-
-@functools.lru_cache(maxsize=8)
-def _gate(dof):
-    """Return the chi-square gate of ``dof`` degrees of freedom (scipy's ppf takes ~100 us)."""
-    return float(chi2_distribution.ppf(1.0 - GATE_PROBABILITY, dof))
 
 
 def _block_diagonal(blocks):
