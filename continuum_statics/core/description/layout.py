@@ -38,6 +38,10 @@ DYNAMIC_STATE = 24
 assert (DYN_POSITION_AT, DYN_ROTATION_AT) == (POSITION_AT, ROTATION_AT)
 #: a node's BDF-alpha history: v_h (3), u_h (3), q_h (3), w_h (3)
 DYN_HISTORY_SIZE = 12
+# first index of each block of a history, and of the v, u, q, w the kernel writes in its place
+DYN_HIST_STRETCH_AT, DYN_HIST_BENDING_AT, DYN_HIST_VELOCITY_AT, DYN_HIST_ANGULAR_AT = 0, 3, 6, 9
+# the kernel loops over n, m and over q, w as six values each
+assert DYN_MOMENT_AT == DYN_FORCE_AT + 3 and DYN_ANGULAR_AT == DYN_VELOCITY_AT + 3
 # the dynamics' rod constants: K_se = diag(GA, GA, EA) (3, N), B_se (3, N s), K_bt =
 # diag(EI, EI, GJ) (3, N m^2), B_bt (3, N m^2 s), rho A (kg/m), rho J (3, kg m), the gravity
 # acceleration (3, m/s^2, global), p(0) (3, m), R(0) row-major (9)

@@ -23,6 +23,10 @@ import numpy as np
 from continuum_statics.core.description.inputs import as_vector
 from continuum_statics.core.description.layout import (
     BENDING,
+    DYN_HIST_ANGULAR_AT,
+    DYN_HIST_BENDING_AT,
+    DYN_HIST_STRETCH_AT,
+    DYN_HIST_VELOCITY_AT,
     DYN_HISTORY_SIZE,
     DYN_MOMENT_AT,
     DYN_PARAMS_SIZE,
@@ -75,21 +79,25 @@ class DynamicState:
         static = np.empty((len(states), STATE_SIZE))
         static[:, POSITION] = states[:, DYN_POSITION_AT:DYN_POSITION_AT + 3]
         static[:, ROTATION] = states[:, DYN_ROTATION_AT:DYN_ROTATION_AT + 9]
-        static[:, STRETCH] = nodes[:, 0:3] - np.array([0.0, 0.0, 1.0])
-        static[:, BENDING] = nodes[:, 3:6]
+        stretch = nodes[:, DYN_HIST_STRETCH_AT:DYN_HIST_STRETCH_AT + 3]
+        bending = nodes[:, DYN_HIST_BENDING_AT:DYN_HIST_BENDING_AT + 3]
+        static[:, STRETCH] = stretch - np.array([0.0, 0.0, 1.0])
+        static[:, BENDING] = bending
         static[:, MOMENT] = states[:, DYN_MOMENT_AT:DYN_MOMENT_AT + 3]
-        return Shape(robot.s_grid, static, nodes[0, 3:6].copy(), self._base_force,
+        return Shape(robot.s_grid, static, bending[0].copy(), self._base_force,
                      robot.node_c, robot.d, fixed_tensions=self.end_tensions)
 
     @functools.cached_property
     def velocity(self):
         """(N, 3) m/s, global."""
-        return np.einsum('nij,nj->ni', self._rotations(), self._nodes[:, 6:9])
+        return np.einsum('nij,nj->ni', self._rotations(),
+                         self._nodes[:, DYN_HIST_VELOCITY_AT:DYN_HIST_VELOCITY_AT + 3])
 
     @functools.cached_property
     def angular_velocity(self):
         """(N, 3) rad/s, global."""
-        return np.einsum('nij,nj->ni', self._rotations(), self._nodes[:, 9:12])
+        return np.einsum('nij,nj->ni', self._rotations(),
+                         self._nodes[:, DYN_HIST_ANGULAR_AT:DYN_HIST_ANGULAR_AT + 3])
 
     @property
     def tip_position(self):

@@ -1,7 +1,7 @@
 """Compiled time step of the Cosserat rod in motion (Till, Aloi & Rucker, IJRR 38(6), 2019).
 
 State along the unstretched arc length s (m), SI units, per node (:mod:`layout`'s
-``DYNAMIC_STATE`` = 24, in this order; the compiled loops index it by number):
+``DYNAMIC_STATE`` = 24, in this order; the compiled loops index it by its ``DYN_*_AT`` names):
   p (3)      position, global                         p_s = R v                       (eq. 7)
   R (9)      orientation, row-major, local -> global  R_s = R hat(u)
   n (3)      internal force, global                   n_s = rho A R (w x q + q_t) - f
@@ -30,15 +30,25 @@ import numba
 import numpy as np
 
 from continuum_statics.core.description.layout import (
+    DYN_ANGULAR_AT,
     DYN_B_BT_AT,
     DYN_B_SE_AT,
     DYN_BASE_POSITION_AT,
     DYN_BASE_ROTATION_AT,
+    DYN_FORCE_AT,
     DYN_GRAVITY_AT,
+    DYN_HIST_ANGULAR_AT,
+    DYN_HIST_BENDING_AT,
+    DYN_HIST_STRETCH_AT,
+    DYN_HIST_VELOCITY_AT,
     DYN_K_BT_AT,
     DYN_K_SE_AT,
     DYN_MASS_AT,
+    DYN_MOMENT_AT,
+    DYN_POSITION_AT,
     DYN_RHO_J_AT,
+    DYN_ROTATION_AT,
+    DYN_VELOCITY_AT,
     DYNAMIC_STATE,
 )
 from continuum_statics.core.rod.tendon_kernel import path_stretch
@@ -53,13 +63,13 @@ def _derivative(y, hist, c0, params, scale, out, values):
 
     ``values`` (12,) receives v, u, q, w there: the next step's history at this point.
     """
-    r00, r01, r02 = y[3], y[4], y[5]
-    r10, r11, r12 = y[6], y[7], y[8]
-    r20, r21, r22 = y[9], y[10], y[11]
-    n0, n1, n2 = y[12], y[13], y[14]
-    m0, m1, m2 = y[15], y[16], y[17]
-    q0, q1, q2 = y[18], y[19], y[20]
-    w0, w1, w2 = y[21], y[22], y[23]
+    r00, r01, r02 = y[DYN_ROTATION_AT], y[DYN_ROTATION_AT + 1], y[DYN_ROTATION_AT + 2]
+    r10, r11, r12 = y[DYN_ROTATION_AT + 3], y[DYN_ROTATION_AT + 4], y[DYN_ROTATION_AT + 5]
+    r20, r21, r22 = y[DYN_ROTATION_AT + 6], y[DYN_ROTATION_AT + 7], y[DYN_ROTATION_AT + 8]
+    n0, n1, n2 = y[DYN_FORCE_AT], y[DYN_FORCE_AT + 1], y[DYN_FORCE_AT + 2]
+    m0, m1, m2 = y[DYN_MOMENT_AT], y[DYN_MOMENT_AT + 1], y[DYN_MOMENT_AT + 2]
+    q0, q1, q2 = y[DYN_VELOCITY_AT], y[DYN_VELOCITY_AT + 1], y[DYN_VELOCITY_AT + 2]
+    w0, w1, w2 = y[DYN_ANGULAR_AT], y[DYN_ANGULAR_AT + 1], y[DYN_ANGULAR_AT + 2]
     # R^T n, R^T m (local)
     ln0 = r00 * n0 + r10 * n1 + r20 * n2
     ln1 = r01 * n0 + r11 * n1 + r21 * n2
@@ -69,62 +79,66 @@ def _derivative(y, hist, c0, params, scale, out, values):
     lm2 = r02 * m0 + r12 * m1 + r22 * m2
     ks, bs = DYN_K_SE_AT, DYN_B_SE_AT
     kb, bb = DYN_K_BT_AT, DYN_B_BT_AT
-    v0 = (ln0 - params[bs] * hist[0]) / (params[ks] + c0 * params[bs])
-    v1 = (ln1 - params[bs + 1] * hist[1]) / (params[ks + 1] + c0 * params[bs + 1])
-    v2 = (ln2 + params[ks + 2] - params[bs + 2] * hist[2]) / (params[ks + 2]
-                                                               + c0 * params[bs + 2])
-    u0 = (lm0 - scale * params[bb] * hist[3]) / (scale * (params[kb] + c0 * params[bb]))
-    u1 = (lm1 - scale * params[bb + 1] * hist[4]) / (scale * (params[kb + 1]
-                                                              + c0 * params[bb + 1]))
-    u2 = (lm2 - scale * params[bb + 2] * hist[5]) / (scale * (params[kb + 2]
-                                                              + c0 * params[bb + 2]))
-    values[0], values[1], values[2], values[3], values[4], values[5] = v0, v1, v2, u0, u1, u2
-    values[6], values[7], values[8] = q0, q1, q2
-    values[9], values[10], values[11] = w0, w1, w2
-    vt0, vt1, vt2 = c0 * v0 + hist[0], c0 * v1 + hist[1], c0 * v2 + hist[2]
-    ut0, ut1, ut2 = c0 * u0 + hist[3], c0 * u1 + hist[4], c0 * u2 + hist[5]
-    qt0, qt1, qt2 = c0 * q0 + hist[6], c0 * q1 + hist[7], c0 * q2 + hist[8]
-    wt0, wt1, wt2 = c0 * w0 + hist[9], c0 * w1 + hist[10], c0 * w2 + hist[11]
+    # the history's blocks, and the same blocks of ``values``
+    hv, hu, hq, hw = (DYN_HIST_STRETCH_AT, DYN_HIST_BENDING_AT, DYN_HIST_VELOCITY_AT,
+                      DYN_HIST_ANGULAR_AT)
+    v0 = (ln0 - params[bs] * hist[hv]) / (params[ks] + c0 * params[bs])
+    v1 = (ln1 - params[bs + 1] * hist[hv + 1]) / (params[ks + 1] + c0 * params[bs + 1])
+    v2 = (ln2 + params[ks + 2] - params[bs + 2] * hist[hv + 2]) / (params[ks + 2]
+                                                                    + c0 * params[bs + 2])
+    u0 = (lm0 - scale * params[bb] * hist[hu]) / (scale * (params[kb] + c0 * params[bb]))
+    u1 = (lm1 - scale * params[bb + 1] * hist[hu + 1]) / (scale * (params[kb + 1]
+                                                                   + c0 * params[bb + 1]))
+    u2 = (lm2 - scale * params[bb + 2] * hist[hu + 2]) / (scale * (params[kb + 2]
+                                                                   + c0 * params[bb + 2]))
+    values[hv], values[hv + 1], values[hv + 2] = v0, v1, v2
+    values[hu], values[hu + 1], values[hu + 2] = u0, u1, u2
+    values[hq], values[hq + 1], values[hq + 2] = q0, q1, q2
+    values[hw], values[hw + 1], values[hw + 2] = w0, w1, w2
+    vt0, vt1, vt2 = c0 * v0 + hist[hv], c0 * v1 + hist[hv + 1], c0 * v2 + hist[hv + 2]
+    ut0, ut1, ut2 = c0 * u0 + hist[hu], c0 * u1 + hist[hu + 1], c0 * u2 + hist[hu + 2]
+    qt0, qt1, qt2 = c0 * q0 + hist[hq], c0 * q1 + hist[hq + 1], c0 * q2 + hist[hq + 2]
+    wt0, wt1, wt2 = c0 * w0 + hist[hw], c0 * w1 + hist[hw + 1], c0 * w2 + hist[hw + 2]
     # p_s = R v
     ps0 = r00 * v0 + r01 * v1 + r02 * v2
     ps1 = r10 * v0 + r11 * v1 + r12 * v2
     ps2 = r20 * v0 + r21 * v1 + r22 * v2
-    out[0], out[1], out[2] = ps0, ps1, ps2
+    out[DYN_POSITION_AT], out[DYN_POSITION_AT + 1], out[DYN_POSITION_AT + 2] = ps0, ps1, ps2
     # R_s = R hat(u): row i of R times hat(u)
-    out[3] = r01 * u2 - r02 * u1
-    out[4] = r02 * u0 - r00 * u2
-    out[5] = r00 * u1 - r01 * u0
-    out[6] = r11 * u2 - r12 * u1
-    out[7] = r12 * u0 - r10 * u2
-    out[8] = r10 * u1 - r11 * u0
-    out[9] = r21 * u2 - r22 * u1
-    out[10] = r22 * u0 - r20 * u2
-    out[11] = r20 * u1 - r21 * u0
+    out[DYN_ROTATION_AT] = r01 * u2 - r02 * u1
+    out[DYN_ROTATION_AT + 1] = r02 * u0 - r00 * u2
+    out[DYN_ROTATION_AT + 2] = r00 * u1 - r01 * u0
+    out[DYN_ROTATION_AT + 3] = r11 * u2 - r12 * u1
+    out[DYN_ROTATION_AT + 4] = r12 * u0 - r10 * u2
+    out[DYN_ROTATION_AT + 5] = r10 * u1 - r11 * u0
+    out[DYN_ROTATION_AT + 6] = r21 * u2 - r22 * u1
+    out[DYN_ROTATION_AT + 7] = r22 * u0 - r20 * u2
+    out[DYN_ROTATION_AT + 8] = r20 * u1 - r21 * u0
     # n_s = rho A R (w x q + q_t) - rho A g
     rho_a = params[DYN_MASS_AT]
     a0 = w1 * q2 - w2 * q1 + qt0
     a1 = w2 * q0 - w0 * q2 + qt1
     a2 = w0 * q1 - w1 * q0 + qt2
     g = DYN_GRAVITY_AT
-    out[12] = rho_a * (r00 * a0 + r01 * a1 + r02 * a2 - params[g])
-    out[13] = rho_a * (r10 * a0 + r11 * a1 + r12 * a2 - params[g + 1])
-    out[14] = rho_a * (r20 * a0 + r21 * a1 + r22 * a2 - params[g + 2])
+    out[DYN_FORCE_AT] = rho_a * (r00 * a0 + r01 * a1 + r02 * a2 - params[g])
+    out[DYN_FORCE_AT + 1] = rho_a * (r10 * a0 + r11 * a1 + r12 * a2 - params[g + 1])
+    out[DYN_FORCE_AT + 2] = rho_a * (r20 * a0 + r21 * a1 + r22 * a2 - params[g + 2])
     # m_s = R (w x rho J w + rho J w_t) - p_s x n
     j0, j1, j2 = params[DYN_RHO_J_AT], params[DYN_RHO_J_AT + 1], params[DYN_RHO_J_AT + 2]
     h0, h1, h2 = j0 * w0, j1 * w1, j2 * w2
     b0 = w1 * h2 - w2 * h1 + j0 * wt0
     b1 = w2 * h0 - w0 * h2 + j1 * wt1
     b2 = w0 * h1 - w1 * h0 + j2 * wt2
-    out[15] = r00 * b0 + r01 * b1 + r02 * b2 - (ps1 * n2 - ps2 * n1)
-    out[16] = r10 * b0 + r11 * b1 + r12 * b2 - (ps2 * n0 - ps0 * n2)
-    out[17] = r20 * b0 + r21 * b1 + r22 * b2 - (ps0 * n1 - ps1 * n0)
+    out[DYN_MOMENT_AT] = r00 * b0 + r01 * b1 + r02 * b2 - (ps1 * n2 - ps2 * n1)
+    out[DYN_MOMENT_AT + 1] = r10 * b0 + r11 * b1 + r12 * b2 - (ps2 * n0 - ps0 * n2)
+    out[DYN_MOMENT_AT + 2] = r20 * b0 + r21 * b1 + r22 * b2 - (ps0 * n1 - ps1 * n0)
     # q_s = v_t - u x q + w x v;  w_s = u_t - u x w
-    out[18] = vt0 - (u1 * q2 - u2 * q1) + (w1 * v2 - w2 * v1)
-    out[19] = vt1 - (u2 * q0 - u0 * q2) + (w2 * v0 - w0 * v2)
-    out[20] = vt2 - (u0 * q1 - u1 * q0) + (w0 * v1 - w1 * v0)
-    out[21] = ut0 - (u1 * w2 - u2 * w1)
-    out[22] = ut1 - (u2 * w0 - u0 * w2)
-    out[23] = ut2 - (u0 * w1 - u1 * w0)
+    out[DYN_VELOCITY_AT] = vt0 - (u1 * q2 - u2 * q1) + (w1 * v2 - w2 * v1)
+    out[DYN_VELOCITY_AT + 1] = vt1 - (u2 * q0 - u0 * q2) + (w2 * v0 - w0 * v2)
+    out[DYN_VELOCITY_AT + 2] = vt2 - (u0 * q1 - u1 * q0) + (w0 * v1 - w1 * v0)
+    out[DYN_ANGULAR_AT] = ut0 - (u1 * w2 - u2 * w1)
+    out[DYN_ANGULAR_AT + 1] = ut1 - (u2 * w0 - u0 * w2)
+    out[DYN_ANGULAR_AT + 2] = ut2 - (u0 * w1 - u1 * w0)
 
 
 @numba.njit(cache=True, nogil=True)
@@ -132,15 +146,17 @@ def _point_loads(y, hist, c0, node, disk_mass, params, tensions, cable_offsets, 
     """Apply the jumps of n and m at ``node``: disk weight and inertia, cables ending there."""
     mass = disk_mass[node]
     if mass > 0.0:  # external force m_d (g - a), a = R (q_t + w x q); n(s+) = n(s-) - it
-        q0, q1, q2 = y[18], y[19], y[20]
-        w0, w1, w2 = y[21], y[22], y[23]
-        a0 = w1 * q2 - w2 * q1 + c0 * q0 + hist[6]
-        a1 = w2 * q0 - w0 * q2 + c0 * q1 + hist[7]
-        a2 = w0 * q1 - w1 * q0 + c0 * q2 + hist[8]
+        q0, q1, q2 = y[DYN_VELOCITY_AT], y[DYN_VELOCITY_AT + 1], y[DYN_VELOCITY_AT + 2]
+        w0, w1, w2 = y[DYN_ANGULAR_AT], y[DYN_ANGULAR_AT + 1], y[DYN_ANGULAR_AT + 2]
+        hq = DYN_HIST_VELOCITY_AT
+        a0 = w1 * q2 - w2 * q1 + c0 * q0 + hist[hq]
+        a1 = w2 * q0 - w0 * q2 + c0 * q1 + hist[hq + 1]
+        a2 = w0 * q1 - w1 * q0 + c0 * q2 + hist[hq + 2]
         g = DYN_GRAVITY_AT
         for i in range(3):
-            acc = y[3 + 3 * i] * a0 + y[4 + 3 * i] * a1 + y[5 + 3 * i] * a2
-            y[12 + i] -= mass * (params[g + i] - acc)
+            row = DYN_ROTATION_AT + 3 * i
+            acc = y[row] * a0 + y[row + 1] * a1 + y[row + 2] * a2
+            y[DYN_FORCE_AT + i] -= mass * (params[g + i] - acc)
     for j in range(cable_end_node.shape[0]):
         t = tensions[j]
         if cable_end_node[j] != node or t == 0.0:
@@ -148,7 +164,8 @@ def _point_loads(y, hist, c0, node, disk_mass, params, tensions, cable_offsets, 
         # t R (e3 x l): e3 x l = (-l1, l0, 0)
         x0, x1 = -t * cable_offsets[j, 1], t * cable_offsets[j, 0]
         for i in range(3):
-            y[15 + i] -= y[3 + 3 * i] * x0 + y[4 + 3 * i] * x1
+            row = DYN_ROTATION_AT + 3 * i
+            y[DYN_MOMENT_AT + i] -= y[row] * x0 + y[row + 1] * x1
 
 
 @numba.njit(cache=True, nogil=True)
@@ -166,8 +183,8 @@ def _segment(model, c0, history, start, k0, k1, tensions, states, left, stages, 
         y[i] = start[i]
     states[k0, :] = y
     if k0 == 0:
-        for i in range(6):
-            left[0, i] = y[12 + i]
+        for i in range(6):  # n, m
+            left[0, i] = y[DYN_FORCE_AT + i]
     for k in range(k0, k1):
         h = s_grid[k + 1] - s_grid[k]
         scale = bending_scale[k]
@@ -184,7 +201,7 @@ def _segment(model, c0, history, start, k0, k1, tensions, states, left, stages, 
         for i in range(DYNAMIC_STATE):
             y[i] += h * _SIXTH * (d1[i] + 2.0 * (d2[i] + d3[i]) + d4[i])
         for i in range(6):
-            left[k + 1, i] = y[12 + i]
+            left[k + 1, i] = y[DYN_FORCE_AT + i]
         _point_loads(y, history[k, 3], c0, k + 1, disk_mass, params, tensions,
                      cable_offsets, cable_end_node)
         states[k + 1, :] = y
@@ -196,12 +213,12 @@ def _start_of(model, x, j, bounds, out):
     if j == 0:  # the base: p, R fixed, q = w = 0; n(0), m(0) unknown
         params = model.params
         for i in range(3):
-            out[i] = params[DYN_BASE_POSITION_AT + i]
+            out[DYN_POSITION_AT + i] = params[DYN_BASE_POSITION_AT + i]
         for i in range(9):
-            out[3 + i] = params[DYN_BASE_ROTATION_AT + i]
+            out[DYN_ROTATION_AT + i] = params[DYN_BASE_ROTATION_AT + i]
         for i in range(6):
-            out[12 + i] = x[i]
-            out[18 + i] = 0.0
+            out[DYN_FORCE_AT + i] = x[i]  # n, m
+            out[DYN_VELOCITY_AT + i] = 0.0  # q, w
     else:
         at = 6 + DYNAMIC_STATE * (j - 1)
         for i in range(DYNAMIC_STATE):
@@ -220,7 +237,7 @@ def _segment_residual(model, j, bounds, x, end, tip, out):
     if j == n_segments - 1:
         at = DYNAMIC_STATE * (n_segments - 1)
         for i in range(6):
-            out[at + i] = (end[12 + i] - tip[i]) / scales[12 + i]
+            out[at + i] = (end[DYN_FORCE_AT + i] - tip[i]) / scales[DYN_FORCE_AT + i]
     else:
         at = DYNAMIC_STATE * j
         start = 6 + DYNAMIC_STATE * j
@@ -355,7 +372,7 @@ def _refresh(model, c0, history, x, cables, tip, residual, jacobian, nominal, sc
         count = 6 if j == 0 else DYNAMIC_STATE
         k0, k1 = bounds[j], bounds[j + 1]
         for c in range(first, first + count):
-            scale = model.scales[12 + c] if j == 0 else model.scales[c - first]
+            scale = model.scales[DYN_FORCE_AT + c] if j == 0 else model.scales[c - first]
             delta = 1e-7 * scale
             for i in range(n_unknowns):
                 trial[i] = x[i]
