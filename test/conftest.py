@@ -6,10 +6,16 @@ never hears another run (or a demo) on the same machine.
 import os
 from pathlib import Path
 import random
+import sys
 
 import pytest
 
 REPO = Path(__file__).resolve().parents[1]
+# A few test modules reuse another layer's fixtures (``from test_run_calibration import V6``):
+# every layer folder is importable, so one folder runs alone (``pytest test/core``) as well.
+sys.path[:0] = [str(folder) for folder in sorted(Path(__file__).parent.iterdir())
+                if folder.is_dir() and folder.name.isidentifier() and folder.name[0] != '_'
+                and not (folder / '__init__.py').exists()]
 
 os.environ['ROS_AUTOMATIC_DISCOVERY_RANGE'] = 'LOCALHOST'
 os.environ.setdefault('ROS_DOMAIN_ID', str(random.randint(10, 99)))

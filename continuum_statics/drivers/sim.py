@@ -205,7 +205,8 @@ class SimulatedCableBackend(CableBackend):
     def _advance(self, now):
         now = float(now)
         if self._rod is not None:  # motors and rod together, at the rod's fixed step
-            self._rod.advance(now, self._motor_step, self._tip_wrench)
+            for _ in range(self._rod.steps_until(now)):
+                self._rod.step(self._motor_step(self._rod.dt), self._tip_wrench)
             return
         if self._time is None:
             self._time = now
@@ -213,10 +214,7 @@ class SimulatedCableBackend(CableBackend):
         if dt <= 0.0:
             return
         self._time = now
-        before = self._lengths
-        self._lengths = self.step(before, self._targets, dt, self.time_constant, self.max_speed)
-        self._lengths = np.clip(self._lengths, self.length_limits[:, 0], self.length_limits[:, 1])
-        self._velocities = (self._lengths - before) / dt
+        self._motor_step(dt)
 
     def _motor_step(self, dt):
         """Move the motors over ``dt`` s; return their lengths (m)."""

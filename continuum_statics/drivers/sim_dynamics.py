@@ -40,31 +40,37 @@ class SimulatedRod:
         self._compute = 0.0  # s of CPU spent stepping
         self._simulated = 0.0
 
-    def advance(self, now, motors, wrench):
-        """Integrate up to ``now`` (s): ``motors(dt)`` steps the motors, returns their lengths.
+    def steps_until(self, now):
+        """Return how many fixed steps bring the rod up to the clock ``now`` (s).
 
-        ``wrench`` (6,) is the hidden tip load (N, N m, base frame).
+        The first call starts the clock. A backlog beyond :data:`MAX_CATCH_UP` is dropped
+        (slower than real time: counted in :attr:`dropped_time`).
         """
         if self.time is None:
             self.time = now
-            return
+            return 0
         behind = now - self.time
         if behind > MAX_CATCH_UP:  # slower than real time: keep up with the clock
             dropped = behind - MAX_CATCH_UP
             self.dropped_time += dropped
             self.time += dropped
+        return max(int((now - self.time) / self.dt + 1e-9), 0)
+
+    def step(self, lengths, wrench):
+        """Advance the rod one ``dt`` with the motors at ``lengths`` (n,) m.
+
+        ``wrench`` (6,) is the hidden tip load (N, N m, base frame). A step that does not
+        converge keeps the last state (counted in :attr:`failed_steps`).
+        """
         began = time.perf_counter()
-        while self.time + self.dt <= now:
-            lengths = motors(self.dt)
-            state = self.dynamics.step(lengths=lengths, tip_force=wrench[:3],
-                                       tip_moment=wrench[3:])
-            if state.converged:
-                self.state = state
-            else:
-                self.failed_steps += 1
-            self.time += self.dt
-            self.steps += 1
-            self._simulated += self.dt
+        state = self.dynamics.step(lengths=lengths, tip_force=wrench[:3], tip_moment=wrench[3:])
+        if state.converged:
+            self.state = state
+        else:
+            self.failed_steps += 1
+        self.time += self.dt
+        self.steps += 1
+        self._simulated += self.dt
         self._compute += time.perf_counter() - began
 
     @property

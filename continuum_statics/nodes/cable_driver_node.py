@@ -54,6 +54,7 @@ from continuum_statics.nodes.node_params import (
     ParamSpec,
     load_robot_file,
 )
+from continuum_statics.nodes.node_runner import RunnerHooks, run_nodes
 from continuum_statics.nodes.parameter_tables import cable_driver_parameters
 from continuum_statics.nodes.qos import COMMAND_QOS
 from continuum_statics.nodes.ros_conversions import (
@@ -67,7 +68,7 @@ from continuum_statics.nodes.ros_topic_backend import lend_topics
 from continuum_statics.nodes.timers import steady_timer
 
 
-class CableDriverNode(LifecycleNode):
+class CableDriverNode(RunnerHooks, LifecycleNode):
     """Cable actuator bridge: commands in, measured cable lengths out; a lifecycle node.
 
     unconfigured -> configure (open the port or bus, read the positions; cable_states flow, the
@@ -351,7 +352,6 @@ class CableDriverNode(LifecycleNode):
 
 def main(args=None):
     """Run the cable_driver node (``ros2 run continuum_statics cable_driver``)."""
-    from continuum_statics.nodes.node_runner import run_nodes
     return run_nodes([CableDriverNode], args)
 
 

@@ -33,6 +33,35 @@ SHUTDOWN_GRACE = 3.0
 RESULT_SEND_TIME = 0.2
 
 
+class RunnerHooks:
+    """What :func:`run_nodes` asks of a node, declared once with its defaults.
+
+    The package's nodes inherit it and override what they use; any other rclpy node runs with
+    these defaults (a single-threaded executor, nothing to count or release).
+    """
+
+    #: The executor the node needs: ``'single'`` or ``'multi'``.
+    EXECUTOR = 'single'
+
+    def on_node_failure(self, text):
+        """Count a callback of this node that raised (``text`` says which) on diagnostics."""
+
+    def release_waiters(self):
+        """At shutdown: end every goal that waits, so that each gets its result."""
+
+    def goals_in_flight(self):
+        """Return how many goals still have a result to send."""
+        return 0
+
+
+_DEFAULT_HOOKS = RunnerHooks()
+
+
+def hooks(node):
+    """Return the :class:`RunnerHooks` of ``node`` (the defaults for a plain rclpy node)."""
+    return node if isinstance(node, RunnerHooks) else _DEFAULT_HOOKS
+
+
 def make_executor(kind, context=None):
     """Return a new executor of ``kind`` ('single' or 'multi')."""
     if kind == 'multi':
@@ -66,7 +95,7 @@ def run_nodes(factories, args=None, context=None):
             print('continuum_statics: cannot start: %s' % error, file=sys.stderr)
             return 1
         for node in nodes:
-            executor = make_executor(getattr(node, 'EXECUTOR', 'single'), context)
+            executor = make_executor(hooks(node).EXECUTOR, context)
             executor.add_node(node)
             executors.append(executor)
             thread = threading.Thread(target=_spin, args=(executor, context, failures,
@@ -111,9 +140,7 @@ def _restart(node, executor, context, failures, restarts, index):
                                   name='spin_' + name, daemon=True)
     print(text, file=sys.stderr)
     node.get_logger().error(text)
-    report = getattr(node, 'on_node_failure', None)  # counted on the node's diagnostics
-    if report is not None:
-        report(text)
+    hooks(node).on_node_failure(text)  # counted on the node's diagnostics
     thread.start()
     return thread
 
@@ -121,12 +148,10 @@ def _restart(node, executor, context, failures, restarts, index):
 def _release_goals(nodes, threads):
     """End every active goal and let the executors send their results (shutdown)."""
     for node in nodes:
-        release = getattr(node, 'release_waiters', None)
-        if release is not None:
-            release()
+        hooks(node).release_waiters()
     deadline = time.monotonic() + SHUTDOWN_GRACE
     while time.monotonic() < deadline and any(
-            getattr(node, 'goals_in_flight', lambda: 0)() for node, thread in zip(nodes, threads)
+            hooks(node).goals_in_flight() for node, thread in zip(nodes, threads)
             if thread.is_alive()):
         time.sleep(0.01)
     time.sleep(RESULT_SEND_TIME)

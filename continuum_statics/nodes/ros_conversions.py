@@ -11,7 +11,7 @@ from geometry_msgs.msg import PoseStamped
 import numpy as np
 from sensor_msgs.msg import JointState
 
-from continuum_statics.core.rod.rotations import quaternion_direction
+from continuum_statics.core.rod.rotations import quaternion_direction, quaternion_to_rotation
 
 #: Quaternion of the identity rotation, [x, y, z, w].
 IDENTITY_QUATERNION = (0.0, 0.0, 0.0, 1.0)
@@ -169,6 +169,33 @@ def base_frame_pose(msg, base_frame_id, what, hint=''):
         raise ValueError('non-finite position')
     q = msg.pose.orientation
     return position, np.array([q.x, q.y, q.z, q.w]), stamp_ns(msg.header.stamp)
+
+
+def tracked_pose(msg, base_frame_id, use_rotation=False, hint=''):
+    """Return (position (3,) m, rotation (3, 3) or None, stamp ns) of a tracker's PoseStamped.
+
+    The one parser of a tracked pose: statics' sensors (``sensors/<name>``,
+    ``tip_pose_measured``), and the tracker tip_controller and tip_load_estimator read from
+    statics' accepted readings, so every node takes and refuses the same messages. An empty
+    frame id is the base frame; the rotation is read when ``use_rotation`` and the quaternion is
+    a unit one (else None).
+
+    :param hint: appended to the frame error (what the user should do)
+    :raises ValueError: another frame than the base frame, or a non-finite position
+    """
+    frame = msg.header.frame_id
+    if frame and frame != base_frame_id:
+        raise ValueError('frame %r is not the base frame %r%s' % (frame, base_frame_id, hint))
+    position = pose_position(msg.pose)
+    if not np.all(np.isfinite(position)):
+        raise ValueError('a reading that is not finite: position %s' % position)
+    rotation = None
+    if use_rotation:
+        q = msg.pose.orientation
+        quaternion = np.array([q.x, q.y, q.z, q.w])
+        if np.all(np.isfinite(quaternion)) and abs(np.linalg.norm(quaternion) - 1.0) < 1e-3:
+            rotation = quaternion_to_rotation(quaternion)
+    return position, rotation, stamp_ns(msg.header.stamp)
 
 
 def twist_vectors(msg, base_frame_id):

@@ -24,8 +24,8 @@ from geometry_msgs.msg import Pose, PoseStamped, PoseWithCovarianceStamped
 import numpy as np
 
 from continuum_statics.control.sensor_readings import SensorInbox
-from continuum_statics.core.rod.rotations import quaternion_to_rotation
 from continuum_statics.nodes.qos import LATCHED_QOS, LATEST_SENSOR_QOS
+from continuum_statics.nodes.ros_conversions import tracked_pose
 
 
 class SensorTopics:
@@ -62,19 +62,13 @@ class SensorTopics:
     def _reader(self, sensor):
         def on_reading(msg):
             now = time.monotonic()
-            frame = msg.header.frame_id
-            if frame and frame != self._base:
-                self.inbox.reject(sensor.name, 'frame %r is not the base frame %r (register '
-                                               'the sensor first)' % (frame, self._base))
+            try:
+                position, rotation, stamp = tracked_pose(
+                    msg, self._base, sensor.kind == 'pose', ' (register the sensor first)')
+            except ValueError as error:
+                self.inbox.reject(sensor.name, str(error))
                 return
-            p, q = msg.pose.position, msg.pose.orientation
-            rotation = None
-            quaternion = np.array([q.x, q.y, q.z, q.w])
-            if sensor.kind == 'pose' and np.all(np.isfinite(quaternion)) and abs(
-                    np.linalg.norm(quaternion) - 1.0) < 1e-3:
-                rotation = quaternion_to_rotation(quaternion)
-            stamp = msg.header.stamp.sec + 1e-9 * msg.header.stamp.nanosec
-            self.inbox.put(sensor.name, (p.x, p.y, p.z), rotation, stamp or None, now)
+            self.inbox.put(sensor.name, position, rotation, stamp * 1e-9 or None, now)
             self._messages[sensor.name] = msg
         return on_reading
 
@@ -123,7 +117,7 @@ class SensorTopics:
 
     def judged(self, estimate):
         """Count the verdicts of the readings the estimate was given; pass on the accepted."""
-        verdicts = getattr(estimate, 'sensors', None)
+        verdicts = None if estimate is None else estimate.sensors
         self.inbox.judged(verdicts)
         for name, verdict in (verdicts or {}).items():
             if verdict.used and name in self._messages:
@@ -144,7 +138,7 @@ def tracker_topic(robot):
 
 def tip_sigma_mm(estimate):
     """Return the fused tip position's standard deviation (mm, largest axis), or nan."""
-    tip = getattr(estimate, 'tip_covariance', None)
+    tip = None if estimate is None else estimate.tip_covariance
     if tip is None:
         return math.nan
     return 1e3 * math.sqrt(max(float(np.max(np.linalg.eigvalsh(tip[:3, :3]))), 0.0))

@@ -72,6 +72,7 @@ from continuum_statics.nodes.node_params import (
     tip_wrench_limits,
     tip_wrench_topic,
 )
+from continuum_statics.nodes.node_runner import RunnerHooks, run_nodes
 from continuum_statics.nodes.parameter_tables import statics_parameters
 from continuum_statics.nodes.pose_encoder import PoseSequenceEncoder
 from continuum_statics.nodes.qos import LATCHED_QOS, LATEST_SENSOR_QOS, measurement_queue_qos
@@ -85,7 +86,7 @@ from continuum_statics.nodes.timers import steady_timer
 NS = 1_000_000_000
 
 
-class StaticsNode(Node):
+class StaticsNode(RunnerHooks, Node):
     """Shape estimation at the measurement rate: a thin layer over ``Robot.estimate_shape``."""
 
     EXECUTOR = 'single'
@@ -345,7 +346,6 @@ class StaticsNode(Node):
 
 def main(args=None):
     """Run the statics node (``ros2 run continuum_statics statics``)."""
-    from continuum_statics.nodes.node_runner import run_nodes
     return run_nodes([StaticsNode], args)
 
 

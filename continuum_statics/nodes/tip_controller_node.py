@@ -62,6 +62,7 @@ from continuum_statics.nodes.node_params import (
     tip_wrench_limits,
     tip_wrench_topic,
 )
+from continuum_statics.nodes.node_runner import RunnerHooks, run_nodes
 from continuum_statics.nodes.parameter_tables import tip_controller_parameters
 from continuum_statics.nodes.qos import COMMAND_QOS, LATCHED_QOS, LATEST_SENSOR_QOS
 from continuum_statics.nodes.ros_conversions import (
@@ -73,6 +74,7 @@ from continuum_statics.nodes.ros_conversions import (
     set_pose,
     stamp_ns,
     tip_load,
+    tracked_pose,
     twist_vectors,
 )
 from continuum_statics.nodes.sensor_topics import tracker_topic
@@ -85,7 +87,7 @@ WORKSPACE_SAMPLES = 400
 WAIT_PERIOD = 0.01
 
 
-class TipControllerNode(Node):
+class TipControllerNode(RunnerHooks, Node):
     """Tip-goal service and streaming goals, closed loop on ``tip_pose``.
 
     Every decision is :attr:`control`'s (:class:`~continuum_statics.control.tip_control.
@@ -194,9 +196,8 @@ class TipControllerNode(Node):
 
     def _on_tip_pose_measured(self, msg):
         try:
-            position, _, stamp = base_frame_pose(
-                msg, self.base_frame_id, 'tip_pose_measured',
-                ' (register the tracker with calibrate)')
+            position, _, stamp = tracked_pose(msg, self.base_frame_id, hint=' (register the '
+                                              'tracker with calibrate)')
         except ValueError as error:
             self.control.reject('tip_pose_measured', error)
             return
@@ -343,7 +344,6 @@ class TipControllerNode(Node):
 
 def main(args=None):
     """Run the tip_controller node (``ros2 run continuum_statics tip_controller``)."""
-    from continuum_statics.nodes.node_runner import run_nodes
     return run_nodes([TipControllerNode], args)
 
 

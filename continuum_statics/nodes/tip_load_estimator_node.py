@@ -29,7 +29,6 @@ import sys
 import time
 
 from geometry_msgs.msg import PoseStamped, WrenchStamped
-import numpy as np
 from rclpy.node import Node
 from sensor_msgs.msg import JointState
 from std_msgs.msg import Bool
@@ -38,22 +37,21 @@ from continuum_statics.control.contact import force_along
 from continuum_statics.control.load_watch import Inputs, LoadWatch, Verdict
 from continuum_statics.control.stamps import StampRule
 from continuum_statics.core.estimation.load_estimation import load_model, plausible_tip_load
-from continuum_statics.core.rod.rotations import quaternion_to_rotation
 from continuum_statics.core.warmup import warm_up
 from continuum_statics.nodes import diagnostics_util as diag
 from continuum_statics.nodes.joint_state_parser import CableStatesReader
 from continuum_statics.nodes.node_params import ParameterTable, load_robot_file
+from continuum_statics.nodes.node_runner import RunnerHooks, run_nodes
 from continuum_statics.nodes.parameter_tables import tip_load_estimator_parameters
 from continuum_statics.nodes.qos import LATCHED_QOS, LATEST_SENSOR_QOS
-from continuum_statics.nodes.ros_conversions import check_frame, ns_to_stamp
-from continuum_statics.nodes.ros_conversions import stamp_ns as stamp_ns_of
+from continuum_statics.nodes.ros_conversions import ns_to_stamp, tracked_pose
 from continuum_statics.nodes.sensor_topics import tracker_topic
 from continuum_statics.nodes.timers import steady_timer
 
 NS = 1_000_000_000
 
 
-class TipLoadEstimatorNode(Node):
+class TipLoadEstimatorNode(RunnerHooks, Node):
     """Intrinsic force sensing at up to ``rate`` Hz: a thin layer over ``estimate_tip_wrench``."""
 
     EXECUTOR = 'single'
@@ -156,19 +154,12 @@ class TipLoadEstimatorNode(Node):
 
     def _on_tip_pose(self, msg):
         try:
-            check_frame(msg.header.frame_id, self.base_frame_id, 'tip_pose_measured')
-            p, q = msg.pose.position, msg.pose.orientation
-            position = np.array([p.x, p.y, p.z])
-            quaternion = np.array([q.x, q.y, q.z, q.w])
-            if not (np.isfinite(position).all() and np.isfinite(quaternion).all()):
-                raise ValueError('non-finite pose')
+            position, rotation, stamp = tracked_pose(msg, self.base_frame_id,
+                                                     self._params['use_tip_orientation'])
         except ValueError as error:
             self._problems.reject('tip_pose_measured', error)
             return
-        rotation = None
-        if self._params['use_tip_orientation'] and abs(np.linalg.norm(quaternion) - 1.0) < 1e-3:
-            rotation = quaternion_to_rotation(quaternion)
-        _, taken = self._judged('tip_pose_measured', stamp_ns_of(msg.header.stamp))
+        _, taken = self._judged('tip_pose_measured', stamp)
         self._inputs = dataclasses.replace(self._inputs, tip_position=position,
                                            tip_rotation=rotation, tip_received=taken)
         self._fresh = True
@@ -283,7 +274,6 @@ class TipLoadEstimatorNode(Node):
 
 def main(args=None):
     """Run the tip_load_estimator node (``ros2 run continuum_statics tip_load_estimator``)."""
-    from continuum_statics.nodes.node_runner import run_nodes
     return run_nodes([TipLoadEstimatorNode], args)
 
 
