@@ -12,6 +12,7 @@ fused estimate, judge a sensor by this one verdict.
 """
 from dataclasses import dataclass, field
 import math
+import threading
 
 import numpy as np
 
@@ -45,6 +46,9 @@ class SensorInbox:
         self.timeout = float(timeout)
         self.records = {name: SensorRecord() for name in names}
         self._unread = {}
+        # readings arrive on the subscriptions' thread, the estimate takes them on the intake's:
+        # handed over under this lock, never iterated while another thread adds
+        self._lock = threading.Lock()
 
     def put(self, name, position, rotation, stamp, now):
         """Keep a reading (base frame, m; stamp s) that arrived at ``now`` (monotonic s)."""
@@ -57,7 +61,8 @@ class SensorInbox:
         record.received += 1
         record.last_arrival = now
         record.arrivals = [t for t in record.arrivals if now - t < 1.0] + [now]
-        self._unread[name] = (SensorReading(position, rotation, stamp), now)
+        with self._lock:
+            self._unread[name] = (SensorReading(position, rotation, stamp), now)
 
     def reject(self, name, reason):
         """Count a reading that could not be used at all (its reason goes on diagnostics)."""
@@ -68,15 +73,14 @@ class SensorInbox:
 
     def take(self, now):
         """Return {name: SensorReading} of the fresh unread readings (then read), or None."""
-        if not self._unread:
-            return None
+        with self._lock:
+            unread, self._unread = self._unread, {}
         fresh = {}
-        for name, (reading, arrival) in self._unread.items():
+        for name, (reading, arrival) in unread.items():
             if now - arrival <= self.timeout:
                 fresh[name] = reading
             else:
                 self.records[name].stale += 1
-        self._unread = {}
         return fresh or None
 
     def judged(self, verdicts):

@@ -8,9 +8,11 @@ the thresholds: published as a shape, published as a best fit (warn), or dropped
 """
 from dataclasses import dataclass
 import math
+import time
 
 import numpy as np
 
+from continuum_statics.control.sensor_readings import SensorInbox
 from continuum_statics.core.estimation.shape_estimation import Tracking
 from continuum_statics.core.rod.tracking import TRACK_RUNS
 from continuum_statics.core.statics.length_statics import MOTION_THRESHOLD
@@ -77,8 +79,13 @@ class TrackResult:
 class ShapeTracker:
     """The estimate of one robot, warm-started from the last published one."""
 
-    def __init__(self, robot, cable_names, max_iterations=0, max_model_runs=TRACK_RUNS):
+    def __init__(self, robot, cable_names, max_iterations=0, max_model_runs=TRACK_RUNS,
+                 sensor_timeout=0.5, clock=time.monotonic):
         self.robot = robot
+        #: the robot file's sensors' readings, fused by :meth:`update` (None without sensors)
+        self.inbox = SensorInbox([sensor.name for sensor in robot.sensors], sensor_timeout) \
+            if robot.sensors else None
+        self._clock = clock
         self.cable_names = cable_names
         limits = np.asarray(robot.cable_length_limits, dtype=float).reshape(-1, 2)
         self.low, self.high = limits[:, 0].copy(), limits[:, 1].copy()
@@ -105,9 +112,19 @@ class ShapeTracker:
         :param tensions: (n_cables,) measured tensions, N, or None
         :param load: (6,) tip wrench (N, N m), base frame
         :param thresholds: :class:`Thresholds`; ``tension_limit``: largest plausible tension, N
-        :param sensors: {name: SensorReading} to fuse (robot files with sensors), or None
+        :param sensors: {name: SensorReading} to fuse, or None: the fresh readings of
+            :attr:`inbox`, whose verdicts it then counts
         :param stamp: the measurement's stamp, s (the unmodelled loads' decay)
         """
+        inbox = self.inbox if sensors is None else None
+        if inbox is not None:
+            sensors = inbox.take(self._clock())
+        result = self._update(lengths, tensions, load, thresholds, tension_limit, sensors, stamp)
+        if inbox is not None and result.estimate is not None:
+            inbox.judged(result.estimate.sensors)
+        return result
+
+    def _update(self, lengths, tensions, load, thresholds, tension_limit, sensors, stamp):
         names = self.cable_names
         outside = np.flatnonzero((lengths < self.low - thresholds.margin)
                                  | (lengths > self.high + thresholds.margin))

@@ -34,6 +34,18 @@ def load_home_file(path, backend_name, zero_option, cable_names):
     return zeros
 
 
+def home_option(path, backend_cls, cable_names):
+    """Return {the backend's zero option: the home file's zeros}, or {} when there are none.
+
+    Empty for no ``path``, a backend without homing, a robot without cables, or no file yet.
+    """
+    option = backend_cls.zero_option
+    if not (path and option and cable_names):
+        return {}
+    zeros = load_home_file(path, backend_cls.name, option, cable_names)
+    return {} if zeros is None else {option: zeros}
+
+
 def write_home_file(path, backend_name, zero_option, cable_names, zeros):
     """Write the home positions atomically (a crash never leaves half a file)."""
     path = Path(path).expanduser()

@@ -45,13 +45,13 @@ from continuum_statics.control.command_gate import CommandGate
 from continuum_statics.control.health import DriverHealth
 from continuum_statics.core.rod.rotations import rotation_to_quaternion
 from continuum_statics.drivers import backend_class
-from continuum_statics.drivers.home_file import load_home_file, write_home_file
+from continuum_statics.drivers.home_file import home_option, write_home_file
 from continuum_statics.nodes import diagnostics_util as diag
 from continuum_statics.nodes.dedicated_intake import PeriodicThread
 from continuum_statics.nodes.joint_state_parser import parse_joint_state
 from continuum_statics.nodes.node_params import (
     ParameterTable,
-    ParamSpec,
+    backend_options,
     load_robot_file,
 )
 from continuum_statics.nodes.node_runner import RunnerHooks, run_nodes
@@ -86,23 +86,14 @@ class CableDriverNode(RunnerHooks, LifecycleNode):
         self._params = ParameterTable(self, specs)
         self.robot = load_robot_file(self._params['robot_file'])
         self._backend_cls = backend_class(self._params['backend'])
-        prefix = self._backend_cls.name + '.'
-        option_specs = [ParamSpec(prefix + o.name, o.default, o.description, o.low, o.high,
-                                  o.read_only) for o in self._backend_cls.options_spec]
-        # Declared after the backend is known; one table per group keeps validation simple.
-        self._options = ParameterTable(self, option_specs)
-        options = {spec.name[len(prefix):]: self._options[spec.name] for spec in option_specs}
+        self._options, options = backend_options(self, self._backend_cls)  # once it is known
         self.cable_names = tuple(self.robot.cable_names)
         self._limits = np.asarray(self.robot.cable_length_limits, dtype=float).reshape(-1, 2)
         self._home_file = self._params['home_file']
-        zero_option = self._backend_cls.zero_option
-        if self._home_file and zero_option and self.cable_names:
-            zeros = load_home_file(self._home_file, self._backend_cls.name, zero_option,
-                                   self.cable_names)
-            if zeros is not None:
-                options[zero_option] = zeros
-                self.get_logger().info('home positions from %s: %s = %s' % (
-                    self._home_file, zero_option, zeros))
+        home = home_option(self._home_file, self._backend_cls, self.cable_names)
+        if home:
+            options.update(home)
+            self.get_logger().info('home positions from %s: %s' % (self._home_file, home))
 
         self.health = DriverHealth(self._backend_cls.name, self._warn, bool(self.cable_names))
         self._problems = self.health.problems

@@ -4,6 +4,7 @@ import numpy as np
 from std_msgs.msg import ColorRGBA
 from visualization_msgs.msg import Marker, MarkerArray
 
+from continuum_statics.core.statics.workspace import reachable_tips
 from continuum_statics.nodes.ros_conversions import set_pose
 
 #: Sentinels of :meth:`BackboneMarkers.encode`'s template: the k-th double is the bit pattern
@@ -221,3 +222,17 @@ def workspace_markers(frame_id, tips, diameter=0.004):
     marker.color = _color((0.6, 0.6, 0.6, 0.35))
     _set_points(marker, np.reshape(tips, (-1, 3)))
     return MarkerArray(markers=[marker])
+
+
+def publish_workspace(node, robot, samples, qos):
+    """Publish ``samples`` reachable tips of ``robot`` on ``workspace_markers`` (latched ``qos``).
+
+    Nothing for a robot without cables (it reaches nothing). Returns the publisher or None.
+    """
+    if not robot.cable_names:
+        return None
+    publisher = node.create_publisher(MarkerArray, 'workspace_markers', qos)
+    publisher.publish(workspace_markers(robot.base_frame_id,
+                                        reachable_tips(robot, samples, seed=0)))
+    return publisher
+

@@ -162,3 +162,15 @@ def tip_wrench_limits(robot, params):
 def tip_wrench_topic(params):
     """Return the topic a node takes its tip load from (``tip_wrench_source``)."""
     return 'tip_wrench_estimate' if params['tip_wrench_source'] == 'estimate' else 'tip_wrench'
+
+
+def backend_options(node, backend_cls):
+    """Declare a backend's options as the parameters ``<backend>.<option>``.
+
+    :returns: (the :class:`ParameterTable` of them, {option: value} for the backend)
+    """
+    prefix = backend_cls.name + '.'
+    specs = [ParamSpec(prefix + o.name, o.default, o.description, o.low, o.high, o.read_only)
+             for o in backend_cls.options_spec]
+    table = ParameterTable(node, specs)  # a table of its own: validated with the backend's
+    return table, {spec.name[len(prefix):]: table[spec.name] for spec in specs}

@@ -5,7 +5,7 @@ In: ``sensors/<name>`` (geometry_msgs/PoseStamped) for each sensor of the robot 
 reads the pose's position (its orientation is ignored); a pose sensor uses the orientation when
 its quaternion is a unit one. Readings must be in the robot's base frame (an empty frame id is
 taken as it): register a tracker's frame before publishing (doc/state_estimation.md). Readings
-go to a :class:`~continuum_statics.control.sensor_readings.SensorInbox`.
+go to the shape tracker's :class:`~continuum_statics.control.sensor_readings.SensorInbox`.
 
 Out: ``sensors/<name>/accepted`` (PoseStamped), each reading the estimator used, as it came:
 statics judges every sensor once, and tip_controller and tip_load_estimator read the tip
@@ -23,7 +23,7 @@ import time
 from geometry_msgs.msg import Pose, PoseStamped, PoseWithCovarianceStamped
 import numpy as np
 
-from continuum_statics.control.sensor_readings import SensorInbox
+from continuum_statics.control.health import OK, WARN
 from continuum_statics.nodes.qos import LATCHED_QOS, LATEST_SENSOR_QOS
 from continuum_statics.nodes.ros_conversions import tracked_pose
 
@@ -31,13 +31,13 @@ from continuum_statics.nodes.ros_conversions import tracked_pose
 class SensorTopics:
     """Subscriptions of a robot's sensors and publishers of the fused estimate's covariance."""
 
-    def __init__(self, node, robot, timeout, rate=0.0):
+    def __init__(self, node, robot, inbox, rate=0.0):
         self.robot = robot
         # the covariance messages are built in Python (~0.15 ms with the backbone's): at most
         # ``rate`` Hz, not at the encoders' 1 kHz (0: with every estimate)
         self._period = 1.0 / rate if rate > 0.0 else 0.0
         self._last_published = -math.inf
-        self.inbox = SensorInbox([sensor.name for sensor in robot.sensors], timeout)
+        self.inbox = inbox  # the shape tracker's: it fuses what arrives here
         self._base = robot.base_frame_id
         self._messages = {}  # the newest message of each sensor, republished once accepted
         self._accepted = {sensor.name: node.create_publisher(
@@ -72,10 +72,6 @@ class SensorTopics:
             self._messages[sensor.name] = msg
         return on_reading
 
-    def take(self):
-        """Return the readings for this estimate ({name: SensorReading}) or None."""
-        return self.inbox.take(time.monotonic()) if self.robot.sensors else None
-
     def publish(self, estimate, header, points, quaternions, s_samples):
         """Publish the covariance outputs of a published fused ``estimate``.
 
@@ -108,17 +104,26 @@ class SensorTopics:
         self._backbone_pub.publish(backbone)
 
     def values(self):
-        """Diagnostic values of every sensor, and the fused estimate's tip sigma."""
-        return self.inbox.values(time.monotonic())
+        """Diagnostic values of every sensor."""
+        return {} if self.inbox is None else self.inbox.values(time.monotonic())
 
     def problems(self):
         """WARN text of the sensors (set aside, silent), '' when all is well."""
-        return self.inbox.problems(time.monotonic())
+        return '' if self.inbox is None else self.inbox.problems(time.monotonic())
 
-    def judged(self, estimate):
-        """Count the verdicts of the readings the estimate was given; pass on the accepted."""
+    def diagnose(self, level, message, values, tip_sigma):
+        """Add every sensor's values and ``tip_sigma`` (mm) to ``values``; return the status.
+
+        (level, message) as given, or WARN naming a sensor set aside or silent when it was OK.
+        """
+        values.update(self.values())
+        values['tip_sigma_mm'] = tip_sigma
+        note = self.problems()
+        return (WARN, note) if note and level == OK else (level, message)
+
+    def pass_on(self, estimate):
+        """Republish on ``sensors/<name>/accepted`` each reading the estimate used."""
         verdicts = None if estimate is None else estimate.sensors
-        self.inbox.judged(verdicts)
         for name, verdict in (verdicts or {}).items():
             if verdict.used and name in self._messages:
                 self._accepted[name].publish(self._messages[name])

@@ -56,7 +56,7 @@ from rclpy.node import Node
 from sensor_msgs.msg import JointState
 from std_msgs.msg import Header
 
-from continuum_statics.control.health import OK, WARN, StaticsHealth, load_values
+from continuum_statics.control.health import StaticsHealth, load_values
 from continuum_statics.control.records import TipLoad, current_load
 from continuum_statics.control.shape_tracking import ShapeTracker, Thresholds, passive_shape
 from continuum_statics.control.stamps import StampRule
@@ -104,7 +104,8 @@ class StaticsNode(RunnerHooks, Node):
         self.cable_names = tuple(self.robot.cable_names)
         self._passive = not self.cable_names
         self._tracker = ShapeTracker(self.robot, self.cable_names, self._params['max_iterations'],
-                                     self._params['max_model_runs'])
+                                     self._params['max_model_runs'],
+                                     self._params['sensor_timeout'])
         self.base_frame_id = self.robot.base_frame_id
 
         # Hot path: the name index of the last good message is kept; no array allocated.
@@ -136,7 +137,7 @@ class StaticsNode(RunnerHooks, Node):
         self._markers = ShapeMarkers(self, lambda: self._params['tube_diameter'],
                                      self._problems.reject)
         # before the intake starts: its thread reads the sensors from the first message on
-        self._sensors = (SensorTopics(self, self.robot, self._params['sensor_timeout'],
+        self._sensors = (SensorTopics(self, self.robot, self._tracker.inbox,
                                       self._params['covariance_rate'])
                          if self.robot.sensors or self.robot.model_uncertainty else None)
         self._intake = make_intake(self, self._params['dedicated_intake_thread'])
@@ -211,13 +212,12 @@ class StaticsNode(RunnerHooks, Node):
         tensions = None
         if self._params['use_measured_tensions']:
             tensions, _ = self._cable_states.tensions(view, self._tensions)  # else unused
-        readings = None if self._sensors is None else self._sensors.take()
         result = self._tracker.update(lengths, tensions,
                                       self._current_tip_load(time.monotonic()),
-                                      self._thresholds(), self._tension_limit(), readings,
-                                      view.sec + 1e-9 * view.nanosec)
-        if self._sensors is not None and result.estimate is not None:
-            self._sensors.judged(result.estimate)
+                                      self._thresholds(), self._tension_limit(),
+                                      stamp=view.sec + 1e-9 * view.nanosec)
+        if self._sensors is not None:
+            self._sensors.pass_on(result.estimate)
         if result.load_problem:
             self._problems.reject('tip_wrench', result.load_problem)
             self._load = None
@@ -325,11 +325,7 @@ class StaticsNode(RunnerHooks, Node):
         if self._tip_position is not None:
             values['tip_position_m'] = '%.5f %.5f %.5f' % tuple(self._tip_position)
         if self._sensors is not None:
-            values.update(self._sensors.values())
-            values['tip_sigma_mm'] = self._tip_sigma
-            note = self._sensors.problems()
-            if note and level == OK:
-                level, message = WARN, note
+            level, message = self._sensors.diagnose(level, message, values, self._tip_sigma)
         self._diagnostics.publish(diag.diagnostic_array(
             self.get_clock().now().to_msg(), self.get_fully_qualified_name().lstrip('/'),
             self.robot.name, level, message, values))

@@ -43,18 +43,16 @@ from rclpy.callback_groups import MutuallyExclusiveCallbackGroup, ReentrantCallb
 from rclpy.node import Node
 from sensor_msgs.msg import JointState
 from std_msgs.msg import Bool, Header
-from visualization_msgs.msg import MarkerArray
 
 from continuum_statics.control.health import ControllerHealth
 from continuum_statics.control.stamps import StampRule
 from continuum_statics.control.tip_control import TipControl
 from continuum_statics.core.rod.rotations import quaternion_to_rotation
-from continuum_statics.core.statics.workspace import reachable_tips
 from continuum_statics.core.warmup import warm_up
 from continuum_statics.nodes import diagnostics_util as diag
 from continuum_statics.nodes.dedicated_intake import make_intake
 from continuum_statics.nodes.joint_state_parser import CableStatesReader, header_stamp_ns
-from continuum_statics.nodes.markers import workspace_markers
+from continuum_statics.nodes.markers import publish_workspace
 from continuum_statics.nodes.move_tip_action import MoveTipServer, answer_plan, load_interface
 from continuum_statics.nodes.node_params import (
     ParameterTable,
@@ -85,6 +83,8 @@ from continuum_statics.nodes.waits import InFlight, Waits
 WORKSPACE_SAMPLES = 400
 #: How often waiting goals check their condition (fresh state, the goal's end), s.
 WAIT_PERIOD = 0.01
+#: What to do about a tracker in another frame.
+TRACKER_HINT = ' (register the tracker with calibrate)'
 
 
 class TipControllerNode(RunnerHooks, Node):
@@ -125,7 +125,6 @@ class TipControllerNode(RunnerHooks, Node):
         self._intake = make_intake(self, self._params['dedicated_intake_thread'],
                                    'tip_controller_intake')
         self._intake.add(PoseStamped, 'tip_pose', self._on_tip_pose, LATCHED_QOS)
-        # an external tracker (motion capture, EM) registered to the base by calibrate
         self._intake.add(PoseStamped, tracker_topic(self.robot), self._on_tip_pose_measured,
                          LATEST_SENSOR_QOS)
         # Kept as bytes: only the backbone that answers a goal is ever decoded.
@@ -146,10 +145,7 @@ class TipControllerNode(RunnerHooks, Node):
         # RViz's Publish Point tool: a click on the workspace markers is a 3-D tip goal
         self.create_subscription(PointStamped, 'tip_goal_point', self._on_goal_point,
                                  COMMAND_QOS, callback_group=self.goal_group)
-        if self.cable_names:
-            workspace = self.create_publisher(MarkerArray, 'workspace_markers', LATCHED_QOS)
-            workspace.publish(workspace_markers(
-                self.base_frame_id, reachable_tips(self.robot, WORKSPACE_SAMPLES, seed=0)))
+        publish_workspace(self, self.robot, WORKSPACE_SAMPLES, LATCHED_QOS)
         # every goal taken, from any source, for recordings and plots (latched)
         self._active_goal_pub = self.create_publisher(PoseStamped, 'tip_goal_active',
                                                       LATCHED_QOS)
@@ -195,9 +191,8 @@ class TipControllerNode(RunnerHooks, Node):
         self.control.on_tip_pose(position, quaternion_to_rotation(quaternion), stamp)
 
     def _on_tip_pose_measured(self, msg):
-        try:
-            position, _, stamp = tracked_pose(msg, self.base_frame_id, hint=' (register the '
-                                              'tracker with calibrate)')
+        try:  # an external tracker (motion capture, EM) registered to the base by calibrate
+            position, _, stamp = tracked_pose(msg, self.base_frame_id, hint=TRACKER_HINT)
         except ValueError as error:
             self.control.reject('tip_pose_measured', error)
             return

@@ -219,3 +219,10 @@ def test_the_checker_sees_each_kind_of_violation(tmp_path):
         assert floor_back_edges() == ['core.rod.kernel imports core.statics (line 1)']
     finally:
         PACKAGE = saved
+
+
+def test_every_node_module_stays_thin():
+    # a node parses, calls its control object and publishes (STYLE.md): at most 350 lines
+    long = {path.name: n for path in (PACKAGE / 'nodes').glob('*_node.py')
+            if (n := len(path.read_text().splitlines())) > 350}
+    assert not long, long
