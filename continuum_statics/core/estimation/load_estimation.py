@@ -37,7 +37,7 @@ is a seen direction whose standard deviation exceeds :data:`POORLY_SEEN` of the 
 warm-started from the nominal solve.
 """
 import dataclasses
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 import math
 
 import numpy as np
@@ -501,111 +501,181 @@ def _start(previous, load):
     return np.linalg.lstsq(load.basis, previous.wrench, rcond=None)[0]
 
 
+@dataclass(eq=False)
+class _Fit:
+    """One estimate's state, handed from phase to phase of :func:`_estimate`."""
+
+    model: object  # the measurements and the forward solves (:class:`_Model`)
+    load: object  # the load model (:class:`LoadModel`): w = B p, prior scales of p
+    p: np.ndarray  # the load parameters
+    predicted: np.ndarray = None  # the measurements the model predicts at p
+    result: object = None  # the forward solve at p (a warm start of the next)
+    shape: object = None
+    weights: object = None  # :class:`_Weights`
+    fresh: bool = False  # the load Jacobian is this estimate's own (not the previous one's)
+    jacobian: np.ndarray = None  # whitened d residual / d p
+    seen: np.ndarray = None  # an orthonormal basis of the directions of p the data see
+    damping: float = COLD_DAMPING
+    converged: bool = False
+    iterations: int = 0
+    failure: str = ''  # why the last trial step found no equilibrium
+    notes: list = field(default_factory=list)
+
+    def evaluate(self, p):
+        """Return (predicted, forward solve, shape) at ``p``; may raise _ForwardFailed."""
+        return self.model.evaluate(self.load.basis @ p)
+
+    def residual(self, predicted):
+        """Return the whitened residual of ``predicted`` measurements."""
+        return self.weights.whiten @ (predicted - self.model.measured)
+
+    def objective(self, p, residual):
+        """e^T C^-1 e + p^T P^-1 p (the prior in its scales)."""
+        return float(residual @ residual) + float(np.sum((p / self.load.prior) ** 2))
+
+    def take_weights(self, weights):
+        """Use ``weights`` (this estimate's own) from now on: their Jacobian and seen basis."""
+        self.weights, self.fresh = weights, True
+        self.jacobian = weights.whiten @ weights.load_jacobian
+        self.seen = _seen_basis(self.jacobian, self.load.prior)
+
+
 def _estimate(robot, lengths, tensions, tip_position, tip_rotation, levels, load, previous):
-    """Estimate on checked arguments (:func:`estimate_tip_wrench`); may raise _ForwardFailed."""
-    basis, prior = load.basis, load.prior
+    """Estimate on checked arguments (:func:`estimate_tip_wrench`); may raise _ForwardFailed.
+
+    Levenberg-Marquardt in the seen directions on e^T C^-1 e + p^T P^-1 p (prior-scaled), in
+    phases: :func:`_started` (the start and its weights), :func:`_iteration` until one says it
+    is done, :func:`_answer` (the covariance and the notes).
+    """
     model = _Model(robot, lengths, tensions, tip_position, tip_rotation, levels,
                    None if previous is None else previous.solution,
                    None if previous is None else previous.friction_reference)
-    p = _start(previous, load)
-    notes, converged, iterations, failure = [], False, 0, ''
+    fit = _started(model, load, previous)
+    for fit.iterations in range(1, MAX_ITERATIONS + 1):
+        if _iteration(fit):
+            break
+    else:
+        fit.notes.append('not converged in %d iterations' % MAX_ITERATIONS)
+    return _answer(fit)
+
+
+def _started(model, load, previous):
+    """Return the start: the warm start's parameters (unloaded if unsolvable), its weights.
+
+    The directions the data do not see stay at the prior's mean, zero (never made up); a warm
+    start is near, so its steps are Gauss-Newton's from the first.
+    """
+    fit = _Fit(model, load, _start(previous, load))
     try:
-        predicted, result, shape = model.evaluate(basis @ p)
+        fit.predicted, fit.result, fit.shape = fit.evaluate(fit.p)
     except _ForwardFailed as error:
-        if not p.any():
+        if not fit.p.any():
             raise ValueError('no equilibrium for these measurements even without a tip load: '
                              '%s' % error) from error
-        p[:] = 0.0  # the previous estimate no longer fits: start unloaded
-        predicted, result, shape = model.evaluate(basis @ p)
-    weights = _reused_weights(previous, model, p, load)
-    fresh = weights is None  # the load Jacobian is this estimate's own
+        fit.p[:] = 0.0  # the previous estimate no longer fits: start unloaded
+        fit.predicted, fit.result, fit.shape = fit.evaluate(fit.p)
+    prior = load.prior
+    weights = _reused_weights(previous, model, fit.p, load)
+    fresh = weights is None  # else the previous estimate's Jacobian, until it misleads
     if fresh:
-        weights = _linearise(model, p, load, predicted, result)
-    elif _moved(p, weights.jacobian_load, prior) > REJACOBIAN:
-        weights, fresh = _with_jacobian(model, weights, p, load, predicted, result), True
-    jacobian = weights.whiten @ weights.load_jacobian
-    seen = _seen_basis(jacobian, prior)
-    # the directions the data do not see stay at the prior's mean, zero (never made up)
-    p = prior * (seen @ (seen.T @ (p / prior)))
-    # Levenberg-Marquardt in the seen directions on e^T C^-1 e + p^T P^-1 p (prior-scaled);
-    # a warm start is near: Gauss-Newton steps from the first
-    damping = COLD_DAMPING if previous is None else WARM_DAMPING
-    identity = np.eye(len(prior))
-    for iterations in range(1, MAX_ITERATIONS + 1):
-        residual = weights.whiten @ (predicted - model.measured)
-        objective = float(residual @ residual) + float(np.sum((p / prior) ** 2))
-        scaled = jacobian * prior  # d residual / d (p / prior)
-        hessian = seen.T @ (scaled.T @ scaled + identity) @ seen
-        gradient = seen.T @ (scaled.T @ residual + p / prior)
-        if _sigmas(hessian, gradient) <= STEP_TOLERANCE:
-            converged = True  # already there (a warm start on an unchanged measurement)
-            break
-        accepted = False
-        for _ in range(10):
-            # Levenberg's damping (identity in prior units): weakly seen directions move last
-            step = prior * (seen @ -np.linalg.solve(
-                hessian + damping * np.max(np.diag(hessian), initial=1.0)
-                * np.eye(len(hessian)), gradient))
-            # at most STEP_LIMIT of the prior scale per step: the branch of equilibria nearest
-            # the start, not a far one (a rod near buckling explains a tip as well)
-            largest = float(np.max(np.abs(step) / prior, initial=0.0))
-            if largest > STEP_LIMIT:
-                step *= STEP_LIMIT / largest
-            trial = p + step
-            try:
-                trial_predicted, trial_result, trial_shape = model.evaluate(basis @ trial)
-            except _ForwardFailed as error:
-                failure, damping = str(error), damping * 10.0
-                continue
-            trial_residual = weights.whiten @ (trial_predicted - model.measured)
-            trial_objective = (float(trial_residual @ trial_residual)
-                               + float(np.sum((trial / prior) ** 2)))
-            if trial_objective <= objective:
-                accepted = True
-                break
-            damping *= 10.0
-        if not accepted:
-            if not fresh:  # the previous estimate's Jacobian misled: take this one's
-                weights, fresh = _linearise(model, p, load, predicted, result), True
-                jacobian = weights.whiten @ weights.load_jacobian
-                seen, damping = _seen_basis(jacobian, prior), COLD_DAMPING
-                continue
-            # no step lowers the objective: a minimum to the solvers' resolution, or no solve
-            converged = not failure
-            if failure:
-                notes.append('no equilibrium near the step from this estimate (%s)' % failure)
-            break
-        p, predicted, result, shape = trial, trial_predicted, trial_result, trial_shape
-        damping = max(damping / 10.0, WARM_DAMPING)
-        # converged when the next Gauss-Newton step (this Jacobian) is below the tolerance, or
-        # the fit no longer improves by a measurable amount (the solvers' resolution)
-        residual = weights.whiten @ (predicted - model.measured)
-        gradient = seen.T @ (scaled.T @ residual + p / prior)
-        if _sigmas(hessian, gradient) <= STEP_TOLERANCE \
-                or (fresh and objective - trial_objective < OBJECTIVE_TOLERANCE):
-            converged = True
-            break
-        weights = (_linearise(model, p, load, predicted, result)
-                   if _moved(p, weights.load, prior) > REWEIGH else
-                   _with_jacobian(model, weights, p, load, predicted, result))
-        fresh = True
-        jacobian = weights.whiten @ weights.load_jacobian
-        seen = _seen_basis(jacobian, prior)
-    else:
-        notes.append('not converged in %d iterations' % MAX_ITERATIONS)
+        weights = _linearise(model, fit.p, load, fit.predicted, fit.result)
+    elif _moved(fit.p, weights.jacobian_load, prior) > REJACOBIAN:
+        weights, fresh = _with_jacobian(model, weights, fit.p, load, fit.predicted,
+                                        fit.result), True
+    fit.take_weights(weights)
+    fit.fresh = fresh
+    fit.p = prior * (fit.seen @ (fit.seen.T @ (fit.p / prior)))
+    fit.damping = COLD_DAMPING if previous is None else WARM_DAMPING
+    return fit
+
+
+def _iteration(fit):
+    """One Levenberg-Marquardt iteration; return True when the fit is done.
+
+    Done: the next Gauss-Newton step is below STEP_TOLERANCE standard deviations, the objective
+    no longer improves measurably (the solvers' resolution), or no step lowers it.
+    """
+    prior = fit.load.prior
+    residual = fit.residual(fit.predicted)
+    objective = fit.objective(fit.p, residual)
+    scaled = fit.jacobian * prior  # d residual / d (p / prior)
+    hessian = fit.seen.T @ (scaled.T @ scaled + np.eye(len(prior))) @ fit.seen
+    gradient = fit.seen.T @ (scaled.T @ residual + fit.p / prior)
+    if _sigmas(hessian, gradient) <= STEP_TOLERANCE:
+        fit.converged = True  # already there (a warm start on an unchanged measurement)
+        return True
+    trial = _damped_step(fit, hessian, gradient, objective)
+    if trial is None:
+        if not fit.fresh:  # the previous estimate's Jacobian misled: take this one's
+            fit.take_weights(_linearise(fit.model, fit.p, fit.load, fit.predicted, fit.result))
+            fit.damping = COLD_DAMPING
+            return False
+        # no step lowers the objective: a minimum to the solvers' resolution, or no solve
+        fit.converged = not fit.failure
+        if fit.failure:
+            fit.notes.append('no equilibrium near the step from this estimate (%s)'
+                             % fit.failure)
+        return True
+    fit.p, fit.predicted, fit.result, fit.shape, trial_objective = trial
+    fit.damping = max(fit.damping / 10.0, WARM_DAMPING)
+    gradient = fit.seen.T @ (scaled.T @ fit.residual(fit.predicted) + fit.p / prior)
+    if _sigmas(hessian, gradient) <= STEP_TOLERANCE \
+            or (fit.fresh and objective - trial_objective < OBJECTIVE_TOLERANCE):
+        fit.converged = True
+        return True
+    fit.take_weights(_linearise(fit.model, fit.p, fit.load, fit.predicted, fit.result)
+                     if _moved(fit.p, fit.weights.load, prior) > REWEIGH else
+                     _with_jacobian(fit.model, fit.weights, fit.p, fit.load, fit.predicted,
+                                    fit.result))
+    return False
+
+
+def _damped_step(fit, hessian, gradient, objective):
+    """Return (p, predicted, solve, shape, objective) of a step that lowers the objective.
+
+    Levenberg's damping (identity in prior units: weakly seen directions move last), raised
+    tenfold per refused trial, ten trials at most; None when none lowers it.
+    """
+    prior = fit.load.prior
+    for _ in range(10):
+        step = prior * (fit.seen @ -np.linalg.solve(
+            hessian + fit.damping * np.max(np.diag(hessian), initial=1.0)
+            * np.eye(len(hessian)), gradient))
+        # at most STEP_LIMIT of the prior scale per step: the branch of equilibria nearest
+        # the start, not a far one (a rod near buckling explains a tip as well)
+        largest = float(np.max(np.abs(step) / prior, initial=0.0))
+        if largest > STEP_LIMIT:
+            step *= STEP_LIMIT / largest
+        trial = fit.p + step
+        try:
+            predicted, result, shape = fit.evaluate(trial)
+        except _ForwardFailed as error:
+            fit.failure, fit.damping = str(error), fit.damping * 10.0
+            continue
+        trial_objective = fit.objective(trial, fit.residual(predicted))
+        if trial_objective <= objective:
+            return trial, predicted, result, shape, trial_objective
+        fit.damping *= 10.0
+    return None
+
+
+def _answer(fit):
+    """Return the :class:`WrenchEstimate` of a finished fit: covariance, what it saw, notes."""
+    load, prior, p, notes = fit.load, fit.load.prior, fit.p, fit.notes
+    weights, jacobian = fit.weights, fit.jacobian
     if _moved(p, weights.jacobian_load, prior) > REJACOBIAN:
         # the covariance is that of the estimate: its own Jacobian once the load moved
-        weights = _with_jacobian(model, weights, p, load, predicted, result)
+        weights = _with_jacobian(fit.model, weights, p, load, fit.predicted, fit.result)
         jacobian = weights.whiten @ weights.load_jacobian
-    residual = weights.whiten @ (predicted - model.measured)
+    residual = weights.whiten @ (fit.predicted - fit.model.measured)
     data_information = jacobian.T @ jacobian
     parameter_covariance = np.linalg.inv(data_information + np.diag(1.0 / prior ** 2))
     parameter_covariance = 0.5 * (parameter_covariance + parameter_covariance.T)
-    rows = basis[:load.size]  # the wrench rows reported: w = B p, Cov_w = B Cov_p B^T
+    rows = load.basis[:load.size]  # the wrench rows reported: w = B p, Cov_w = B Cov_p B^T
     covariance = rows @ parameter_covariance @ rows.T
     covariance = 0.5 * (covariance + covariance.T)
     unseen = _unseen(data_information, prior, rows)
-    wrench = basis @ p
+    wrench = load.basis @ p
     mass = mass_sigma = None
     if load.name == 'weight':
         mass, mass_sigma = float(p[0]), float(np.sqrt(parameter_covariance[0, 0]))
@@ -617,10 +687,10 @@ def _estimate(robot, lengths, tensions, tip_position, tip_rotation, levels, load
     chi2 = float(residual @ residual) / max(len(residual), 1)
     return WrenchEstimate(force=wrench[:3].copy(),
                           moment=wrench[3:].copy() if load.size == 6 else np.zeros(3),
-                          covariance=covariance, shape=shape, converged=converged,
-                          message='; '.join(notes), unseen=unseen, iterations=iterations,
-                          chi2=chi2, solution=result, weights=weights,
-                          measurements=len(residual), friction_reference=model.reference,
+                          covariance=covariance, shape=fit.shape, converged=fit.converged,
+                          message='; '.join(notes), unseen=unseen, iterations=fit.iterations,
+                          chi2=chi2, solution=fit.result, weights=weights,
+                          measurements=len(residual), friction_reference=fit.model.reference,
                           load=load, parameters=p.copy(),
                           parameter_covariance=parameter_covariance, mass=mass,
                           mass_sigma=mass_sigma)
