@@ -50,8 +50,11 @@ class SensorInbox:
         # handed over under this lock, never iterated while another thread adds
         self._lock = threading.Lock()
 
-    def put(self, name, position, rotation, stamp, now):
-        """Keep a reading (base frame, m; stamp s) that arrived at ``now`` (monotonic s)."""
+    def put(self, name, position, rotation, stamp, now, sigma=None):
+        """Keep a reading (base frame, m; stamp s) that arrived at ``now`` (monotonic s).
+
+        ``sigma``: the position noise (m) the device reported with it, or None.
+        """
         record = self.records[name]
         position = np.asarray(position, dtype=float)
         if position.shape != (3,) or not np.all(np.isfinite(position)) or (
@@ -62,7 +65,7 @@ class SensorInbox:
         record.last_arrival = now
         record.arrivals = [t for t in record.arrivals if now - t < 1.0] + [now]
         with self._lock:
-            self._unread[name] = (SensorReading(position, rotation, stamp), now)
+            self._unread[name] = (SensorReading(position, rotation, stamp, sigma), now)
 
     def reject(self, name, reason):
         """Count a reading that could not be used at all (its reason goes on diagnostics)."""

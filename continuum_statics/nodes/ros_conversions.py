@@ -7,7 +7,7 @@ that input. Writers never emit a NaN: they raise instead.
 import math
 
 from builtin_interfaces.msg import Time
-from geometry_msgs.msg import PoseStamped
+from geometry_msgs.msg import PoseStamped, PoseWithCovarianceStamped
 import numpy as np
 from sensor_msgs.msg import JointState
 
@@ -172,13 +172,15 @@ def base_frame_pose(msg, base_frame_id, what, hint=''):
 
 
 def tracked_pose(msg, base_frame_id, use_rotation=False, hint=''):
-    """Return (position (3,) m, rotation (3, 3) or None, stamp ns) of a tracker's PoseStamped.
+    """Return (position (3,) m, rotation (3, 3) or None, stamp ns, sigma m or None) of a pose.
 
     The one parser of a tracked pose: statics' sensors (``sensors/<name>``,
     ``tip_pose_measured``), and the tracker tip_controller and tip_load_estimator read from
     statics' accepted readings, so every node takes and refuses the same messages. An empty
     frame id is the base frame; the rotation is read when ``use_rotation`` and the quaternion is
-    a unit one (else None).
+    a unit one (else None). ``msg`` is a PoseStamped, or a PoseWithCovarianceStamped whose
+    position covariance gives ``sigma``: the square root of its largest diagonal value when all
+    three are finite and positive (else None, the configured noise).
 
     :param hint: appended to the frame error (what the user should do)
     :raises ValueError: another frame than the base frame, or a non-finite position
@@ -186,16 +188,21 @@ def tracked_pose(msg, base_frame_id, use_rotation=False, hint=''):
     frame = msg.header.frame_id
     if frame and frame != base_frame_id:
         raise ValueError('frame %r is not the base frame %r%s' % (frame, base_frame_id, hint))
-    position = pose_position(msg.pose)
+    pose, sigma = msg.pose, None
+    if isinstance(msg, PoseWithCovarianceStamped):
+        pose, variances = msg.pose.pose, np.asarray(msg.pose.covariance, dtype=float)[[0, 7, 14]]
+        if np.all(np.isfinite(variances)) and np.all(variances > 0.0):
+            sigma = math.sqrt(float(np.max(variances)))
+    position = pose_position(pose)
     if not np.all(np.isfinite(position)):
         raise ValueError('a reading that is not finite: position %s' % position)
     rotation = None
     if use_rotation:
-        q = msg.pose.orientation
+        q = pose.orientation
         quaternion = np.array([q.x, q.y, q.z, q.w])
         if np.all(np.isfinite(quaternion)) and abs(np.linalg.norm(quaternion) - 1.0) < 1e-3:
             rotation = quaternion_to_rotation(quaternion)
-    return position, rotation, stamp_ns(msg.header.stamp)
+    return position, rotation, stamp_ns(msg.header.stamp), sigma
 
 
 def twist_vectors(msg, base_frame_id):

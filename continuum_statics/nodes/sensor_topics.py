@@ -1,15 +1,18 @@
 """statics' sensor topics and covariance outputs (issue 35, state estimation).
 
-In: ``sensors/<name>`` (geometry_msgs/PoseStamped) for each sensor of the robot file, and
-``tip_pose_measured`` (PoseStamped) for the one at the tip (the tip tracker). A position sensor
-reads the pose's position (its orientation is ignored); a pose sensor uses the orientation when
-its quaternion is a unit one. Readings must be in the robot's base frame (an empty frame id is
-taken as it): register a tracker's frame before publishing (doc/state_estimation.md). Readings
-go to the shape tracker's :class:`~continuum_statics.control.sensor_readings.SensorInbox`.
+In: ``sensors/<name>`` (geometry_msgs/PoseStamped, or PoseWithCovarianceStamped for a sensor
+with ``covariance: true``, whose position covariance is then the reading's noise) for each
+sensor of the robot file, and ``tip_pose_measured`` (PoseStamped) for the one at the tip. A
+position sensor reads the pose's position (its orientation is ignored); a pose sensor uses the
+orientation when its quaternion is a unit one. Readings must be in the robot's base frame (an
+empty frame id is taken as it): register a tracker's frame before publishing
+(doc/state_estimation.md). Readings go to the shape tracker's
+:class:`~continuum_statics.control.sensor_readings.SensorInbox`.
 
-Out: ``sensors/<name>/accepted`` (PoseStamped), each reading the estimator used, as it came:
-statics judges every sensor once, and tip_controller and tip_load_estimator read the tip
-tracker from there (:func:`tracker_topic`), so a reading statics set aside reaches no node.
+Out: ``sensors/<name>/accepted`` (PoseStamped), each reading the estimator used, as it came
+(its header and pose): statics judges every sensor once, and tip_controller and
+tip_load_estimator read the tip tracker from there (:func:`tracker_topic`), so a reading statics
+set aside reaches no node.
 With ``model_uncertainty``: ``tip_pose_covariance``
 (geometry_msgs/PoseWithCovarianceStamped: the tip pose and its 6x6 covariance, ROS order x, y,
 z, rotation about x, y, z) and ``backbone_estimate``
@@ -44,8 +47,9 @@ class SensorTopics:
             PoseStamped, 'sensors/%s/accepted' % sensor.name, LATEST_SENSOR_QOS)
             for sensor in robot.sensors}
         for sensor in robot.sensors:
-            node.create_subscription(PoseStamped, 'sensors/%s' % sensor.name,
-                                     self._reader(sensor), LATEST_SENSOR_QOS)
+            node.create_subscription(
+                PoseWithCovarianceStamped if sensor.covariance else PoseStamped,
+                'sensors/%s' % sensor.name, self._reader(sensor), LATEST_SENSOR_QOS)
             if sensor.at_tip and not any(s.at_tip for s in robot.sensors[:robot.sensors.index(
                     sensor)]):
                 node.create_subscription(PoseStamped, 'tip_pose_measured',
@@ -63,12 +67,14 @@ class SensorTopics:
         def on_reading(msg):
             now = time.monotonic()
             try:
-                position, rotation, stamp = tracked_pose(
+                position, rotation, stamp, sigma = tracked_pose(
                     msg, self._base, sensor.kind == 'pose', ' (register the sensor first)')
             except ValueError as error:
                 self.inbox.reject(sensor.name, str(error))
                 return
-            self.inbox.put(sensor.name, position, rotation, stamp * 1e-9 or None, now)
+            self.inbox.put(sensor.name, position, rotation, stamp * 1e-9 or None, now, sigma)
+            if isinstance(msg, PoseWithCovarianceStamped):  # accepted readings: PoseStamped
+                msg = PoseStamped(header=msg.header, pose=msg.pose.pose)
             self._messages[sensor.name] = msg
         return on_reading
 

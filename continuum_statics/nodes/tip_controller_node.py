@@ -192,7 +192,7 @@ class TipControllerNode(RunnerHooks, Node):
 
     def _on_tip_pose_measured(self, msg):
         try:  # an external tracker (motion capture, EM) registered to the base by calibrate
-            position, _, stamp = tracked_pose(msg, self.base_frame_id, hint=TRACKER_HINT)
+            position, _, stamp, _ = tracked_pose(msg, self.base_frame_id, hint=TRACKER_HINT)
         except ValueError as error:
             self.control.reject('tip_pose_measured', error)
             return

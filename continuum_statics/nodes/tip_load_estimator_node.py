@@ -154,8 +154,8 @@ class TipLoadEstimatorNode(RunnerHooks, Node):
 
     def _on_tip_pose(self, msg):
         try:
-            position, rotation, stamp = tracked_pose(msg, self.base_frame_id,
-                                                     self._params['use_tip_orientation'])
+            position, rotation, stamp, _ = tracked_pose(msg, self.base_frame_id,
+                                                        self._params['use_tip_orientation'])
         except ValueError as error:
             self._problems.reject('tip_pose_measured', error)
             return

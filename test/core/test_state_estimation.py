@@ -71,6 +71,7 @@ def test_without_readings_the_estimate_is_the_models(name):
     ({'sensors': [{'name': 'x'}, {'name': 'x'}]}, 'used twice'),
     ({'sensors': [{'name': 'x', 'noise': {'position': -1}}]}, 'sensors[0].noise.position'),
     ({'sensors': [{'name': 'x', 'colour': 'red'}]}, 'unknown keys'),
+    ({'sensors': [{'name': 'x', 'covariance': 'yes'}]}, 'sensors[0].covariance'),
     ({'model_uncertainty': {'tip_force': 'big'}}, 'model_uncertainty.tip_force'),
     ({'model_uncertainty': {'correlation_time': 0.0}}, 'model_uncertainty.correlation_time'),
     ({'model_uncertainty': {'wind': 1.0}}, 'unknown keys'),
@@ -152,6 +153,29 @@ def test_a_biased_reading_is_set_aside_and_changes_nothing():
         'tip_tracker': SensorReading(tip + np.array([0.002, 0.0, 0.0]))})
     assert good.sensors['tip_tracker'].used
     assert good.shape.tip_position[0] - model.shape.tip_position[0] > 1e-3
+
+
+def test_a_reading_that_reports_its_own_noise_is_weighed_by_it():
+    robot = load_robot(SENSOR_ROBOT)
+    lengths = _pulled(robot)
+    model = robot.estimate_shape(lengths, exact=True)
+    tip = model.shape.tip_position + model.shape.tip_rotation @ robot.sensors[0].offset
+
+    def shift(offset, **sigma):
+        estimate = robot.estimate_shape(lengths, exact=True, sensors={
+            'tip_tracker': SensorReading(tip + np.array([offset, 0.0, 0.0]), **sigma)})
+        verdict = estimate.sensors['tip_tracker']
+        return estimate.shape.tip_position[0] - model.shape.tip_position[0], verdict.used
+
+    configured = shift(0.002)
+    assert shift(0.002, sigma=None) == configured  # no figure of its own: the file's noise
+    assert shift(0.002, sigma=robot.sensors[0].position_sigma) == configured
+    # a noisier device pulls less, a more precise one more
+    assert 0.0 < shift(0.002, sigma=0.005)[0] < configured[0] < shift(0.002, sigma=1e-4)[0]
+    # 30 mm off is beyond the gate at the file's 0.5 mm, and a plausible reading at its own 30 mm
+    assert not shift(0.03)[1] and shift(0.03, sigma=0.03)[1]
+    with pytest.raises(ValueError, match='sigma must be a finite standard deviation'):
+        shift(0.002, sigma=0.0)
 
 
 def test_a_correction_fades_with_the_correlation_time():

@@ -331,3 +331,32 @@ def test_each_cable_is_drawn_to_its_end_disk_and_the_tube_coloured_by_section():
     assert len(cable_markers[0].points) == 7 and len(cable_markers[3].points) == 13
     passive = load_robot(REPO / 'config' / 'jones2009_nitinol_rod.yaml')
     assert section_layout(passive)[0].shape == (0,)
+
+
+def test_a_tracked_pose_is_read_alike_from_either_message_with_the_devices_sigma():
+    from geometry_msgs.msg import PoseWithCovarianceStamped
+
+    from continuum_statics.nodes.ros_conversions import tracked_pose
+
+    plain = PoseStamped()
+    plain.header.frame_id = ''  # an empty frame id is the base frame
+    plain.header.stamp.sec, plain.header.stamp.nanosec = 3, 5
+    plain.pose.position.x, plain.pose.position.y, plain.pose.position.z = 0.01, 0.02, 0.3
+    plain.pose.orientation.w = 1.0
+    position, rotation, stamp, sigma = tracked_pose(plain, 'base_link', use_rotation=True)
+    assert position.tolist() == [0.01, 0.02, 0.3] and stamp == 3_000_000_005 and sigma is None
+    assert np.array_equal(rotation, np.eye(3))
+    covariant = PoseWithCovarianceStamped(header=plain.header)
+    covariant.pose.pose = plain.pose
+    covariance = np.zeros(36)
+    covariance[[0, 7, 14]] = 1e-6, 4e-6, 2.5e-7  # m^2: the largest sigma is 2 mm
+    covariant.pose.covariance = covariance.tolist()
+    again = tracked_pose(covariant, 'base_link')
+    assert again[0].tolist() == position.tolist() and again[2] == stamp
+    assert again[3] == pytest.approx(2e-3)
+    covariance[7] = 0.0  # a device that sends no covariance: the configured noise
+    covariant.pose.covariance = covariance.tolist()
+    assert tracked_pose(covariant, 'base_link')[3] is None
+    plain.header.frame_id = 'tracker'
+    with pytest.raises(ValueError, match="frame 'tracker' is not the base frame 'base_link'"):
+        tracked_pose(plain, 'base_link')

@@ -22,11 +22,16 @@ pytestmark = pytest.mark.ros
 SENSOR_ROBOT = REPO / 'config' / 'tendon_robot_sensors.yaml'
 
 
-def robot_file(tmp_path, correlation_time):
-    """Write the sensor robot with another correlation time (s); return its path."""
+def robot_file(tmp_path, correlation_time, covariance=False):
+    """Write the sensor robot with another correlation time (s); return its path.
+
+    ``covariance``: its tip tracker publishes PoseWithCovarianceStamped.
+    """
     with open(SENSOR_ROBOT, encoding='utf-8') as stream:
         document = yaml.safe_load(stream)
     document['model_uncertainty']['correlation_time'] = correlation_time
+    if covariance:
+        next(s for s in document['sensors'] if s['name'] == 'tip_tracker')['covariance'] = True
     path = FilePath(tmp_path) / 'robot.yaml'
     path.write_text(yaml.safe_dump(document))
     return path
@@ -48,8 +53,10 @@ class Rig:
         self.estimate = Collector(client, BackboneEstimate, 'backbone_estimate', LATCHED)
         self.diagnostics = Collector(client, DiagnosticArray, '/diagnostics', 10)
         self.states = client.create_publisher(JointState, 'cable_states', qos_profile_sensor_data)
-        self.tracker = client.create_publisher(PoseStamped, 'sensors/tip_tracker',
-                                               qos_profile_sensor_data)
+        self.covariant = self.robot.sensors[0].covariance
+        self.tracker = client.create_publisher(
+            PoseWithCovarianceStamped if self.covariant else PoseStamped,
+            'sensors/tip_tracker', qos_profile_sensor_data)
         self.stamp = 100
         self.lengths = np.array(self.robot.straight_cable_lengths)
         self.lengths[0] -= 0.004
@@ -71,15 +78,23 @@ class Rig:
         return (np.array([position.x, position.y, position.z]),
                 np.array(last.pose.covariance).reshape(6, 6))
 
-    def see(self, offset):
-        """Send one tracker reading at the model's marker + offset (m), stamped as the next."""
-        msg = PoseStamped()
-        msg.header.frame_id = self.robot.base_frame_id
-        msg.header.stamp = Time(sec=self.stamp + 1)
+    def see(self, offset, sigma=None):
+        """Send one tracker reading at the model's marker + offset (m), stamped as the next.
+
+        ``sigma`` (m): the noise a PoseWithCovarianceStamped tracker reports with it.
+        """
+        pose = PoseStamped()
+        pose.header.frame_id = self.robot.base_frame_id
+        pose.header.stamp = Time(sec=self.stamp + 1)
         point = self.model_marker + np.asarray(offset)
-        msg.pose.position.x, msg.pose.position.y, msg.pose.position.z = (float(v)
-                                                                          for v in point)
-        msg.pose.orientation.w = 1.0
+        pose.pose.position.x, pose.pose.position.y, pose.pose.position.z = (float(v)
+                                                                            for v in point)
+        pose.pose.orientation.w = 1.0
+        msg = pose
+        if self.covariant:
+            msg = PoseWithCovarianceStamped(header=pose.header)
+            msg.pose.pose = pose.pose
+            msg.pose.covariance = (sigma ** 2 * np.eye(6)).ravel().tolist()
         received = self.node._sensors.inbox.records['tip_tracker'].received
         publish_until(self.tracker, msg, lambda: self.node._sensors.inbox.records[
             'tip_tracker'].received > received, 10.0, 'the tracker reading')
@@ -148,3 +163,20 @@ def test_other_nodes_read_only_the_readings_statics_accepted(harness, tmp_path):
     rig.feed()
     wait_until(lambda: 'set aside 1' in rig.sensor_value()[0], 5.0, 'the biased one set aside')
     assert len(accepted) == first
+
+
+def test_a_tracker_that_reports_its_covariance_is_weighed_by_it(harness, tmp_path):
+    """A PoseWithCovarianceStamped tracker (covariance: true): its own sigma, not the file's."""
+    rig = Rig(harness, robot_file(tmp_path, 10.0, covariance=True))
+    client = harness.client('listener')
+    accepted = Collector(client, PoseStamped, 'sensors/tip_tracker/accepted',
+                         qos_profile_sensor_data)
+    tip, _ = rig.feed()
+    # 30 mm off: set aside at the file's 0.5 mm (test_a_biased_tracker_is_set_aside_and_named),
+    # a plausible reading from a device that says it is 30 mm uncertain
+    rig.see([0.03, 0.0, 0.0], sigma=0.03)
+    after, _ = rig.feed()
+    wait_until(lambda: 'used 1' in rig.sensor_value()[0], 5.0, 'the verdict on diagnostics')
+    assert 1e-4 < after[0] - tip[0] < 0.03
+    wait_until(lambda: len(accepted) >= 1, 5.0, 'the accepted reading, as a PoseStamped')
+    assert abs(accepted.last.pose.position.x - (rig.model_marker[0] + 0.03)) < 1e-9

@@ -16,7 +16,7 @@ import numpy as np
 SENSOR_KINDS = ('position', 'pose')
 #: Default standard deviations of a sensor (an optical tracker's): m and rad.
 DEFAULT_SENSOR_NOISE = {'position': 5.0e-4, 'angle': 0.01}
-_SENSOR_KEYS = {'name', 'at', 'offset', 'kind', 'noise', 'frame_id'}
+_SENSOR_KEYS = {'name', 'at', 'offset', 'kind', 'noise', 'frame_id', 'covariance'}
 _UNCERTAINTY_KEYS = ('tip_force', 'section_moment', 'cable_length', 'base_position',
                      'correlation_time')
 
@@ -33,6 +33,8 @@ class Sensor:
     :ivar angle_sigma: rad
     :ivar frame_id: frame of its messages (None: the robot's base frame)
     :ivar at_tip: it sits at the tip (the tip tracker: ``tip_pose_measured`` answers for it)
+    :ivar covariance: it publishes geometry_msgs/PoseWithCovarianceStamped, whose position
+        covariance (when positive) is the reading's own noise, in place of ``position_sigma``
     """
 
     name: str
@@ -43,6 +45,7 @@ class Sensor:
     angle_sigma: float = DEFAULT_SENSOR_NOISE['angle']
     frame_id: str = None
     at_tip: bool = False
+    covariance: bool = False
 
     @property
     def size(self):
@@ -81,11 +84,15 @@ class SensorReading(NamedTuple):
     :ivar position: (3,) m
     :ivar rotation: (3, 3) or None (a position sensor, or a pose sensor's angle not used)
     :ivar stamp: s, or None (the estimate's own stamp)
+    :ivar sigma: m, the position noise the device reported with this reading, or None (the
+        robot file's ``noise.position``): the device's own figure wins (nmea_navsat_driver's
+        habit)
     """
 
     position: np.ndarray
     rotation: np.ndarray = None
     stamp: float = None
+    sigma: float = None
 
 
 class SensorVerdict(NamedTuple):
@@ -182,12 +189,16 @@ def parse_sensors(data, length, guides, tip_marker):
         sigma = {key: _number(noise.get(key, default), '%s.noise.%s' % (field, key),
                               positive=True, allow_zero=False)
                  for key, default in DEFAULT_SENSOR_NOISE.items()}
+        covariance = entry.get('covariance', False)
+        if not isinstance(covariance, bool):
+            raise ValueError('%s.covariance must be true or false (it publishes '
+                             'PoseWithCovarianceStamped), got %r' % (field, covariance))
         frame_id = entry.get('frame_id')
         if frame_id is not None and (not isinstance(frame_id, str) or not frame_id):
             raise ValueError('%s.frame_id must be a frame name, got %r' % (field, frame_id))
         offset.setflags(write=False)
         sensors.append(Sensor(name, s, offset, kind, sigma['position'], sigma['angle'],
-                              frame_id, at_tip))
+                              frame_id, at_tip, covariance))
     return tuple(sensors)
 
 
@@ -224,8 +235,13 @@ def as_reading(sensor, reading):
     if reading.stamp is not None and not math.isfinite(float(reading.stamp)):
         raise ValueError('sensor %s: stamp must be finite (s), got %r'
                          % (sensor.name, reading.stamp))
+    sigma = reading.sigma
+    if sigma is not None and not (math.isfinite(float(sigma)) and float(sigma) > 0.0):
+        raise ValueError('sensor %s: sigma must be a finite standard deviation > 0 (m), got %r'
+                         % (sensor.name, sigma))
     return SensorReading(position, rotation if sensor.kind == 'pose' else None,
-                         None if reading.stamp is None else float(reading.stamp))
+                         None if reading.stamp is None else float(reading.stamp),
+                         None if sigma is None else float(sigma))
 
 
 def default_model_uncertainty(bending_stiffness, length):

@@ -338,7 +338,7 @@ def _update(robot, shape, sensitivity, prior, readings, stamp):
     for sensor, reading in readings.items():
         predicted, jac, rotation = _sensor_rows(shape, sensitivity, sensor)
         innovation = reading.position - predicted - jac[:3] @ mean
-        sigmas = [sensor.position_sigma] * 3
+        sigmas = [reading.sigma or sensor.position_sigma] * 3  # the device's own wins
         if sensor.kind == 'pose' and reading.rotation is not None:
             angle = _small_rotations(reading.rotation[None], rotation[None])[0]
             innovation = np.concatenate([innovation, angle - jac[3:] @ mean])
