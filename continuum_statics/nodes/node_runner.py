@@ -1,7 +1,8 @@
 """Start nodes with the executor each needs, and stop them cleanly on Ctrl-C (Jazzy and Kilted).
 
 Each node class names the executor it wants in ``EXECUTOR``: ``'single'`` or ``'multi'`` (several
-threads, for nodes whose service callbacks wait on topics). Several nodes in one process (bringup)
+threads, for nodes whose service callbacks wait on topics), one of the :class:`RunnerHooks` it
+inherits (a plain rclpy node gets their defaults). Several nodes in one process (bringup)
 each get their own executor and thread, so a busy node never delays another.
 
 rclpy's experimental ``EventsExecutor`` (Kilted) is not used: in rclpy 9.1 its ``spin()``

@@ -87,7 +87,7 @@ def scipy_tip(robot, u0, tip_force):
 
 
 def scipy_sections_tip(robot, state, fixed, tip_force, rtol=1e-3, atol=1e-6):
-    """Tip of the kernel's equations (module docstring of ``core.kernel``) with SciPy RK45.
+    """Tip of the kernel's equations (module docstring of ``core.rod.kernel``) with SciPy RK45.
 
     The same model in plain NumPy: state (r, R, M), strains from M and N = F + f (L - s) by
     Newton's method for the distributed model, point moments at the end disks, piecewise

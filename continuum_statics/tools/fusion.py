@@ -76,8 +76,8 @@ def simulated_truth(robot, cases, seed=0):
 
 def _truth(robot, lengths, force, moment, offset):
     """Return the true shape: the model's under the hidden loads, moved by the hidden offset."""
-    shape = shape_estimation.estimate_shape(robot, lengths, force, moment, None, None, None, None,
-                                      None).shape
+    shape = shape_estimation.estimate_shape(robot, lengths, force, moment, None, None, None,
+                                            None, None).shape
     states = shape.states.copy()
     states[:, :3] += offset
     return type(shape)(shape.s, states, shape.u0, shape.tip_force, shape.c, shape.d)

@@ -178,6 +178,20 @@ def test_a_reading_that_reports_its_own_noise_is_weighed_by_it():
         shift(0.002, sigma=0.0)
 
 
+def test_a_file_whose_model_uncertainty_is_all_zero_names_each_reading_it_cannot_use():
+    """Nothing to correct: each reading gets its verdict by the sensor's name (was a KeyError)."""
+    with open(SENSOR_ROBOT, encoding='utf-8') as stream:
+        document = yaml.safe_load(stream)
+    document['model_uncertainty'] = {key: 0.0 for key in (
+        'tip_force', 'section_moment', 'cable_length', 'base_position')}
+    robot = Robot(parse_robot_description(document, SENSOR_ROBOT))
+    lengths = _pulled(robot)
+    estimate = robot.estimate_shape(lengths, exact=True, sensors={
+        'tip_tracker': SensorReading(robot.estimate_shape(lengths).shape.tip_position)})
+    verdict = estimate.sensors['tip_tracker']
+    assert not verdict.used and 'no model_uncertainty to correct' in verdict.reason
+
+
 def test_a_correction_fades_with_the_correlation_time():
     """Ornstein-Uhlenbeck: the mean decays as exp(-t / tau), the variance grows back to P0."""
     robot = load_robot(SENSOR_ROBOT)

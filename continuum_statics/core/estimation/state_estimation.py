@@ -187,12 +187,13 @@ def estimate_state(robot, lengths, tip_force, tip_moment, tensions, sensors, sta
     ``stamp`` (s). ``previous`` carries the unmodelled loads and the load columns.
     """
     readings = _readings(robot, sensors)
-    model = shape_estimation.estimate_shape(robot, lengths, tip_force, tip_moment, tensions, start,
-                                      jacobians, previous, tracking)
+    model = shape_estimation.estimate_shape(robot, lengths, tip_force, tip_moment, tensions,
+                                            start, jacobians, previous, tracking)
     prior = propagate(robot, getattr(previous, 'unmodelled', None), stamp)
     if not len(prior.mean):
         verdicts = {name: SensorVerdict(False, math.nan, 'the robot file gives no '
-                                        'model_uncertainty to correct') for name in readings}
+                                        'model_uncertainty to correct')
+                    for name in (sensor.name for sensor in readings)}
         return dataclasses.replace(model, unmodelled=prior, sensors=verdicts)
     sensitivity = _sensitivity(robot, model, lengths, tip_force, tip_moment, tensions,
                                getattr(previous, 'sensitivity', None), prior, tracking)
