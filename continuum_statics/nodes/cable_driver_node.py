@@ -93,8 +93,7 @@ class CableDriverNode(RunnerHooks, LifecycleNode):
         home = home_option(self._home_file, self._backend_cls, self.cable_names)
         if home:
             options.update(home)
-            self.get_logger().info('home positions from %s: %s = %s' % (
-                (self._home_file,) + next(iter(home.items()))))
+            self.get_logger().info('home positions from %s: %s' % (self._home_file, home))
 
         self.health = DriverHealth(self._backend_cls.name, self._warn, bool(self.cable_names))
         self._problems = self.health.problems
@@ -273,8 +272,7 @@ class CableDriverNode(RunnerHooks, LifecycleNode):
                 self._publish_true_tip()
 
     def _publish_true_tip(self):
-        backend = self.backend  # read once: a cleanup on the executor may clear it
-        pose = None if backend is None else backend.true_tip_pose
+        pose = None if (backend := self.backend) is None else backend.true_tip_pose  # read once
         if pose is None:
             return
         position, rotation = pose
