@@ -1,7 +1,11 @@
 """Settling time, overshoot and spectrum peaks against a second-order system's closed forms."""
 import numpy as np
 
-from continuum_statics.core.dynamics.response import overshoot, settling_time, spectrum_peaks
+from continuum_statics.core.dynamics.response import (
+    overshoot,
+    settling_time,
+    spectrum_peaks,
+)
 
 ZETA, FREQUENCY = 0.1, 9.3  # damping ratio, natural frequency (Hz)
 
@@ -37,3 +41,15 @@ def test_a_path_that_never_settles_says_so_and_a_still_one_has_no_peaks():
     assert settling_time(np.arange(100) * 1e-3, still) == 0.0
     assert overshoot(still) == 0.0
     assert spectrum_peaks(np.arange(100) * 1e-3, still) == []
+
+
+def test_a_run_cut_short_is_not_settled_and_a_long_one_meets_the_closed_form():
+    """The band is about the median of the last fifth, and the path must stay in it that long."""
+    envelope = np.log(0.02 * np.sqrt(1.0 - ZETA ** 2)) / (-ZETA * 2.0 * np.pi * FREQUENCY)
+    for duration in (0.2, 0.3, 0.4, 0.5):  # all end before the 0.67 s envelope
+        t, path, _ = step_response(duration=duration)
+        # before: 0.198, 0.298, 0.395, 0.468 s (the band centred on the last sample)
+        assert settling_time(t, path) is None, duration
+    for duration in (1.0, 3.0):  # no final given: estimated from the record itself
+        t, path, _ = step_response(duration=duration)
+        assert 0.8 * envelope < settling_time(t, path) <= envelope

@@ -7,29 +7,50 @@ import numpy as np
 #: the settling band: this fraction of the move, and never under SETTLE_FLOOR (m)
 SETTLE_FRACTION = 0.02
 SETTLE_FLOOR = 1e-4
+#: the record's last fraction: its median is the final value, and a response has settled only
+#: if it stayed in the band over at least this stretch before the end (a shorter stay is a
+#: swing passing through the band, not rest)
+SETTLE_TAIL = 0.2
+
+
+def final_value(path, tail=SETTLE_TAIL):
+    """Return the path's (T, 3) final value (m): the median of its last ``tail``, per axis.
+
+    The last sample of a run cut short sits anywhere on the swing; the median of the last
+    fifth is the centre it swings about, and no outlier moves it.
+    """
+    path = np.asarray(path, dtype=float)
+    count = max(1, int(round(tail * len(path))))
+    return np.median(path[-count:], axis=0)
 
 
 def settling_time(times, path, final=None):
-    """Time (s) after which the path (T, 3) stays within the band around ``final`` (its end).
+    """Time (s) after which the path (T, 3) stays within the band around ``final``, or None.
 
-    The band is 2 % of the move from the start, at least 0.1 mm; None if it never settles
-    inside the record (the last sample is outside).
+    ``final`` defaults to :func:`final_value`; the band is 2 % of the move from the start, at
+    least 0.1 mm. None (not settled within the run) unless the path stayed in the band over at
+    least the last :data:`SETTLE_TAIL` of the record: a run that ends mid-swing has no
+    settling time, however close its last sample is to itself.
     """
+    times = np.asarray(times, dtype=float)
     path = np.asarray(path, dtype=float)
-    final = path[-1] if final is None else np.asarray(final, dtype=float)
+    final = final_value(path) if final is None else np.asarray(final, dtype=float)
     band = max(SETTLE_FRACTION * np.linalg.norm(final - path[0]), SETTLE_FLOOR)
     outside = np.nonzero(np.linalg.norm(path - final, axis=1) > band)[0]
-    if not len(outside):
-        return float(times[0])
-    if outside[-1] == len(path) - 1:
+    settled = times[0] if not len(outside) else (
+        None if outside[-1] == len(path) - 1 else times[outside[-1] + 1])
+    if settled is None or times[-1] - settled < SETTLE_TAIL * (times[-1] - times[0]):
         return None
-    return float(times[outside[-1] + 1])
+    return float(settled)
 
 
 def overshoot(path, final=None):
-    """Overshoot (% of the move) beyond ``final`` along the move's direction (0 if none)."""
+    """Overshoot (% of the move) beyond ``final`` along the move's direction (0 if none).
+
+    ``final`` defaults to :func:`final_value`.
+    """
     path = np.asarray(path, dtype=float)
-    final = path[-1] if final is None else np.asarray(final, dtype=float)
+    final = final_value(path) if final is None else np.asarray(final, dtype=float)
     move = final - path[0]
     size = np.linalg.norm(move)
     if size == 0.0:
