@@ -66,9 +66,10 @@ from continuum_statics.nodes.ros_conversions import (
 )
 from continuum_statics.nodes.ros_topic_backend import lend_topics
 from continuum_statics.nodes.timers import steady_timer
+from continuum_statics.nodes.transition_failures import TransitionFailures
 
 
-class CableDriverNode(RunnerHooks, LifecycleNode):
+class CableDriverNode(RunnerHooks, TransitionFailures, LifecycleNode):
     """Cable actuator bridge: commands in, measured cable lengths out; a lifecycle node.
 
     unconfigured -> configure (open the port or bus, read the positions; cable_states flow, the
@@ -100,7 +101,7 @@ class CableDriverNode(RunnerHooks, LifecycleNode):
         # lifecycle, connection and fault state, and what a command becomes (control/)
         self.gate = CommandGate(self.cable_names, self._limits, self.robot.straight_cable_lengths)
         # every backend call, under one lock (the executor and the publish loop both call in)
-        self.actuators = Actuators(self.gate, self._backend_cls.name, self.get_logger())
+        self.actuators = Actuators(self.gate, self._backend_cls.name, self._recording())
         self.actuators.max_interval = self._params['reconnect_max_interval']
         self._state_msg = JointState()
         self._diagnostics = self.create_publisher(diag.DiagnosticArray, '/diagnostics', 10)
@@ -158,8 +159,7 @@ class CableDriverNode(RunnerHooks, LifecycleNode):
                                         self.robot.straight_cable_lengths,
                                         **self._backend_options, **extra)
         except Exception as error:  # bad options a parameter check could not see
-            self.get_logger().error('configure failed: %s' % error)
-            return TransitionCallbackReturn.FAILURE
+            return self._transition_failed('configure', error)  # on /diagnostics too
         if backend.takes_tip_wrench:
             try:
                 backend.set_tip_wrench(self._hidden_load)
@@ -167,7 +167,7 @@ class CableDriverNode(RunnerHooks, LifecycleNode):
                 self._problems.reject('sim_tip_wrench', error)
                 self._hidden_load = np.zeros(6)
         self.actuators.configure(backend, self._lend_topics)
-        return TransitionCallbackReturn.SUCCESS
+        return self._transition_done()
 
     def _lend_topics(self, backend):
         if backend.ros_topics:  # ros2_control: the node lends it topics (made once)
@@ -200,10 +200,10 @@ class CableDriverNode(RunnerHooks, LifecycleNode):
 
     def _switch_power(self, on):
         if not self.actuators.switch_power(on):
-            return TransitionCallbackReturn.FAILURE
+            return self._transition_failed('activate' if on else 'deactivate')
         self.get_logger().info('cable_driver %s' % ('active: torque on, commands accepted' if on
                                                     else 'inactive: torque off, holding'))
-        return TransitionCallbackReturn.SUCCESS
+        return self._transition_done()
 
     # -- parameters ---------------------------------------------------------------------------
     def _on_parameter_change(self, name, value):
@@ -322,8 +322,8 @@ class CableDriverNode(RunnerHooks, LifecycleNode):
     def _publish_diagnostics(self):
         # read by tip_controller: a goal fails at once, naming this, when commands are refused
         status = self.actuators.status()
-        level, message, values = self.health.report(self.gate, status,
-                                                    self.actuators.reconnects)
+        level, message, values = self._with_transition_failure(self.health.report(
+            self.gate, status, self.actuators.reconnects))
         self._diagnostics.publish(diag.diagnostic_array(
             self.get_clock().now().to_msg(), self.get_fully_qualified_name().lstrip('/'),
             self.robot.name, level, message, values))

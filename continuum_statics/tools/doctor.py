@@ -2,8 +2,10 @@
 
 Looks at the environment (domain id, discovery range), the robot file, the kernel cache and, for
 ``--duration`` seconds, the robot's namespace in the ROS graph: the nodes and their
-``/diagnostics``, the driver's lifecycle state and homing, topic rates against the parameters
-(read from the running nodes), /tf, and the sensors' frames and ages. The conclusions are
+``/diagnostics``, the driver's lifecycle state (and why a transition failed) and homing, topic
+rates against the parameters (read from the running nodes), /tf, every sensor's frame and stamp
+(the robot file's ``sensors/<name>`` too, once statics names its robot file), and on real
+tendons the measured tensions against the model's for the measured lengths. The conclusions are
 :mod:`.doctor_checks`'s; each finding says the one thing to do. Exit code 1 when any finding is
 an error.
 
@@ -20,6 +22,7 @@ import time
 from continuum_statics.tools.doctor_checks import (
     ERROR,
     WARN,
+    CableSample,
     Observation,
     TopicSample,
     diagnose,
@@ -69,11 +72,26 @@ def observe(namespace='continuum', duration=3.0, robot_file=None, domain_id=None
     observation = Observation(environment={key: os.environ.get(key, '') for key in ENV_KEYS},
                               namespace=absolute_namespace(namespace), duration=duration,
                               graph_seen=graph)
+    from continuum_statics.config_paths import resolve_config_path
+
     if domain_id is not None:
         observation.environment['ROS_DOMAIN_ID'] = str(domain_id)
     observation.kernels_cached = kernel_cache_state()
-    if graph:
-        _observe_graph(observation, domain_id)
+    samplers = _observe_graph(observation, domain_id, robot_file) if graph else {}
+    statics_file = observation.parameters.get('statics', {}).get('robot_file')
+    if not observation.robot_file or not robot_file and statics_file and \
+            resolve_config_path(statics_file) != observation.robot_file:  # statics seen late
+        observation.robot, observation.robot_error = None, ''
+        _load_robot(observation, robot_file)
+    if observation.robot is not None and 'cable_states' in samplers:
+        observation.cables = samplers['cable_states'].cables(observation.robot.cable_names)
+    if 'tip_wrench' in samplers:
+        observation.tip_force = samplers['tip_wrench'].mean_force()
+    return observation
+
+
+def _load_robot(observation, robot_file=None):
+    """Load the robot file the nodes use: ``robot_file``, else statics', else the shipped one."""
     from continuum_statics import load_robot
     from continuum_statics.config_paths import default_robot_file, resolve_config_path
 
@@ -84,17 +102,20 @@ def observe(namespace='continuum', duration=3.0, robot_file=None, domain_id=None
         observation.robot = load_robot(observation.robot_file)
     except (ValueError, OSError) as error:
         observation.robot_error = str(error)
-    return observation
 
 
 class _Sampler:
-    """Counts, rate, last frame and age of one topic's messages."""
+    """Counts, rate, last frame and age of one topic's messages.
+
+    And their values, for ``cable_states`` and ``tip_wrench``.
+    """
 
     def __init__(self, clock):
         self.clock = clock
         self.times = []
         self.frame_id = ''
         self.age = None
+        self.values = []  # (names, positions, efforts) of JointStates; forces of wrenches
 
     def __call__(self, msg):
         self.times.append(time.monotonic())
@@ -103,6 +124,37 @@ class _Sampler:
             self.frame_id = header.frame_id
             stamp = header.stamp.sec + 1e-9 * header.stamp.nanosec
             self.age = (self.clock.now().nanoseconds * 1e-9 - stamp) if stamp else None
+        if hasattr(msg, 'effort'):
+            self.values.append((tuple(msg.name), tuple(msg.position), tuple(msg.effort)))
+        elif hasattr(msg, 'wrench'):
+            force = msg.wrench.force
+            self.values.append((force.x, force.y, force.z))
+
+    def cables(self, names):
+        """Return the :class:`CableSample` of the JointStates that name ``names``, or None."""
+        import numpy as np
+
+        names = tuple(names)
+        lengths, efforts = [], []
+        for got, positions, effort in self.values:
+            if set(got) != set(names) or len(positions) != len(got):
+                continue
+            order = [got.index(name) for name in names]
+            lengths.append([positions[i] for i in order])
+            if len(effort) == len(got):
+                efforts.append([effort[i] for i in order])
+        if not lengths:
+            return None
+        efforts = np.array(efforts, dtype=float).reshape(-1, len(names))
+        known = len(efforts) == len(lengths) and bool(np.all(np.isfinite(efforts)))
+        return CableSample(np.mean(lengths, axis=0), np.mean(efforts, axis=0) if known else
+                           None, np.std(efforts, axis=0) if known else None, len(lengths))
+
+    def mean_force(self):
+        """Return the mean force (3,) N of the wrenches received, or None."""
+        import numpy as np
+
+        return np.mean(self.values, axis=0) if self.values else None
 
     def sample(self, publishers):
         rate = 0.0
@@ -118,7 +170,8 @@ def _message_class(path):
     return getattr(importlib.import_module(module), name)
 
 
-def _observe_graph(observation, domain_id):
+def _observe_graph(observation, domain_id, robot_file=None):
+    """Watch the graph; return the topic samplers by relative topic name."""
     import rclpy
     from rclpy.executors import SingleThreadedExecutor
     from rclpy.qos import qos_profile_sensor_data
@@ -133,14 +186,14 @@ def _observe_graph(observation, domain_id):
     executor = SingleThreadedExecutor(context=context)
     executor.add_node(node)
     try:
-        _watch(observation, node, executor, qos_profile_sensor_data)
+        return _watch(observation, node, executor, qos_profile_sensor_data, robot_file)
     finally:
         executor.shutdown(timeout_sec=1.0)
         node.destroy_node()
         rclpy.try_shutdown(context=context)
 
 
-def _watch(observation, node, executor, sensor_qos):
+def _watch(observation, node, executor, sensor_qos, robot_file=None):
     from diagnostic_msgs.msg import DiagnosticArray
 
     ns = observation.namespace.rstrip('/')
@@ -153,10 +206,28 @@ def _watch(observation, node, executor, sensor_qos):
 
     node.create_subscription(DiagnosticArray, '/diagnostics', on_diagnostics, 100)
     samplers = {}
-    for topic, path in SAMPLED_TOPICS.items():
+
+    def sample(topic, message_class):
         samplers[topic] = _Sampler(node.get_clock())
-        node.create_subscription(_message_class(path), '%s/%s' % (ns, topic), samplers[topic],
+        node.create_subscription(message_class, '%s/%s' % (ns, topic), samplers[topic],
                                  sensor_qos)
+
+    for topic, path in SAMPLED_TOPICS.items():
+        sample(topic, _message_class(path))
+
+    def on_found(nodes):
+        """Once the namespace is seen: the robot file statics runs, and its sensors sampled."""
+        if 'statics' in nodes:
+            observation.parameters['statics'] = _parameters(
+                node, executor, '%s/statics' % ns, NODE_PARAMETERS['statics'])
+        _load_robot(observation, robot_file)
+        sensors = () if observation.robot is None else observation.robot.sensors
+        for sensor in sensors:
+            sample('sensors/%s' % sensor.name, _message_class(
+                'geometry_msgs.msg:PoseWithCovarianceStamped' if sensor.covariance
+                else 'geometry_msgs.msg:PoseStamped'))
+        return bool(sensors)  # a full window more for the sensors' topics
+
     tf_frames = set()
     try:
         from tf2_msgs.msg import TFMessage
@@ -165,14 +236,15 @@ def _watch(observation, node, executor, sensor_qos):
             (t.header.frame_id, t.child_frame_id) for t in msg.transforms), sensor_qos)
     except ImportError:  # no tf2_msgs: the tf check says nothing
         pass
-    observation.nodes = _watch_until_found(node, executor, ns, observation.duration)
+    observation.nodes = _watch_until_found(node, executor, ns, observation.duration, on_found)
     for name, parameters in NODE_PARAMETERS.items():
-        if name in observation.nodes:
+        if name in observation.nodes and not observation.parameters.get(name):
             observation.parameters[name] = _parameters(node, executor, '%s/%s' % (ns, name),
                                                        parameters)
     observation.topics = {topic: sampler.sample(node.count_publishers('%s/%s' % (ns, topic)))
                           for topic, sampler in samplers.items()}
     observation.tf_frames = tuple(sorted(tf_frames))
+    return samplers
 
 
 _LEVEL_NAMES = {0: 'ok', 1: WARN, 2: ERROR, 3: WARN}
@@ -181,8 +253,12 @@ _LEVEL_NAMES = {0: 'ok', 1: WARN, 2: ERROR, 3: WARN}
 DISCOVERY_GRACE = 5.0
 
 
-def _watch_until_found(node, executor, ns, duration):
-    """Spin for ``duration`` s (longer while the namespace has no node); return its nodes."""
+def _watch_until_found(node, executor, ns, duration, on_found=None):
+    """Spin for ``duration`` s (longer while the namespace has no node); return its nodes.
+
+    ``on_found(nodes)`` is called once, when the namespace's nodes are first seen (else at the
+    end); True from it watches ``duration`` s more (for the subscriptions it made).
+    """
     start = time.monotonic()
     end, found, next_look = start + duration, (), start
     while True:
@@ -196,8 +272,13 @@ def _watch_until_found(node, executor, ns, duration):
                                      if namespace.rstrip('/') == ns))
                 if found:
                     end = max(end, now + min(duration, 1.0))
+                    if on_found is not None and on_found(found):
+                        end = max(end, time.monotonic() + duration)
+                    on_found = None
         if now >= end and (found or now >= start + duration + DISCOVERY_GRACE):
             break
+    if on_found is not None:  # nothing found: the robot file all the same
+        on_found(())
     return tuple(sorted(name for name, namespace in node.get_node_names_and_namespaces()
                         if namespace.rstrip('/') == ns))
 

@@ -8,6 +8,7 @@ counts the same errors. The checks' judgement is also tested without DDS.
 """
 import json
 import os
+import re
 import subprocess
 import sys
 
@@ -201,3 +202,226 @@ def test_checks_without_dds(tmp_path):
     # written today, calibrated in 2020: edited after calibration, and an old calibration
     assert [f.level for f in calibration] == [checks.WARN, checks.WARN]
     assert 'changed' in calibration[0].message and '2020-01-02 03:04' in calibration[1].message
+
+
+# -- issue 44 item 5: the doctor sees what the user sees --------------------------------------
+SENSORS_FILE = str(REPO / 'config' / 'tendon_robot_sensors.yaml')
+TENDONS_FILE = str(REPO / 'config' / 'tendon_robot_real_tendons.yaml')
+SENSORS = load_robot(SENSORS_FILE)
+TENDONS = load_robot(TENDONS_FILE)
+
+
+def sensors_seen(findings):
+    return [f for f in findings if f.check == 'sensors' and f.level == checks.ERROR]
+
+
+def test_robot_file_sensors_silent_foreign_or_1970():
+    ns = '/continuum'
+    topics = {'sensors/tip_tracker': checks.TopicSample(publishers=1),
+              'sensors/em_coil': checks.TopicSample(1, 40, 40.0, 'mocap_world', 0.01)}
+    seen = checks.Observation(robot=SENSORS, robot_file=SENSORS_FILE, namespace=ns,
+                              nodes=('statics',), topics=topics)
+    findings = checks.diagnose(seen)
+    # before: only tip_pose_measured and tip_wrench were looked at: no sensors finding, rc 0
+    errors_ = sensors_seen(findings)
+    assert [f.message.split(':')[0] for f in errors_] == ['sensor tip_tracker',
+                                                          'sensor em_coil'], findings
+    assert 'silent' in errors_[0].message
+    assert 'check the sensor tip_tracker is publishing on /continuum/sensors/tip_tracker' \
+        in errors_[0].action
+    assert "'mocap_world'" in errors_[1].message
+    # stamped 1970 (sec 1): before 'note' at worst; nobody publishing a declared sensor: error
+    topics['sensors/em_coil'] = checks.TopicSample(1, 40, 40.0, 'base_link', 1.75e9)
+    del topics['sensors/tip_tracker']
+    errors_ = sensors_seen(checks.diagnose(seen))
+    assert 'nobody publishes' in errors_[0].message and '1970' in errors_[1].message, errors_
+    # the tip tracker on tip_pose_measured counts for the robot file's tip sensor
+    topics['sensors/em_coil'] = checks.TopicSample(1, 40, 40.0, 'base_link', 0.01)
+    topics['tip_pose_measured'] = checks.TopicSample(1, 100, 100.0, 'base_link', 0.01)
+    assert not sensors_seen(checks.diagnose(seen))
+
+
+def test_statics_status_naming_a_silent_sensor_is_an_error():
+    status = (checks.WARN, 'sensor tip_tracker silent for 55.1 s',
+              {'tip_sigma_mm': '3.2'})
+    seen = checks.Observation(robot=SENSORS, robot_file=SENSORS_FILE, nodes=('statics',),
+                              statuses={'continuum/statics': status},
+                              topics={'tip_pose_measured': checks.TopicSample(
+                                  1, 100, 100.0, 'base_link', 0.01),
+                                  'sensors/em_coil': checks.TopicSample(
+                                      1, 40, 40.0, 'base_link', 0.01)})
+    findings = checks.diagnose(seen)
+    # before: [ok] statics ready: sensor tip_tracker silent for 55.1 s (and rc 0)
+    assert [f.level for f in findings if f.check == 'nodes' and 'statics' in f.message] == [
+        checks.WARN]
+    (silent,) = sensors_seen(findings)
+    assert 'sensor tip_tracker silent for 55.1 s' in silent.message
+    assert '/continuum/sensors/tip_tracker' in silent.action
+
+
+def test_sensors_without_model_uncertainty_run_on_a_stand_in_prior(tmp_path):
+    text = open(SENSORS_FILE).read()
+    bare = tmp_path / 'no_prior.yaml'
+    bare.write_text(text[:text.index('model_uncertainty:')])
+    robot = load_robot(str(bare))
+    seen = checks.Observation(robot=robot, robot_file=str(bare), graph_seen=False)
+    prior = [f for f in checks.diagnose(seen) if 'stand-in' in f.message]
+    # before: no word (the stand-in prior was silent)
+    assert [f.level for f in prior] == [checks.WARN]
+    assert 'calibrate --model-uncertainty' in prior[0].action
+    # a file with its own model_uncertainty: nothing to say
+    seen = checks.Observation(robot=SENSORS, robot_file=SENSORS_FILE, graph_seen=False)
+    assert not [f for f in checks.diagnose(seen) if 'stand-in' in f.message]
+
+
+def true_tensions(lengths):
+    """Tensions of the real robot at these true lengths, the cables last pulled (N)."""
+    warm = TENDONS.solve_lengths(lengths + 1e-4)
+    return TENDONS.solve_lengths(lengths, warm_start=warm).tensions
+
+
+@pytest.mark.parametrize('pose', [(0.0, 0.0, 0.0, 0.0), (-0.004, 0.001, 0.004, -0.001)])
+def test_tension_mismatch_names_the_cable_homed_10_mm_off(pose):
+    import numpy as np
+
+    truth = np.asarray(TENDONS.straight_cable_lengths) + pose
+    tensions = true_tensions(truth) + np.random.default_rng(4).normal(0.0, 0.05, 4)
+    std = np.full(4, 0.05)
+    homed = checks.Observation(robot=TENDONS, robot_file=TENDONS_FILE, graph_seen=False,
+                               cables=checks.CableSample(truth, tensions, std, 100))
+    (ok,) = [f for f in checks.diagnose(homed) if f.check == 'tensions']
+    assert ok.level == checks.OK, ok  # a correct home is not named
+    reads = truth.copy()
+    reads[2] -= 0.010  # cable_2's zero 10 mm off: it reads 10 mm short
+    off = checks.Observation(robot=TENDONS, robot_file=TENDONS_FILE, graph_seen=False,
+                             cables=checks.CableSample(reads, tensions, std, 100))
+    findings = checks.diagnose(off)
+    # before: no tensions check: status OK, nothing named (a shape bent ~68 mm, 39 N modelled)
+    (named,) = [f for f in findings if f.check == 'tensions']
+    assert named.level == checks.ERROR and checks.worst(findings) == checks.ERROR
+    assert re.search(r'cable_2 reads (9\.[5-9]|10\.[0-5]) mm less than its tension says',
+                     named.message), named.message
+    assert 'cable_0 reads' not in named.message
+    assert 're-home cable_2' in named.action and 'set_home' in named.action
+
+
+def test_tension_tolerance_is_noise_friction_and_sensor_error():
+    import numpy as np
+
+    truth = np.asarray(TENDONS.straight_cable_lengths) + (-0.004, 0.001, 0.004, -0.001)
+    for warm in (1e-4, -1e-4):  # friction either way: inside the band
+        tensions = TENDONS.solve_lengths(truth, warm_start=TENDONS.solve_lengths(
+            truth + warm)).tensions
+        result = checks.compare_tensions(TENDONS, truth, tensions)
+        assert not np.any(result.mismatch) and result.named == ()
+        assert np.all(result.low <= tensions + 1e-9) and np.all(tensions <= result.high + 1e-9)
+    # noisier readings widen it: 3 sigma of their scatter
+    wide = checks.compare_tensions(TENDONS, truth, tensions, np.full(4, 1.0))
+    assert np.allclose(wide.tolerance - result.tolerance, 3.0)
+
+
+def test_failed_lifecycle_transition_names_its_cause():
+    failure = 'configure failed: sim.dynamics needs real tendons (a tendons block)'
+    status = (checks.ERROR, failure, {'lifecycle': 'unconfigured',
+                                      'transition_failure': failure})
+    seen = checks.Observation(robot=ROBOT, robot_file=ROBOT_FILE, nodes=('cable_driver',),
+                              statuses={'continuum/cable_driver': status})
+    (driver,) = errors(checks.diagnose(seen), 'driver')
+    # before: "cable_driver is unconfigured" -> configure, then activate (which fails the same)
+    assert 'sim.dynamics needs real tendons' in driver.message
+    assert driver.action.startswith('fix that cause')
+
+
+def test_transition_failures_keep_the_reason_until_a_transition_succeeds():
+    from rclpy.lifecycle import TransitionCallbackReturn
+
+    from continuum_statics.control.health import ERROR as ERROR_LEVEL
+    from continuum_statics.nodes.transition_failures import TransitionFailures
+
+    class Logger:
+        def __init__(self):
+            self.lines = []
+
+        def error(self, text):
+            self.lines.append(text)
+
+        info = warning = error
+
+    class Node(TransitionFailures):
+        logger = Logger()
+
+        def get_logger(self):
+            return self.logger
+
+    node = Node()
+    log = node._recording()
+    health = (0, 'unconfigured (lifecycle)', {'lifecycle': 'unconfigured'})
+    assert node._with_transition_failure(health)[0] == 0
+    assert node._transition_failed('configure', ValueError('no tendons')) == \
+        TransitionCallbackReturn.FAILURE
+    level, message, values = node._with_transition_failure(health)
+    # before: the reason was in the log only; /diagnostics said "unconfigured", level OK
+    assert level == ERROR_LEVEL
+    assert values['transition_failure'] == 'configure failed: no tendons'
+    log.error('activate failed: torque refused')  # what the actuators log
+    node._transition_failed('activate')
+    assert node._with_transition_failure(health)[2]['transition_failure'] == \
+        'activate failed: torque refused'
+    node._transition_done()
+    assert 'transition_failure' not in node._with_transition_failure(
+        (0, 'ok', {'lifecycle': 'active'}))[2]
+
+
+@pytest.mark.ros
+def test_robot_file_sensors_over_dds(harness):
+    """A silent tip_tracker and an em_coil stamped 1970, as the robot file declares them."""
+    client = harness.client('sensors')
+    client.create_publisher(PoseStamped, 'sensors/tip_tracker', qos_profile_sensor_data)
+    coil = client.create_publisher(PoseStamped, 'sensors/em_coil', qos_profile_sensor_data)
+
+    def send():
+        msg = PoseStamped()
+        msg.header.frame_id = SENSORS.base_frame_id
+        msg.header.stamp.sec = 1  # an unset clock
+        coil.publish(msg)
+
+    client.create_timer(0.02, send)
+    found = sensors_seen(diagnose(harness, robot_file=SENSORS_FILE))
+    # before: neither topic was sampled: worst 'note', rc 0
+    assert [f.message.split(':')[0] for f in found] == ['sensor tip_tracker',
+                                                        'sensor em_coil'], found
+    assert 'silent' in found[0].message and '1970' in found[1].message
+    assert '%s/sensors/tip_tracker' % harness.namespace in found[0].action
+
+
+@pytest.mark.ros
+def test_refused_configure_is_named(harness):
+    """sim.dynamics on a robot file without real tendons: the driver says why, doctor too."""
+    start(harness, 'cable_driver', **{'sim.dynamics': True})
+    (driver,) = errors(diagnose(harness), 'driver')
+    # before: 'cable_driver is unconfigured' -> 'configure, then activate' (failing the same way)
+    assert 'configure failed' in driver.message and 'real tendons' in driver.message, driver
+    assert driver.action.startswith('fix that cause')
+
+
+@pytest.mark.ros
+def test_cable_homed_10_mm_off_on_real_tendons(harness):
+    """The driver reports cable_1 10 mm short at the straight pose, its load cell 2 N."""
+    client = harness.client('homed_off')
+    publisher = client.create_publisher(JointState, 'cable_states', qos_profile_sensor_data)
+    lengths = [float(v) for v in TENDONS.straight_cable_lengths]
+    lengths[1] -= 0.010
+
+    def send():
+        msg = JointState(name=list(TENDONS.cable_names), position=lengths, effort=[2.0] * 4)
+        msg.header.stamp = client.get_clock().now().to_msg()
+        publisher.publish(msg)
+
+    client.create_timer(0.01, send)
+    run = subprocess.run([sys.executable, '-m', 'continuum_statics', 'doctor', '--namespace',
+                          harness.namespace, '--duration', str(WATCH), '--robot', TENDONS_FILE],
+                         capture_output=True, text=True, timeout=120)
+    # before: no tension check, nothing named (statics would show a shape bent ~68 mm)
+    assert run.returncode == 1, run.stdout + run.stderr
+    assert re.search(r'cable_1 reads (9\.\d|10\.\d) mm less', run.stdout), run.stdout
+    assert 're-home cable_1' in run.stdout and 'set_home' in run.stdout
