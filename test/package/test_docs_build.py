@@ -2,7 +2,8 @@
 
 Warnings are errors (``-W``): a broken internal link or heading anchor (MyST), a missing image, a
 docstring autodoc cannot render. The node parameter tables are generated from the code's own
-tables, so every parameter a node declares is on the page.
+tables, so every parameter a node declares is on the page. The site reads offline (MathJax is
+copied into it) in rosdoc2's theme.
 """
 import re
 import subprocess
@@ -63,3 +64,19 @@ def test_every_page_is_in_the_table_of_contents(built):
             'calibration', 'api'} <= pages
     for page in pages:
         assert (built / ('%s.html' % page)).is_file(), page
+
+
+def test_the_site_reads_offline_in_rosdoc2s_theme(built):
+    """MathJax is the site's own copy (a robot computer is often offline); rosdoc2's theme."""
+    model = (built / 'model.html').read_text()
+    scripts = re.findall(r'<script[^>]*\ssrc="([^"]+)"', model)
+    mathjax = [src for src in scripts if 'mathjax' in src.lower()]
+    assert mathjax == ['_static/mathjax/tex-chtml.js'], scripts
+    assert (built / mathjax[0]).stat().st_size > 100_000
+    assert list((built / '_static' / 'mathjax' / 'output' / 'chtml' / 'fonts').rglob('*.woff'))
+    remote = re.compile(r'<(?:script|link|img)[^>]*\s(?:src|href)="(?:https?:)?//', re.I)
+    for page in built.glob('*.html'):
+        assert not remote.search(page.read_text()), page.name
+    assert '_static/css/theme.css' in model and 'wy-nav-content' in model  # sphinx_rtd_theme
+    assert '_static/site.css' in model and (built / '_static' / 'site.css').is_file()
+    assert r'\mathbf' in model  # the TeX is there for the local MathJax to typeset

@@ -25,8 +25,9 @@ ROSDEP_KEYS = {
 #: Development tools of the pip route only (lint, fuzzing, bag tests, the dynamics benchmark's
 #: PyElastica baseline): not needed on a robot.
 DEVELOPMENT_ONLY = {'hypothesis', 'ruff', 'mcap', 'mcap-ros2-support', 'playwright', 'sphinx',
-                    'myst-parser', 'colcon-core', 'colcon-ros', 'colcon-cmake',
-                    'colcon-python-setup-py', 'urdf-parser-py', 'pyelastica', 'pytest-xdist'}
+                    'myst-parser', 'sphinx-rtd-theme', 'sphinx-mathjax-offline', 'colcon-core',
+                    'colcon-ros', 'colcon-cmake', 'colcon-python-setup-py', 'urdf-parser-py',
+                    'pyelastica', 'pytest-xdist'}
 #: Optional on a robot computer (no rosdep key exists): `pip install viser` for `view`.
 OPTIONAL_PIP = {'viser'}
 #: ROS wheels that are the middleware, not a package dependency.
