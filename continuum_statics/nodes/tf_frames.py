@@ -11,6 +11,10 @@ transform), at an arc length of the backbone, oriented as the rod's cross-sectio
 
 The tracker's marker (``tip_marker`` of the robot file, when not zero) is a fixed offset from the
 tip frame: ``<tip frame>_marker`` on /tf_static.
+
+Every frame id is used once: :func:`frames` refuses a ``tip_frame_id`` that names another of
+these frames, and statics does not start (``tip_frame_id:=base_link`` gave the URDF two
+``base_link`` links, no root, and /tf a transform from base_link to itself).
 """
 import numpy as np
 
@@ -23,18 +27,44 @@ def frames(robot, tip_frame_id='', disks=False, prefix=''):
 
     ``prefix`` (``frame_prefix``, e.g. ``arm1/``) goes before every frame id: two arms from one
     robot file publish frames of their own.
+
+    :raises ValueError: when two of the frames (with the base frame and the marker's) share an
+        id, naming both: a node parameter or the robot file to change, not an invalid URDF
     """
     tip = tip_frame_id or '%s_tip' % robot.name
     names, arc_lengths = [tip], [float(robot.length)]
+    roles = ['the tip frame' + (' (tip_frame_id %r)' % tip_frame_id if tip_frame_id else '')]
     _, section_ends = section_layout(robot)
     for k, end in enumerate(section_ends):
         names.append('%s_section_%d' % (robot.name, k))
         arc_lengths.append(float(end))
+        roles.append("section %d's end-disk frame" % k)
     if disks:
         for i, s in enumerate(robot.guides):
             names.append('%s_disk_%d' % (robot.name, i))
             arc_lengths.append(float(s))
-    return tuple(prefix + name for name in names), np.asarray(arc_lengths)
+            roles.append("guide disk %d's frame (tf_disks)" % i)
+    names = tuple(prefix + name for name in names)
+    owners = [(robot.base_frame_id, 'the base frame (base.frame_id of the robot file)')]
+    owners += list(zip(names, roles))
+    if np.any(robot.tip_marker):
+        owners.append((marker_frame(names[0]), "the tip marker's frame (tip_marker)"))
+    _refuse_shared_ids(owners, robot.name)
+    return names, np.asarray(arc_lengths)
+
+
+def _refuse_shared_ids(owners, robot_name):
+    """Raise ValueError when one frame id is two frames of ``owners`` [(frame id, role)]."""
+    seen = {}
+    for frame, role in owners:
+        if frame in seen:
+            fix = ("choose another tip_frame_id (empty: '%s_tip')" % robot_name
+                   if 'tip' in seen[frame] + role
+                   else "rename the robot file's name or base.frame_id")
+            raise ValueError('frame id %r would be both %s and %s (robot_description would get '
+                             'two %r links, /tf two poses for it): %s'
+                             % (frame, seen[frame], role, frame, fix))
+        seen[frame] = role
 
 
 def marker_frame(tip_frame):

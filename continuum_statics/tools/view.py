@@ -5,7 +5,9 @@ guide disks and cables (``backbone_markers``; cables coloured by the tension ``c
 reports, blue 0 N to red ``--max-tension``, grey when no tension is measured), the tip trail
 (``tip_pose``), the goal in force (``tip_goal_active``) and every node's status
 (``/diagnostics``). A draggable gizmo (or the goal fields) and the *Send goal* button publish a
-tip goal on ``tip_goal_pose``. Until a topic has arrived the page says what it waits for.
+tip goal on ``tip_goal_pose``. The fields and gizmo follow the goal in force, whoever sent it,
+unless they hold an edit not sent yet (:func:`follow_goal`). Until a topic has arrived the page
+says what it waits for.
 Works wherever the page opens: no RViz needed.
 """
 import argparse
@@ -24,6 +26,10 @@ TRAIL = 300
 REFRESH_HZ = 10.0
 BACKBONE_RGB = (217, 140, 38)
 GOAL_RGB = (220, 30, 30)
+#: The goal fields' resolution, decimals of a metre (0.1 mm).
+FIELD_DECIMALS = 4
+#: Fields further than this from what the view last put there hold the user's edit, m.
+EDIT_TOLERANCE = 0.5 * 10.0 ** -FIELD_DECIMALS
 
 
 class LiveState:
@@ -161,6 +167,24 @@ def ros_thread(namespace, state, outbox, stop):
         rclpy.try_shutdown(context=context)
 
 
+def field_value(position):
+    """Return ``position`` (m) as the goal fields show it: a tuple rounded to 0.1 mm."""
+    return tuple(round(float(v), FIELD_DECIMALS) for v in position)
+
+
+def follow_goal(fields, synced, goal):
+    """Return where the goal fields go when the goal in force becomes ``goal``, or None.
+
+    The fields follow goals from any client (service, action, teleop, another view) while they
+    show what the view itself last put there (``synced``: the tip, a goal, or the goal just
+    sent); a difference is the user's edit, not sent yet, and it is kept rather than
+    overwritten. All positions in m, base frame.
+    """
+    if np.max(np.abs(np.subtract(fields, synced))) > EDIT_TOLERANCE:
+        return None
+    return field_value(goal)
+
+
 def tension_colours(values, max_tension):
     """RGB (k, 3) uint8, blue at 0 N to red at ``max_tension``; grey for unknown (NaN)."""
     values = np.asarray(values, dtype=float)
@@ -178,9 +202,12 @@ class Page:
         self.max_tension = max_tension
         self.seen = -1
         self.gizmo = None
+        self._goal_seen = None  # the goal in force the fields were last offered
         gui = server.gui
         self.status = gui.add_markdown('**waiting for backbone** (is statics running?)')
         self.goal_field = gui.add_vector3('goal (m, base frame)', (0.0, 0.0, 0.0), step=0.001)
+        # what the view last put into the goal fields: they differ from it when the user edits
+        self.synced = field_value(self.goal_field.value)
         self.send = gui.add_button('Send goal')
         self.send.on_click(lambda _: self.send_goal())
         self.goal_field.on_update(lambda _: self._move_gizmo(self.goal_field.value))
@@ -199,14 +226,21 @@ class Page:
         """Queue the goal the fields (and the gizmo) show as a tip goal."""
         goal = np.asarray(self.goal_field.value, dtype=float)
         if np.all(np.isfinite(goal)):
+            self.synced = tuple(self.goal_field.value)  # sent: no longer an edit to keep
             self.outbox.append((goal, self.state.frame_id or 'base_link'))
+
+    def _set_fields(self, position):
+        """Put ``position`` (m) into the goal fields and the gizmo, as not edited."""
+        self.synced = field_value(position)
+        self.goal_field.value = self.synced
+        self._move_gizmo(self.synced)
 
     def _move_gizmo(self, position):
         if self.gizmo is not None:
             self.gizmo.position = tuple(float(v) for v in position)
 
     def _on_drag(self, _):
-        self.goal_field.value = tuple(round(float(v), 4) for v in self.gizmo.position)
+        self.goal_field.value = field_value(self.gizmo.position)
 
     def refresh(self):
         """Redraw what changed."""
@@ -228,12 +262,19 @@ class Page:
         if backbone is not None:
             segments = np.stack([backbone[:-1], backbone[1:]], axis=1)
             scene.add_line_segments('/robot/backbone', segments, BACKBONE_RGB, thickness=0.008)
-            if self.gizmo is None:  # the goal gizmo starts at the tip
+            if self.gizmo is None:  # the goal gizmo starts at the goal in force, else the tip
+                start = field_value(backbone[-1] if goal is None else goal)
                 self.gizmo = scene.add_transform_controls('/goal_gizmo', scale=0.08,
-                                                          position=tuple(backbone[-1]),
+                                                          position=start,
                                                           disable_rotations=True)
                 self.gizmo.on_update(self._on_drag)
-                self.goal_field.value = tuple(round(float(v), 4) for v in backbone[-1])
+                self._set_fields(start)
+                self._goal_seen = goal
+        if goal is not None and goal is not self._goal_seen:  # a new goal (a new array each)
+            self._goal_seen = goal
+            target = follow_goal(self.goal_field.value, self.synced, goal)
+            if target is not None:
+                self._set_fields(target)
         for i, (position, quaternion, diameter) in enumerate(disks):
             x, y, z, w = quaternion
             scene.add_cylinder('/robot/disk_%d' % i, radius=0.5 * diameter, height=0.002,
@@ -253,6 +294,9 @@ class Page:
             scene.add_icosphere('/goal', radius=0.006, color=GOAL_RGB, position=tuple(goal))
         lines = ['waiting for **backbone** (is statics running?)' if backbone is None else
                  'tip **%.1f %.1f %.1f** mm' % tuple(backbone[-1] * 1e3)]
+        if goal is not None and follow_goal(self.goal_field.value, self.synced, goal) is None:
+            lines.append('goal fields: your edit, not sent (goal in force **%.1f %.1f %.1f** mm)'
+                         % tuple(np.asarray(goal) * 1e3))
         if not cables:
             lines.append('waiting for **backbone_markers**')
         if not tensions:

@@ -16,10 +16,8 @@ import pytest
 
 PAGES = [REPO / 'README.md'] + sorted((REPO / 'doc').glob('*.md'))
 MARK = re.compile(r'^(?:%|<!--)\s*snippet:\s*compile-only\b')
-#: Pages whose snippets are compiled only until their owner makes them self-contained: doc/
-#: dynamics.md's block uses `robot` and `new_lengths` it does not define (python_api.md has the
-#: same block, self-contained).
-PENDING = {'dynamics.md'}
+#: Pages whose snippets are compiled only until their owner makes them self-contained.
+PENDING = set()
 
 
 def snippets():

@@ -2,7 +2,8 @@
 
 Bringup and the view run as subprocesses, as a user starts them; the browser loads the page, a
 screenshot must show the robot (pixels of the backbone's colour), and a goal typed into the page
-and sent with its button must reach the controller (``tip_goal_active``) and be reached.
+and sent with its button must reach the controller (``tip_goal_active``) and be reached; a goal
+another client then sends must show in the page's goal fields.
 """
 import os
 import shutil
@@ -21,6 +22,7 @@ from diagnostic_msgs.msg import DiagnosticArray  # noqa: E402
 from geometry_msgs.msg import PoseStamped  # noqa: E402
 
 from continuum_statics import load_robot  # noqa: E402
+from continuum_statics.nodes.qos import COMMAND_QOS  # noqa: E402
 
 pytestmark = pytest.mark.ros
 BROWSER = shutil.which('chromium-headless-shell') or shutil.which('chromium')
@@ -66,6 +68,7 @@ def test_the_page_shows_the_live_robot_and_sends_a_goal_the_controller_reaches(t
     goals = Collector(node, PoseStamped, 'tip_goal_active', LATCHED)
     tips = Collector(node, PoseStamped, 'tip_pose', LATCHED)
     diagnostics = Collector(node, DiagnosticArray, '/diagnostics', 10)
+    client = node.create_publisher(PoseStamped, 'tip_goal_pose', COMMAND_QOS)
 
     def spin_until(predicate, timeout, what):
         def spun():
@@ -100,6 +103,23 @@ def test_the_page_shows_the_live_robot_and_sends_a_goal_the_controller_reaches(t
 
             spin_until(reached, 30.0, 'the goal reached')
             assert np.linalg.norm(pose_xyz(tips.last.pose) - goal) < 2e-3
+            # another client's goal: the page's fields follow it
+            other = np.round(ROBOT.solve_ivp([0.0, 2.0, 1.0]).tip_position, 3)
+            message = PoseStamped()
+            message.header.frame_id = ROBOT.base_frame_id
+            message.pose.position.x, message.pose.position.y, message.pose.position.z = (
+                float(v) for v in other)
+            message.pose.orientation.w = 1.0
+            client.publish(message)
+            spin_until(lambda: np.linalg.norm(pose_xyz(goals.last.pose) - other) < 1e-6, 30.0,
+                       'the goal %s from another client at the controller' % other)
+
+            def fields_show_it():
+                shown = [float(fields.nth(i).input_value()) for i in range(3)]
+                return np.allclose(shown, other, atol=1e-4)
+
+            spin_until(fields_show_it, 10.0, 'the goal %s in the page fields' % other)
+            # before: the fields stayed at the page's own goal (timed out after 10 s)
             browser.close()
     finally:
         executor.shutdown()
