@@ -169,7 +169,7 @@ def format_budget(budget):
     lines = ['error budget (tip RMS per row, mm; motor positions within %.2f mm count as the '
              'same command):' % (budget['same_command_tolerance'] * 1e3)]
     for name, entry in budget['repeatability'].items():
-        lines.append('  repeatability floor, %-8s %s (%d pairs, pair RMS %s, median %s)' % (
+        lines.append('  repeatability floor, %-10s %s (%d pairs, pair RMS %s, median %s)' % (
             name + ':', mm(entry['per_row']), entry['pairs'], mm(entry['pair_rms']),
             mm(entry['pair_median'])))
     for name, entry in budget['baselines'].items():
@@ -180,6 +180,6 @@ def format_budget(budget):
                                                     mm(entry['held_out_rms_aligned']))
         lines.append(text)
     for name, entry in budget.get('model', {}).items():
-        lines.append('  physical model, %-8s %s (%s aligned); beyond the floor about %s' % (
+        lines.append('  physical model, %-10s %s (%s aligned); beyond the floor about %s' % (
             name + ':', mm(entry['rms']), mm(entry['rms_aligned']), mm(entry['beyond_floor'])))
     return '\n'.join(lines)

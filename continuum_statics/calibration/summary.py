@@ -7,8 +7,8 @@ number for a one-value name, a list per section or cable otherwise), ``rms_befor
 ``mean_after``, ``max_before``, ``max_after`` (m, Euclidean tip errors), ``optimizer``,
 ``seconds``, ``output``. Recorded runs add ``registration``, ``unconverged_rows``, ``notes``,
 with ``--validate`` ``validate_rms``, ``validate_rms_aligned``, ``validate_max`` and with
-``--report`` the ``error_budget``. Tip loads add ``tip_error_before`` / ``tip_error_after``
-({mean_mm, max_mm}), kept for scripts written against the first releases.
+``report`` (the command's default) the ``error_budget``. Tip loads add ``tip_error_before`` /
+``tip_error_after`` ({mean_mm, max_mm}), kept for scripts written against the first releases.
 """
 import numpy as np
 import yaml
@@ -20,6 +20,14 @@ from continuum_statics.calibration.replay import error_statistics
 UNDETERMINED = 0.5
 #: A capstan coefficient below this changes a tension by < 0.3 % over a half turn: none.
 NEGLIGIBLE_FRICTION = 1e-3
+
+
+def unit_label(unit):
+    """Return the unit as a report prints it: 'dimensionless' for a value's ``'1'`` (SI).
+
+    Printed bare, ``friction 7.3e-11 1`` read as a second value (issue 44).
+    """
+    return 'dimensionless' if unit == '1' else unit
 
 
 def shear_fixed(robot_file):
@@ -96,7 +104,7 @@ def header(summary):
     for name, value in summary['fitted'].items():
         after, std = np.atleast_1d(value['after']), np.atleast_1d(value['std'])
         parts.append('%s %s %s (1-sigma %s)' % (
-            name, ' '.join('%.5g' % v for v in after), value['unit'],
+            name, ' '.join('%.5g' % v for v in after), unit_label(value['unit']),
             ' '.join('%.2g' % v for v in std)))
     names = ', '.join(summary['fit'])
     lines.append('fitted: %s.' % names)

@@ -3,7 +3,8 @@
 Two data kinds, one library (:mod:`continuum_statics.calibration`): static rows of known tip
 loads (:mod:`~continuum_statics.calibration.tip_loads`) and recorded runs of cable lengths and a
 tracked tip (:mod:`~continuum_statics.calibration.runs`). This module parses the command line and
-prints; ``--report`` adds the error budget (repeatability floor, smooth baselines, the model).
+prints; recorded runs get the error budget (repeatability floor, smooth baselines, the model)
+by default, the yardstick the model's RMS is read against (``--no-report`` leaves it out).
 """
 import argparse
 import json
@@ -21,6 +22,7 @@ from continuum_statics.calibration.parameters import (
 )
 from continuum_statics.calibration.recorded_run import add_column_arguments, column_map_from_args
 from continuum_statics.calibration.runs import calibrate_run
+from continuum_statics.calibration.summary import unit_label
 from continuum_statics.calibration.tip_loads import FORCE_COLUMNS, calibrate_tip_loads
 
 
@@ -83,9 +85,12 @@ def main(argv=None):
                         help='recorded runs: candidate fit names added to --fit only where they '
                              'lower the error cross-validated inside the run (by motion '
                              'pattern; the --validate file is never used to choose)')
-    parser.add_argument('--report', action='store_true',
-                        help='recorded runs: add the error budget (repeatability floor, smooth '
-                             'baselines of the motor positions, the model) to the report')
+    # on by default: 0.16 s on the v6 run (1019 + 274 rows, 9 cables) beside an 18 s fit, and
+    # without it an RMS of 11 mm cannot be told good from bad (issue 44)
+    parser.add_argument('--report', action=argparse.BooleanOptionalAction, default=True,
+                        help='recorded runs: the error budget (repeatability floor, smooth '
+                             'baselines of the motor positions, the model) in the report '
+                             '(default on; --no-report leaves it out)')
     parser.add_argument('--model-uncertainty', action='store_true',
                         help="recorded runs: also measure the model's own error on the run "
                              '(unmodelled loads and their correlation time) and write it as '
@@ -123,7 +128,7 @@ def main(argv=None):
                                                    summary['model']))
     for name, f in summary['fitted'].items():
         print('  %-20s %14.6g -> %14.6g %-7s (1-sigma %.2g)%s' % (
-            name, f['before'], f['after'], f['unit'], f['std'],
+            name, f['before'], f['after'], unit_label(f['unit']), f['std'],
             '  AT BOUND' if f['at_bound'] else ''))
     print('tip error before: mean %.3f mm, max %.3f mm' % (summary['mean_before'] * 1e3,
                                                            summary['max_before'] * 1e3))
@@ -176,7 +181,7 @@ def _run_report(summary):
         after, sigma = (np.atleast_1d(np.asarray(value.get(key, np.nan), dtype=float))
                         for key in ('after', 'std'))
         lines.append('  %-17s %s %s (1-sigma %s)' % (
-            name, ' '.join('%.5g' % v for v in after), value['unit'],
+            name, ' '.join('%.5g' % v for v in after), unit_label(value['unit']),
             ' '.join('%.2g' % v for v in sigma)))
         # a value whose 1-sigma reaches its own size: the data do not determine it
         if np.any(~(sigma < np.abs(after))):
@@ -203,6 +208,9 @@ def _run_report(summary):
             ', '.join(selection['kept']) or 'none'))
     if 'error_budget' in summary:
         lines.append(format_budget(summary['error_budget']))
+    else:
+        lines.append('note: no error budget (--no-report): without its repeatability floor '
+                     'and model-free baselines the tip RMS above has no yardstick')
     if 'model_uncertainty' in summary:
         u = summary['model_uncertainty']
         lines.append("model_uncertainty (the model's own error, tracker sigma %.2g m):"

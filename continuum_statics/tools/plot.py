@@ -7,7 +7,8 @@ Reads a rosbag2 directory (ours or one from ``ros2 bag record``, MCAP or SQLite)
   started), or at several instants of a recording without goals, in 3-D (equal axes, base frame)
 - ``tip_path.png``: tip path in 3-D with the goals, and each tip coordinate over time on an axis
   of its own, with the goal in force drawn as a step
-- ``cable_lengths.png``: commanded vs measured cable lengths over time
+- ``cable_lengths.png``: commanded vs measured cable lengths over time, one axis per cable in
+  the robot file's order (the order the driver's and controller's JointStates list them)
 - ``solver.png``: statics solve time and residual over time (from ``/diagnostics``)
 
 Topics are found by name and type (``.../backbone`` Path, ``.../tip_pose`` PoseStamped,
@@ -290,9 +291,18 @@ def _figure_tip(rec, output):
     return output
 
 
+def cable_order(rec):
+    """Cable names in the order the bag's JointStates first list them: the robot file's.
+
+    Measured first (the driver lists every cable), then any only commanded. Not sorted:
+    ``servo_1, servo_11, servo_2`` is no robot's order.
+    """
+    return list(dict.fromkeys([*rec.measured, *rec.commanded]))
+
+
 def _figure_cables(rec, output):
     plt = _pyplot()
-    names = sorted(set(rec.commanded) | set(rec.measured))
+    names = cable_order(rec)
     fig, axes = plt.subplots(len(names), 1, figsize=(9.0, 2.2 * len(names) + 1.0), sharex=True,
                              squeeze=False)
     for ax, name in zip(axes[:, 0], names):
@@ -383,7 +393,6 @@ def main(argv=None):
         print('error: nothing to plot in %s' % args.bag, file=sys.stderr)
         return 1
     return 0
-
 
 
 if __name__ == '__main__':

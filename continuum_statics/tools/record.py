@@ -10,6 +10,10 @@ Default topics: everything in the robot's namespace (default ``continuum``) plus
 ``ros2 bag record`` does: reliable only if every publisher is, transient local only if every
 publisher is (so the latched backbone and tip pose are recorded even when they are not
 republished). Ctrl-C (SIGINT) or SIGTERM ends the recording with a complete bag.
+
+``--duration`` counts from the first message written, not from start-up: discovery and
+subscription matching take 1-4 s, which a clock started at launch cut off the recording (issue
+44). Rates are over each topic's own span, first to last message.
 """
 import argparse
 import datetime
@@ -26,6 +30,9 @@ DEFAULT_NAMESPACE = 'continuum'
 EXTRA_TOPICS = ('/diagnostics',)
 #: How often the graph is searched for new topics (s).
 DISCOVERY_PERIOD = 0.5
+#: Longest wait for the first message when a duration is given (s; at least the duration):
+#: a recording of nothing then ends instead of waiting for Ctrl-C.
+FIRST_MESSAGE_WAIT = 30.0
 
 
 def _print(text):
@@ -172,7 +179,8 @@ class Recorder:
     """Subscribes to wanted topics as they appear and writes every message to a rosbag2 writer.
 
     All callbacks run in the thread that spins ``node``, which is also the one that adds
-    connections, so the writer needs no lock.
+    connections, so the writer needs no lock. ``times`` holds each topic's first and last
+    receive stamp (ns, the bag's clock); ``started`` the monotonic time of the first message (s).
     """
 
     def __init__(self, node, writer, namespace=DEFAULT_NAMESPACE, topics=(), log=_print):
@@ -183,6 +191,8 @@ class Recorder:
         self.log = log
         self.typestore = make_typestore()
         self.counts = {}
+        self.times = {}
+        self.started = None
         self.subscriptions = {}
         self.skipped = {}
 
@@ -217,8 +227,12 @@ class Recorder:
         self.counts[topic] = 0
 
         def write(data, topic=topic, connection=connection):
-            self.writer.write(connection, time.time_ns(), data)
+            stamp = time.time_ns()
+            self.writer.write(connection, stamp, data)
             self.counts[topic] += 1
+            self.times[topic] = (self.times.get(topic, (stamp,))[0], stamp)
+            if self.started is None:
+                self.started = time.monotonic()
 
         self.subscriptions[topic] = self.node.create_subscription(
             message_class(msgtype), topic, write, qos, raw=True)
@@ -269,9 +283,13 @@ def default_output():
 
 def record(output, duration=None, namespace=DEFAULT_NAMESPACE, topics=(), log=_print,
            stop_requested=lambda: False):
-    """Record until ``duration`` s have passed or ``stop_requested()``; return the counts.
+    """Record ``duration`` s from the first message, or until ``stop_requested()``.
 
-    :returns: (dict topic -> message count, recorded seconds)
+    With a duration and no message within ``max(duration, FIRST_MESSAGE_WAIT)`` s, it stops
+    with an empty bag.
+
+    :returns: (dict topic -> message count, dict topic -> (first, last) receive stamp in ns;
+        a topic subscribed that sent nothing has a count of 0 and no stamps)
     :raises ValueError: when ``output`` exists (a bag is never overwritten)
     """
     import rclpy
@@ -296,19 +314,42 @@ def record(output, duration=None, namespace=DEFAULT_NAMESPACE, topics=(), log=_p
     try:
         while not stop_requested():
             now = time.monotonic()
-            if duration is not None and now - start >= duration:
+            if duration is not None and (
+                    now - start >= max(duration, FIRST_MESSAGE_WAIT) if recorder.started is None
+                    else now - recorder.started >= duration):
                 break
             if now >= next_discovery:
                 recorder.discover()
                 next_discovery = now + DISCOVERY_PERIOD
             executor.spin_once(timeout_sec=0.05)
     finally:
-        elapsed = time.monotonic() - start
         executor.shutdown()
         node.destroy_node()
         rclpy.try_shutdown(context=context)
         writer.close()
-    return dict(recorder.counts), elapsed
+    return dict(recorder.counts), dict(recorder.times)
+
+
+def recorded_span(times):
+    """Seconds from the first to the last message of a recording (0 without messages).
+
+    :param times: topic -> (first, last) receive stamp, ns
+    """
+    if not times:
+        return 0.0
+    return (max(last for _, last in times.values())
+            - min(first for first, _ in times.values())) * 1e-9
+
+
+def topic_rate(count, first_last):
+    """Rate of a topic over its own span (Hz): (count - 1) / (last - first); None below 2.
+
+    Over the topic's span, not the recording's: a topic discovered late, or a 1 Hz one whose
+    next message is due after the end, is not diluted by time it could not be heard in.
+    """
+    if count < 2 or first_last is None or first_last[1] <= first_last[0]:
+        return None
+    return (count - 1) / ((first_last[1] - first_last[0]) * 1e-9)
 
 
 def main(argv=None):
@@ -337,32 +378,42 @@ def main(argv=None):
     previous = {sig: signal.signal(sig, on_signal) for sig in (signal.SIGINT, signal.SIGTERM)}
     what = (' '.join(sorted(absolute_topics(args.topics, args.namespace))) if args.topics
             else '/%s/* and %s' % (args.namespace.strip('/'), ' '.join(EXTRA_TOPICS)))
-    print('record: %s -> %s (ROS_DOMAIN_ID %s)%s' % (
+    print('record: %s -> %s (ROS_DOMAIN_ID %s); %s' % (
         what, output, os.environ.get('ROS_DOMAIN_ID', '0'),
-        '' if args.duration else '; Ctrl-C to stop'), flush=True)
+        '%g s from the first message' % args.duration if args.duration else 'Ctrl-C to stop'),
+        flush=True)
     try:
-        counts, elapsed = record(output, args.duration, args.namespace, args.topics,
-                                 stop_requested=lambda: bool(stop))
+        counts, times = record(output, args.duration, args.namespace, args.topics,
+                               stop_requested=lambda: bool(stop))
     except ValueError as error:
         print('error: %s' % error, file=sys.stderr)
         return 1
     finally:
         for sig, handler in previous.items():
             signal.signal(sig, handler)
-    print_summary(output, counts, elapsed)
+    print_summary(output, counts, times)
     never = sorted(absolute_topics(args.topics, args.namespace) - set(counts))
     if never:
         print('record: never saw a publisher on %s' % ', '.join(never), flush=True)
     return 0
 
 
-def print_summary(output, counts, elapsed):
-    """Print messages and rate per topic."""
-    print('record: %.1f s into %s' % (elapsed, output))
-    print('%-44s %9s %9s' % ('topic', 'messages', 'rate[Hz]'))
+def print_summary(output, counts, times):
+    """Print the recorded span, and messages, span and rate per topic.
+
+    :param times: topic -> (first, last) receive stamp, ns (as :func:`record` returns)
+    """
+    print('record: %.2f s from the first to the last message into %s' % (
+        recorded_span(times), output))
+    print('%-44s %9s %8s %9s' % ('topic', 'messages', 'span[s]', 'rate[Hz]'))
     for topic in sorted(counts):
-        print('%-44s %9d %9.1f' % (topic, counts[topic], counts[topic] / max(elapsed, 1e-9)))
-    print('%-44s %9d' % ('total', sum(counts.values())), flush=True)
+        first_last = times.get(topic)
+        span = 0.0 if first_last is None else (first_last[1] - first_last[0]) * 1e-9
+        rate = topic_rate(counts[topic], first_last)
+        print('%-44s %9d %8.2f %9s' % (topic, counts[topic], span,
+                                       '-' if rate is None else '%.1f' % rate))
+    print('%-44s %9d' % ('total', sum(counts.values())))
+    print('(span: first to last message of the topic; rate: (messages - 1) / span)', flush=True)
     if not counts:
         print('record: no topics found: is the robot running in this ROS_DOMAIN_ID and '
               'namespace?', flush=True)

@@ -228,3 +228,41 @@ def test_the_run_report_notes_values_that_act_only_with_another():
     assert 'gravity acts only' not in report({'youngs_modulus': {'after': 5e10, 'std': 1e8,
                                                                  'unit': 'Pa'}})
 
+
+
+def test_a_recorded_run_reports_its_error_budget_and_names_friction_unit_by_default(
+        tmp_path, capsys):
+    """Issue 44: the budget came only with --report; friction's unit read as a second value.
+
+    `calibrate` as documented printed no yardstick (the floor and baselines) and `friction
+    7.3e-11 1`.
+    """
+    from test_run_calibration import V6, synthetic_run, write_run_csv
+
+    robot = load_robot(V6)
+    run, _ = synthetic_run(robot)  # pulls and releases: repeated commands, friction's spread
+    csv, header = write_run_csv(tmp_path / 'run.csv', robot, run)
+    code = calibrate.main([
+        '--robot', str(V6), '--data', str(csv), '--fit', 'registration', 'friction',
+        '--max-evaluations', '1', '--cable-columns', ','.join(header[1:10]),
+        '--cable-kind', 'displacement', '--cable-scale', '0.001', '--tip-scale', '0.001'])
+    assert code == 0
+    report = capsys.readouterr().out
+    # before: neither line (the budget needed --report); 'friction          1e-10 1 (1-sigma ...'
+    assert '  repeatability floor, train:' in report, report
+    assert '  polynomial ridge (' in report and '  physical model, train:' in report
+    friction = next(line for line in report.splitlines() if line.startswith('  friction '))
+    assert friction.split()[2:4] == ['dimensionless', '(1-sigma'], friction
+
+
+def test_without_the_budget_the_run_report_says_it_has_no_yardstick():
+    from continuum_statics.tools.calibrate import _run_report
+
+    summary = {'optimizer': {'message': 'ok', 'evaluations': 3}, 'seconds': 1.0,
+               'fitted': {'friction': {'after': 0.05, 'std': 0.01, 'unit': '1'}},
+               'rms_before': 1e-3, 'rms_after': 5e-4, 'rms_aligned_after': 4e-4,
+               'max_after': 1e-3, 'unconverged_rows': 0, 'output': None}
+    report = _run_report(summary)
+    # before: no word that the budget was missing, and 'friction          0.05 1 (1-sigma 0.01)'
+    assert 'note: no error budget (--no-report)' in report, report
+    assert '  friction          0.05 dimensionless (1-sigma 0.01)' in report, report

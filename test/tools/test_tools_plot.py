@@ -221,3 +221,29 @@ def test_the_backbone_at_the_end_of_each_goal_and_goals_from_the_active_goal_top
     assert result.returncode == 0, result.stderr
     assert_png(tmp_path / 'plots' / 'backbone.png')
     assert_png(tmp_path / 'plots' / 'tip_path.png')
+
+
+def test_cables_are_drawn_in_the_robot_files_order(tmp_path, monkeypatch):
+    """The v6 robot's cables as its file lists them, not as their names sort."""
+    v6 = ['servo_1', 'servo_20', 'servo_23', 'servo_9', 'servo_6', 'servo_11']
+    JointState = STORE.types['sensor_msgs/msg/JointState']
+
+    def state(t):
+        return JointState(header=header(t), name=v6, position=np.full(len(v6), 0.3 - 1e-3 * t),
+                          velocity=np.zeros(0), effort=np.zeros(0))
+
+    bag = write_bag(tmp_path / 'bag', {
+        '/continuum/cable_states': ('sensor_msgs/msg/JointState', state),
+        '/continuum/cable_commands': ('sensor_msgs/msg/JointState', state)}, seconds=1)
+    figures = []
+    import matplotlib.pyplot as plt
+
+    monkeypatch.setattr(plt, 'close', figures.append)  # keep the figure to read its axes
+    plot.plot_bag(bag, tmp_path / 'png', log=lambda text: None)
+    monkeypatch.undo()
+    labels = [ax.get_ylabel() for ax in figures[0].axes]
+    # before: servo_1, servo_11, servo_20, servo_23, servo_6, servo_9 (sorted by name)
+    assert labels == ['%s [mm]' % name for name in v6], labels
+    assert plot.cable_order(plot.read_recording(bag)) == v6
+    for figure in figures:
+        plt.close(figure)

@@ -23,6 +23,7 @@ import yaml
 rclpy = pytest.importorskip('rclpy')
 from geometry_msgs.msg import PoseStamped  # noqa: E402
 from rosbags.highlevel import AnyReader  # noqa: E402
+from sensor_msgs.msg import JointState  # noqa: E402
 
 from continuum_statics import load_robot  # noqa: E402
 from continuum_statics.tools import plot  # noqa: E402
@@ -221,9 +222,9 @@ def test_duration_namespace_filter_and_topic_list(harness, tmp_path):
         listed, _ = record(tmp_path / 'listed', duration=30.0, namespace=namespace,
                            topics=['/elsewhere/tip_goal_pose'], log=log, stop_requested=done)
         start = time.monotonic()
-        _, elapsed = record(tmp_path / 'short', duration=0.5, namespace=namespace,
-                            log=lambda text: None)
-        assert time.monotonic() - start >= 0.5 and elapsed >= 0.5
+        _, times = record(tmp_path / 'short', duration=0.5, namespace=namespace,
+                          log=lambda text: None)
+        assert time.monotonic() - start >= 0.5 and mine in times
     finally:
         stop.set()
         publisher.join()
@@ -285,3 +286,78 @@ def test_move_tip_feedback_and_status_are_recorded_and_read_back(harness, tmp_pa
     assert connections[0].msgtype == 'continuum_statics_interfaces/action/MoveTip_FeedbackMessage'
     known = [d for d in distances if d >= 0.0]
     assert known and known[0] > known[-1], distances  # the tip got closer
+
+
+def bag_stamps(bag, topic):
+    """Receive stamps (ns) of ``topic``'s messages in ``bag``."""
+    with AnyReader([Path(bag)]) as reader:
+        connections = [c for c in reader.connections if c.topic == topic]
+        return [stamp for _, stamp, _ in reader.messages(connections=connections)]
+
+
+def test_duration_counts_from_the_first_message_and_rates_are_over_the_span(
+        harness, tmp_path, capsys):
+    """Issue 44: --duration counts from the first message; rates are over the topic's span.
+
+    The clock started at launch (discovery ate 1-4 s of --duration) and the rate was the count
+    over the requested time (`--duration 5`: 2.36 s saved, 96.4 Hz printed for 204 Hz).
+    """
+    from continuum_statics.tools import record as recorder
+
+    node = harness.client()
+    publisher = node.create_publisher(JointState, 'cable_states', RELIABLE)
+    topic = '%s/cable_states' % harness.namespace
+    subscribed, stop = threading.Event(), threading.Event()
+
+    def publish():
+        # the first message 2 s after the recorder subscribed: later than --duration 1.5
+        # counted from launch, whatever discovery takes
+        subscribed.wait(60.0)
+        stop.wait(2.0)
+        while not stop.is_set():
+            publisher.publish(JointState(name=['c0'], position=[0.3]))
+            time.sleep(0.005)
+
+    def log(text):
+        if text.startswith('record: recording %s ' % topic):
+            subscribed.set()
+
+    thread = threading.Thread(target=publish, daemon=True)
+    thread.start()
+    try:
+        counts, times = recorder.record(tmp_path / 'bag', duration=1.5, topics=[topic],
+                                        log=log)
+    finally:
+        stop.set()
+        thread.join()
+    stamps = bag_stamps(tmp_path / 'bag', topic)
+    # before: 0 messages (the 1.5 s had run out before the first message came)
+    assert counts[topic] == len(stamps) > 50, counts
+    # the whole 1.5 s from the first message is in the bag (less the last inter-message gap;
+    # 0.5 s of slack for a loaded machine)
+    assert times[topic] == (stamps[0], stamps[-1])
+    assert recorder.recorded_span(times) == (stamps[-1] - stamps[0]) * 1e-9 > 1.0
+    recorder.print_summary(tmp_path / 'bag', counts, times)
+    line = next(line for line in capsys.readouterr().out.splitlines()
+                if line.startswith(topic)).split()
+    # messages, span (s) and rate (Hz) over the topic's own first-to-last span
+    span = (stamps[-1] - stamps[0]) * 1e-9
+    assert line[1:] == [str(len(stamps)), '%.2f' % span, '%.1f' % ((len(stamps) - 1) / span)]
+
+
+def test_the_summary_says_what_the_span_and_rates_are_over(capsys):
+    """A 200 Hz topic recorded for 5 s and a 1 Hz one: each rate over its own span."""
+    from continuum_statics.tools.record import print_summary
+
+    counts = {'/c/cable_states': 1001, '/diagnostics': 5, '/c/tip_pose': 1}
+    times = {'/c/cable_states': (10 ** 9, 6 * 10 ** 9), '/diagnostics': (2 * 10 ** 9, 6 * 10 ** 9),
+             '/c/tip_pose': (3 * 10 ** 9, 3 * 10 ** 9)}
+    print_summary('bag', counts, times)
+    out = capsys.readouterr().out
+    # before: counts over the requested time: with --duration 10 'record: 10.0 s' and
+    # cable_states 100.1 Hz, /diagnostics 0.5 Hz, tip_pose 0.1 Hz (from one message)
+    assert out.startswith('record: 5.00 s from the first to the last message into bag\n'), out
+    rows = {line.split()[0]: line.split()[1:] for line in out.splitlines()[2:5]}
+    assert rows == {'/c/cable_states': ['1001', '5.00', '200.0'],
+                    '/diagnostics': ['5', '4.00', '1.0'], '/c/tip_pose': ['1', '0.00', '-']}
+    assert '(span: first to last message of the topic; rate: (messages - 1) / span)' in out
