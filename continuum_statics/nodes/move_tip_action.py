@@ -13,13 +13,15 @@ many goals wait, identical or not, none holds an executor thread. The goal, canc
 services keep every request of a burst (:data:`~continuum_statics.nodes.qos.ACTION_SERVICE_QOS`,
 depth 1000; a client sending bursts of more than 10 goals gives its ActionClient the same), and
 a result is kept ``RESULT_TIMEOUT`` after its goal ended (Kilted's default, 10 s, answered results
-asked for later with UNKNOWN; Jazzy's is 900 s).
+asked for later with UNKNOWN; Jazzy's is 900 s). The server counts the results it
+owes (:mod:`~continuum_statics.nodes.action_results`): shutdown waits until each is sent.
 """
 import math
 import time
 
-from rclpy.action import ActionServer, CancelResponse, GoalResponse
+from rclpy.action import CancelResponse, GoalResponse
 
+from continuum_statics.nodes.action_results import AnsweringActionServer
 from continuum_statics.nodes.qos import ACTION_SERVICE_QOS
 from continuum_statics.nodes.ros_conversions import (
     backbone_path,
@@ -74,14 +76,15 @@ class MoveTipServer:
         self.in_flight = in_flight or InFlight()
         self.base_frame_id = base_frame_id
         self.action_type = action_type
-        self.server = ActionServer(node, action_type, 'move_tip', self._counted,
-                                   goal_callback=self._on_goal,
-                                   cancel_callback=lambda _: CancelResponse.ACCEPT,
-                                   callback_group=callback_group,
-                                   goal_service_qos_profile=ACTION_SERVICE_QOS,
-                                   result_service_qos_profile=ACTION_SERVICE_QOS,
-                                   cancel_service_qos_profile=ACTION_SERVICE_QOS,
-                                   result_timeout=RESULT_TIMEOUT)
+        self.server = AnsweringActionServer(node, action_type, 'move_tip', self._counted,
+                                            goal_callback=self._on_goal,
+                                            cancel_callback=lambda _: CancelResponse.ACCEPT,
+                                            callback_group=callback_group,
+                                            goal_service_qos_profile=ACTION_SERVICE_QOS,
+                                            result_service_qos_profile=ACTION_SERVICE_QOS,
+                                            cancel_service_qos_profile=ACTION_SERVICE_QOS,
+                                            result_timeout=RESULT_TIMEOUT)
+        self.in_flight.also(self.server.owed)  # shutdown waits for the results' sends
 
     def destroy(self):
         """Destroy the action server (node shutdown)."""

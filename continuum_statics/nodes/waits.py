@@ -85,6 +85,11 @@ class InFlight:
     def __init__(self):
         self._count = 0
         self._lock = threading.Lock()
+        self._owed = []  # callables: results asked for and not sent yet
+
+    def also(self, owed):
+        """Count ``owed()`` too (an action server's results not sent yet)."""
+        self._owed.append(owed)
 
     def __enter__(self):
         with self._lock:
@@ -96,5 +101,5 @@ class InFlight:
             self._count -= 1
 
     def __call__(self):
-        """Return the number of goals not answered yet."""
-        return self._count
+        """Return the number of goals not answered yet (running, or their result not sent)."""
+        return self._count + sum(owed() for owed in self._owed)

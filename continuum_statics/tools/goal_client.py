@@ -74,6 +74,9 @@ def run_client(robot_file, namespace, goals=5, tolerance=1e-3, print_rows=True, 
             request.goal.pose.position.x, request.goal.pose.position.y, \
                 request.goal.pose.position.z = (float(v) for v in position)
             request.goal.pose.orientation.w = 1.0
+            if print_rows and not reachable:  # before the controller's WARN about it
+                print('(last: a goal 2 m away on purpose; the controller WARNs that it is '
+                      'unreachable)', flush=True)
             start = time.monotonic()
             future = client.call_async(request)
             executor.spin_until_future_complete(future, timeout_sec=timeout)

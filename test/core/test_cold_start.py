@@ -42,6 +42,8 @@ def test_demo_reaches_every_goal_on_its_first_run_with_an_empty_kernel_cache(tmp
         cwd=REPO, env=cold_env(tmp_path), capture_output=True, text=True, timeout=COMPILE_S * 2)
     assert result.returncode == 0, result.stdout + result.stderr
     assert 'figures: 5/5 reachable goals reached' in result.stdout, result.stdout
+    # issue 44: the deliberately unreachable goal is announced before the controller WARNs
+    assert 'a goal 2 m away on purpose' in result.stdout, result.stdout
 
 
 def test_a_goal_sent_just_after_the_service_appears_is_reached_from_a_cold_bringup(tmp_path):

@@ -127,3 +127,42 @@ def test_a_service_goal_running_at_sigint_gets_its_answer(tmp_path):
         executor.shutdown()
     finally:
         bringup.close()
+
+
+def test_a_burst_of_100_goals_is_all_answered_and_the_last_one_at_sigint_too(tmp_path):
+    """Issue 44 item 2: 99 goals pre-empted in a burst, the 100th running at SIGINT: 100 results.
+
+    The shutdown waits until every result asked for is sent (before: a fixed 0.2 s after the
+    goals ended, and on a loaded machine the client of the goal running at SIGINT got none).
+    """
+    from test_goal_reliability import action_client, reachable
+
+    bringup, node, executor = slow_bringup(tmp_path, 'burst44')
+    try:
+        client = action_client(node)
+        threading.Thread(target=executor.spin, daemon=True).start()
+        wait_until(client.server_is_ready, 60.0, 'bringup up')
+        results = []
+
+        def ask_result(future):
+            if future.result().accepted:
+                results.append(future.result().get_result_async())
+
+        handles = [send_goal(client, position) for position in reachable(4, 100)]
+        for handle in handles:
+            handle.add_done_callback(ask_result)
+        wait_until(lambda: all(h.done() for h in handles), 60.0, 'the 100 goals accepted')
+        assert len(results) == 100
+        wait_until(lambda: sum(r.done() for r in results) >= 99, 30.0,
+                   'the 99 pre-empted results: %d arrived' % sum(r.done() for r in results))
+        running = [r for r in results if not r.done()]
+        assert len(running) == 1  # the last of the burst runs (slow cables)
+        assert all(r.result().status == 6 and 'pre-empted' in r.result().result.message
+                   for r in results if r.done())
+        bringup.process.send_signal(2)
+        wait_until(running[0].done, 8.0, 'the last result after SIGINT: %s' % bringup.output())
+        assert 'shutting down' in running[0].result().result.message
+        assert bringup.process.wait(timeout=10.0) == 0, bringup.output()
+        executor.shutdown()
+    finally:
+        bringup.close()
