@@ -62,7 +62,8 @@ def statics_parameters():
         ParamSpec('marker_rate', 30.0, 'backbone_markers rate, Hz (0: off)', 0.0, 200.0),
         ParamSpec('publish_tf', True, "publish the robot's frames on /tf at the backbone rate "
                   '(tip, section ends; base frame -> each)', read_only=True),
-        ParamSpec('tip_frame_id', '', "the tip's frame on /tf (empty: <robot name>_tip)",
+        ParamSpec('tip_frame_id', '', "the tip's frame on /tf (empty: <robot name>_tip); a name "
+                  "another published frame has is refused",
                   read_only=True),
         ParamSpec('tf_disks', False, 'also one /tf frame per guide disk (<robot name>_disk_<i>)',
                   read_only=True),
