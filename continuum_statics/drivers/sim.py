@@ -164,8 +164,8 @@ class SimulatedCableBackend(CableBackend):
 
     def _tensions(self, lengths):
         """Motor-side tensions (N) of the tendon model at the true lengths, or None."""
-        if self._rod is not None:
-            return self._rod.tensions
+        if self._rod is not None:  # a slack cable's tension is zero, never -1e-12 or -0.0
+            return np.maximum(self._rod.tensions, 0.0)
         if self._robot is None:
             return None
         solution = self._robot.solve_lengths(lengths, self._tip_wrench[:3], self._tip_wrench[3:],
@@ -173,7 +173,7 @@ class SimulatedCableBackend(CableBackend):
         if not solution.converged:  # keep the last good history; report nothing made up
             return None
         self._statics = solution
-        return solution.tensions.copy()
+        return np.maximum(solution.tensions, 0.0)
 
     def status(self):
         """Report the largest distance between a cable and its target (and the rod's pace)."""

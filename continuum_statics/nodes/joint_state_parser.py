@@ -55,6 +55,10 @@ _STAMP = struct.Struct('<iI')
 CDR_LE = b'\x00\x01'
 #: Smallest serialized JointState: encapsulation, stamp, empty frame_id, four empty sequences.
 MIN_JOINT_STATE_BYTES = 32
+#: How far below zero a measured tension is still a slack cable's zero, N: three standard
+#: deviations of the default tension noise (0.05 N, load_estimation.DEFAULT_NOISE). Beyond it the
+#: effort is not a tension (a signed motor current, a load cell's lost zero).
+ZERO_BAND = 0.15
 
 
 def _aligned(offset, size):
@@ -217,20 +221,22 @@ class CableStatesReader:
         lengths[self.index] = view.position
         return view, lengths
 
-    def tensions(self, view, out=None):
+    def tensions(self, view, out=None, zero_band=ZERO_BAND):
         """Return (tensions (n,) N in robot order, or None, and why not ('' when given)).
 
-        ``effort`` is a tension only when finite and >= 0 for every cable (a signed motor
-        current is not); an empty ``effort`` gives (None, '').
+        ``effort`` is a tension only when finite and >= -``zero_band`` N for every cable (a
+        signed motor current is not); a slack cable read a hair below zero (a load cell's noise,
+        or -0.0) is zero. An empty ``effort`` gives (None, '').
         """
         if not view.effort.shape[0]:
             return None, ''
         tensions = np.empty(len(self.cable_names)) if out is None else out
         tensions[self.index] = view.effort
-        if (tensions >= 0.0).all() and np.isfinite(tensions).all():
+        if (tensions >= -zero_band).all() and np.isfinite(tensions).all():
+            np.maximum(tensions, 0.0, out=tensions)
             return tensions, ''
-        return None, 'effort (tensions) not finite and >= 0 N: %s' % np.round(
-            tensions, 4).tolist()
+        return None, 'effort (tensions) not finite and >= %g N: %s' % (
+            -zero_band, np.round(tensions, 4).tolist())
 
 
 def _parse_with_rclpy(data):

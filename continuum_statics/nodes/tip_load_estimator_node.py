@@ -36,7 +36,11 @@ from std_msgs.msg import Bool
 from continuum_statics.control.contact import force_along
 from continuum_statics.control.load_watch import Inputs, LoadWatch, Verdict
 from continuum_statics.control.stamps import StampRule
-from continuum_statics.core.estimation.load_estimation import load_model, plausible_tip_load
+from continuum_statics.core.estimation.load_estimation import (
+    load_model,
+    plausible_tip_load,
+    tension_sigma,
+)
 from continuum_statics.core.warmup import warm_up
 from continuum_statics.nodes import diagnostics_util as diag
 from continuum_statics.nodes.joint_state_parser import CableStatesReader
@@ -133,7 +137,10 @@ class TipLoadEstimatorNode(RunnerHooks, Node):
         except ValueError as error:
             self._problems.reject('cable_states', error)
             return
-        tensions, problem = self._cable_states.tensions(view)
+        # a slack cable read within 3 sigma of its noise below zero is zero (the estimate went
+        # stale on each such message before: issue 43)
+        band = 3.0 * tension_sigma(self._noise()['tension'], [0.0])[0]
+        tensions, problem = self._cable_states.tensions(view, zero_band=band)
         if problem:
             self._problems.reject('cable_states', problem)
         self._stamp_ns, taken = self._judged('cable_states', view.sec * NS + view.nanosec)
