@@ -5,7 +5,10 @@ readings at its
 own rate (an optical tracker 120 Hz, EM coils 40 Hz) while statics estimates at the encoders'
 (1 kHz). A reading is fused once, by its stamp, at the first estimate after it arrived; one
 older than ``timeout`` when that estimate comes is not used (a stalled stream must not pin the
-shape). What the estimator made of each
+shape), nor one stamped further than ``max_offset`` from the clock when it arrives (a tracker
+stamped 1970 or by an unsynchronised clock, seconds old or ahead). Only the
+readings the estimator used are passed on (:meth:`SensorInbox.used_sources`). What the estimator
+made of each
 (:class:`~continuum_statics.core.description.sensors.SensorVerdict`)
 is counted here per sensor, for ``/diagnostics``: statics, and every node that follows statics'
 fused estimate, judge a sensor by this one verdict.
@@ -40,20 +43,26 @@ class SensorInbox:
 
     :param names: the robot file's sensor names
     :param timeout: s; a reading older than this at the next estimate is not used
+    :param max_offset: s; a reading stamped further than this from the clock is set aside
     """
 
-    def __init__(self, names, timeout):
+    def __init__(self, names, timeout, max_offset=1.0):
         self.timeout = float(timeout)
+        self.max_offset = float(max_offset)
         self.records = {name: SensorRecord() for name in names}
         self._unread = {}
+        self._taken = {}  # name -> source of the readings the last take handed out
         # readings arrive on the subscriptions' thread, the estimate takes them on the intake's:
         # handed over under this lock, never iterated while another thread adds
         self._lock = threading.Lock()
 
-    def put(self, name, position, rotation, stamp, now, sigma=None):
+    def put(self, name, position, rotation, stamp, now, sigma=None, source=None,
+            clock_now=None):
         """Keep a reading (base frame, m; stamp s) that arrived at ``now`` (monotonic s).
 
-        ``sigma``: the position noise (m) the device reported with it, or None.
+        ``sigma``: the position noise (m) the device reported with it, or None. ``source``: the
+        message it came in, passed on once the estimator used it. ``clock_now``: the time of the
+        stamps' clock at arrival (s), to judge the stamp by; None: not judged.
         """
         record = self.records[name]
         position = np.asarray(position, dtype=float)
@@ -64,8 +73,15 @@ class SensorInbox:
         record.received += 1
         record.last_arrival = now
         record.arrivals = [t for t in record.arrivals if now - t < 1.0] + [now]
+        if stamp is not None and clock_now is not None:
+            age = clock_now - stamp
+            if not (math.isfinite(age) and abs(age) <= self.max_offset):
+                self.reject(name, 'stamped %.3g s %s this clock (max_stamp_offset %g s): '
+                            'is its clock synchronised?' % (
+                                abs(age), 'before' if age > 0 else 'ahead of', self.max_offset))
+                return
         with self._lock:
-            self._unread[name] = (SensorReading(position, rotation, stamp, sigma), now)
+            self._unread[name] = (SensorReading(position, rotation, stamp, sigma), now, source)
 
     def reject(self, name, reason):
         """Count a reading that could not be used at all (its reason goes on diagnostics)."""
@@ -78,13 +94,19 @@ class SensorInbox:
         """Return {name: SensorReading} of the fresh unread readings (then read), or None."""
         with self._lock:
             unread, self._unread = self._unread, {}
-        fresh = {}
-        for name, (reading, arrival) in unread.items():
+        fresh, self._taken = {}, {}
+        for name, (reading, arrival, source) in unread.items():
             if now - arrival <= self.timeout:
                 fresh[name] = reading
+                self._taken[name] = source
             else:
                 self.records[name].stale += 1
         return fresh or None
+
+    def used_sources(self, verdicts):
+        """Return [(name, source)] of the last taken readings the estimator used."""
+        return [(name, self._taken[name]) for name, verdict in (verdicts or {}).items()
+                if verdict.used and self._taken.get(name) is not None]
 
     def judged(self, verdicts):
         """Count the estimator's verdicts ({name: SensorVerdict}) of the readings it was given."""

@@ -42,7 +42,8 @@ class SensorTopics:
         self._last_published = -math.inf
         self.inbox = inbox  # the shape tracker's: it fuses what arrives here
         self._base = robot.base_frame_id
-        self._messages = {}  # the newest message of each sensor, republished once accepted
+        self._clock = node.get_clock()  # the stamps' clock: a reading's age is judged by it
+        self._node = node
         self._accepted = {sensor.name: node.create_publisher(
             PoseStamped, 'sensors/%s/accepted' % sensor.name, LATEST_SENSOR_QOS)
             for sensor in robot.sensors}
@@ -72,10 +73,13 @@ class SensorTopics:
             except ValueError as error:
                 self.inbox.reject(sensor.name, str(error))
                 return
-            self.inbox.put(sensor.name, position, rotation, stamp * 1e-9 or None, now, sigma)
+            # judged by the node's max_stamp_offset, as cable_states' stamps are (read each time:
+            # a parameter change holds at once)
+            self.inbox.max_offset = self._node.get_parameter('max_stamp_offset').value
             if isinstance(msg, PoseWithCovarianceStamped):  # accepted readings: PoseStamped
                 msg = PoseStamped(header=msg.header, pose=msg.pose.pose)
-            self._messages[sensor.name] = msg
+            self.inbox.put(sensor.name, position, rotation, stamp * 1e-9 or None, now, sigma,
+                           msg, self._clock.now().nanoseconds * 1e-9)
         return on_reading
 
     def publish(self, estimate, header, points, quaternions, s_samples):
@@ -128,11 +132,10 @@ class SensorTopics:
         return (WARN, note) if note and level == OK else (level, message)
 
     def pass_on(self, estimate):
-        """Republish on ``sensors/<name>/accepted`` each reading the estimate used."""
+        """Republish on ``sensors/<name>/accepted`` each reading the estimate used, as judged."""
         verdicts = None if estimate is None else estimate.sensors
-        for name, verdict in (verdicts or {}).items():
-            if verdict.used and name in self._messages:
-                self._accepted[name].publish(self._messages[name])
+        for name, msg in self.inbox.used_sources(verdicts):
+            self._accepted[name].publish(msg)
 
 
 def tracker_topic(robot):

@@ -114,3 +114,37 @@ def test_sensor_inbox_fuses_each_reading_once_and_counts_verdicts():
     assert 'tip_tracker set aside' in inbox.problems(1.3)
     assert 'silent' in inbox.problems(5.0)
     assert 'set aside 1' in inbox.values(1.3)['sensor_tip_tracker']
+
+
+@pytest.mark.parametrize('stamp, word', [(1.0, 'before'), (98.0, 'before'), (110.0, 'ahead of')],
+                         ids=['1970', '2 s old', '10 s ahead'])
+def test_a_reading_is_judged_by_its_stamp_not_by_its_arrival(stamp, word):
+    # issue 43 item 7, before: readings stamped 1970, 2 s old or 10 s ahead were fused as fresh
+    from continuum_statics.control.sensor_readings import SensorInbox
+
+    inbox = SensorInbox(['tip_tracker'], timeout=0.5, max_offset=1.0)
+    inbox.put('tip_tracker', (0.0, 0.0, 0.3), None, stamp, now=1.0, clock_now=100.0)
+    record = inbox.records['tip_tracker']
+    assert inbox.take(1.0) is None and record.rejected == 1
+    assert word in record.last_reason and 'max_stamp_offset 1 s' in record.last_reason
+    inbox.put('tip_tracker', (0.0, 0.0, 0.3), None, 99.5, now=1.1, clock_now=100.0)
+    assert list(inbox.take(1.1)) == ['tip_tracker']  # a fresh stamp is fused
+    inbox.put('tip_tracker', (0.0, 0.0, 0.3), None, None, now=1.2, clock_now=100.0)
+    assert list(inbox.take(1.2)) == ['tip_tracker']  # unstamped: judged by arrival
+
+
+def test_only_the_judged_reading_is_passed_on():
+    # issue 43 item 7, before: sensors/<name>/accepted republished the newest message (in 8 s
+    # 345 "accepted", 136 of them NaN and 26 the gate had set aside)
+    from continuum_statics.control.sensor_readings import SensorInbox
+    from continuum_statics.core.description.sensors import SensorVerdict
+
+    inbox = SensorInbox(['tip_tracker', 'coil'], timeout=0.5)
+    inbox.put('tip_tracker', (0.0, 0.0, 0.3), None, None, now=1.0, source='judged')
+    inbox.put('coil', (0.0, 0.0, 0.1), None, None, now=1.0, source='coil reading')
+    assert set(inbox.take(1.0)) == {'tip_tracker', 'coil'}
+    inbox.put('tip_tracker', (0.0, float('nan'), 0.3), None, None, now=1.01, source='nan')
+    inbox.put('coil', (0.0, 0.0, 0.2), None, None, now=1.01, source='newer, not judged')
+    verdicts = {'tip_tracker': SensorVerdict(True, 1.0, ''),
+                'coil': SensorVerdict(False, 80.0, 'innovation chi2 80.0 above')}
+    assert inbox.used_sources(verdicts) == [('tip_tracker', 'judged')]
