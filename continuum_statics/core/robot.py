@@ -454,8 +454,10 @@ class Robot:
         :class:`sensors.SensorReading`} of the file's sensors, base frame; a missing name is not
         seen this time) the estimate is the fused one of :mod:`state_estimation`, with
         ``position_covariance`` and ``tip_covariance``; ``stamp`` (s) times the unmodelled
-        loads' decay since ``warm_start``.
+        loads' decay since ``warm_start``. A non-finite ``stamp`` or reading stamp is refused
+        (ValueError): it would carry NaN into every later warm-started estimate.
         """
+        _check_stamps(stamp, sensors)
         jacobians = getattr(warm_start, 'jacobians', None)
         if jacobians is not None and jacobians[0].shape != (len(self.cable_names),
                                                             self.state_size):
@@ -522,6 +524,17 @@ def _warm_tensions(robot, result):
     if fixed is None or len(fixed) != len(robot.cable_names):
         return np.zeros(len(robot.cable_names))
     return np.array(fixed, dtype=float)
+
+
+def _check_stamps(stamp, sensors):
+    """Refuse a non-finite estimate stamp or reading stamp (s; None is allowed)."""
+    if stamp is not None and not math.isfinite(stamp):
+        raise ValueError('stamp must be a finite time in s (or None), got %r' % (stamp,))
+    for name, reading in (sensors or {}).items():
+        when = getattr(reading, 'stamp', None)  # a bare position has none
+        if when is not None and not math.isfinite(when):
+            raise ValueError('sensor %r: reading stamp must be a finite time in s (or None), '
+                             'got %r' % (name, when))
 
 
 def _warm_or_guess(robot, warm_start, u0_guess):

@@ -92,6 +92,24 @@ def test_an_unknown_sensor_or_a_bad_reading_is_named():
         robot.estimate_shape(lengths, sensors={'tip_tracker': [0.0, np.nan, 0.3]})
 
 
+def test_a_nan_stamp_is_refused_and_the_next_call_from_the_last_good_estimate_is_finite():
+    # issue 43 item 7, before: estimate_shape(..., stamp=nan) returned a NaN shape and every
+    # later warm-started call stayed NaN
+    robot = load_robot(SENSOR_ROBOT)
+    lengths = _pulled(robot)
+    good = robot.estimate_shape(lengths, stamp=10.0)
+    tip = good.shape.tip_position + good.shape.tip_rotation @ robot.sensors[0].offset
+    with pytest.raises(ValueError, match='stamp must be a finite time'):
+        robot.estimate_shape(lengths, warm_start=good, stamp=math.nan)
+    with pytest.raises(ValueError, match="sensor 'tip_tracker': reading stamp must be a finite"):
+        robot.estimate_shape(lengths, warm_start=good, stamp=10.5, sensors={
+            'tip_tracker': SensorReading(tip, stamp=math.inf)})
+    later = robot.estimate_shape(lengths, warm_start=good, stamp=11.0, sensors={
+        'tip_tracker': SensorReading(tip, stamp=10.9)})
+    assert np.all(np.isfinite(later.shape.positions)) and np.all(np.isfinite(
+        later.tip_covariance))
+
+
 def test_simulated_truth_each_sensor_helps_and_the_ellipsoid_is_honest():
     """500 seeded cases: hidden loads from the prior, sensors with their noise (NEES)."""
     rows = simulated_truth(load_robot(SENSOR_ROBOT), 500, seed=35)
