@@ -4,7 +4,8 @@ On the FTDCR v6 robot's recorded runs (``test/data/ftdcr_v6``): the cost of one 
 training run by the calibrated robot (the unit of every fit), one Jacobian both ways (exact,
 from the implicit-function theorem, against one replay per parameter) and the default fit
 both ways, the default fit from the nominal robot file (wall time on every core, train and
-held-out tip RMS), and the error budget on both files (repeatability floor, model-free
+held-out tip RMS, and the phases: scan, fit, validate ... with their wall and CPU
+seconds), and the error budget on both files (repeatability floor, model-free
 baselines, the model). With ``--select NAME ...``: the candidate physics cross-validated
 inside the training run (whole motion patterns per fold; the held-out file is only reported,
 never used to choose). With ``--fit NAME ...``: a fit of other names instead of the default
@@ -19,6 +20,7 @@ from benchmarks.shared import V6_COLUMNS, V6_DATA, V6_ROBOT
 from continuum_statics import load_robot
 from continuum_statics.calibration.error_budget import format_budget
 from continuum_statics.calibration.parameters import DEFAULT_FIT
+from continuum_statics.calibration.phases import cpu_seconds, format_phases
 from continuum_statics.calibration.replay import replay
 from continuum_statics.calibration.runs import calibrate_run, read_run
 from continuum_statics.config_paths import config_file
@@ -116,11 +118,11 @@ def bench_jacobians(fits=(DEFAULT_FIT, DEFAULT_FIT + EXTRA_NAMES)):
 
 def bench_fit(fit, candidates=()):
     """Fit the nominal v6 file to train.csv; print the figures and the error budget."""
-    start = time.perf_counter()
+    start, cpu = time.perf_counter(), cpu_seconds()
     summary = calibrate_run(V6_ROBOT, V6_DATA / 'train.csv', list(fit), V6_COLUMNS,
                             validate=V6_DATA / 'val.csv', log=lambda line: None, report=True,
                             candidates=candidates)
-    wall = time.perf_counter() - start
+    wall, cpu = time.perf_counter() - start, cpu_seconds() - cpu
     if 'selection' in summary:
         selection = summary['selection']
         print('\nselection, cross-validated inside train.csv (3 folds of whole motion '
@@ -129,13 +131,17 @@ def bench_fit(fit, candidates=()):
             print('  + %-16s %.2f mm%s' % (name, score * 1e3,
                                            '  kept' if name in selection['kept'] else ''))
         print('  chosen: %s (%.2f mm)' % (' '.join(selection['fit']), selection['selected'] * 1e3))
-    print('\nv6 fit (%s): %.0f s wall, %d evaluations, %d parameters' % (
-        ', '.join(summary['fit']), wall, summary['optimizer']['evaluations'],
-        sum(np.size(v['after']) for v in summary['fitted'].values())))
+    print('\nv6 fit (%s): %.1f s wall, %.1f s CPU (this process and its workers), %d '
+          'evaluations, %d parameters' % (
+              ', '.join(summary['fit']), wall, cpu, summary['optimizer']['evaluations'],
+              sum(np.size(v['after']) for v in summary['fitted'].values())))
+    print('  phases (the file as given is replayed in a process of its own during scan and '
+          'fit; its CPU counts where it ends):')
+    print(format_phases(summary['phases']))
     print('  train RMS: file as given %.1f mm -> %.2f mm (%.2f mm aligned)' % (
         summary['rms_before'] * 1e3, summary['rms_after'] * 1e3,
         summary['rms_aligned_after'] * 1e3))
-    print('  held-out RMS: %.2f mm (%.2f mm aligned)' % (
+    print('  held-out RMS: %.3f mm (%.3f mm aligned)' % (
         summary['validate_rms'] * 1e3, summary['validate_rms_aligned'] * 1e3))
     print(format_budget(summary['error_budget']))
     return summary

@@ -11,6 +11,7 @@ from typing import NamedTuple
 import numpy as np
 from scipy.optimize import least_squares
 
+from continuum_statics.calibration.phases import Phases
 from continuum_statics.calibration.pool import default_workers, fork_pool
 from continuum_statics.calibration.replay import rms
 from continuum_statics.calibration.run_model import RunModel
@@ -117,13 +118,16 @@ def scan_stick_length(model, x0, log=print, workers=1):
     return x
 
 
-def fit(model, log=print, workers=None, max_evaluations=40, x0=None, jacobian='implicit'):
+def fit(model, log=print, workers=None, max_evaluations=40, x0=None, jacobian='implicit',
+        phases=None):
     """Fit the model's search vector; returns a :class:`FitResult`.
 
     ``x0``: the start (e.g. an earlier fit's values, :meth:`RunModel.start_from`); by default
     the robot file's values with the pattern rotations scanned. ``jacobian``: ``'implicit'``
     (:mod:`.sensitivities`, every variable from one pass over the rows) or ``'differences'``
     (one re-solved replay per variable, each row started from the current replay's).
+    ``phases``: a :class:`phases.Phases` that gets the seconds of the scans (``scan``) and of
+    the least-squares steps (``fit``).
     """
     if jacobian not in JACOBIANS:
         raise ValueError('jacobian %r: one of %s' % (jacobian, ', '.join(JACOBIANS)))
@@ -131,10 +135,19 @@ def fit(model, log=print, workers=None, max_evaluations=40, x0=None, jacobian='i
         # its replays start each row from the base's, friction states held: no memory
         raise ValueError("stick_length needs jacobian='implicit' (the friction state's chain)")
     workers = workers or default_workers()
+    phases = phases or Phases()
     low, high = model.bounds()
-    if x0 is None:
-        x0 = scan_rotations(model, np.clip(model.start(), low, high), log, workers=workers)
-    x0 = scan_stick_length(model, np.clip(x0, low, high), log, workers)
+    with phases('scan'):
+        if x0 is None:
+            x0 = scan_rotations(model, np.clip(model.start(), low, high), log, workers=workers)
+        x0 = scan_stick_length(model, np.clip(x0, low, high), log, workers)
+    with phases('fit'):
+        return _least_squares(model, log, workers, max_evaluations, x0, jacobian)
+
+
+def _least_squares(model, log, workers, max_evaluations, x0, jacobian):
+    """:func:`fit` from ``x0``: the trust-region steps."""
+    low, high = model.bounds()
     model.residuals(x0, update=True)
     began = time.monotonic()
     count = [0]

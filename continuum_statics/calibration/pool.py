@@ -46,3 +46,63 @@ def fork_pool(workers):
             yield pool
     finally:
         gc.unfreeze()
+
+
+class Background:
+    """``function(*args)`` run in one forked process while this one goes on; :meth:`result`.
+
+    What the calibration needs but nothing waits for (the robot file's own errors on the run,
+    a whole serial replay) fills the core the fit's serial steps leave idle. Runs at
+    :meth:`result` in this process where forking is unavailable or ``workers`` is 1. The
+    fork takes the garbage precautions of :func:`fork_pool`.
+    """
+
+    def __init__(self, function, *args, workers=2):
+        self.call, self.process = (function, args), None
+        if workers <= 1 or 'fork' not in multiprocessing.get_all_start_methods():
+            return
+        context = multiprocessing.get_context('fork')
+        self.receiver, sender = context.Pipe(duplex=False)
+        gc.collect()
+        gc.freeze()
+        try:
+            self.process = context.Process(target=_send_result, args=(sender, function, args),
+                                           daemon=True)
+            self.process.start()
+        finally:
+            gc.unfreeze()
+        sender.close()
+
+    def result(self):
+        """Return the function's value (its exception raised here)."""
+        if self.process is None:
+            function, args = self.call
+            return function(*args)
+        try:
+            ok, value = self.receiver.recv()
+        except EOFError:  # the process died without an answer: do it here
+            ok, value = True, self.call[0](*self.call[1])
+        finally:
+            self.receiver.close()
+            self.process.join()
+        self.process = None
+        if not ok:
+            raise value
+        return value
+
+    def close(self):
+        """End the process if its result was not taken (the calibration stopped early)."""
+        if self.process is not None:
+            self.process.terminate()
+            self.process.join()
+            self.receiver.close()
+            self.process = None
+
+
+def _send_result(sender, function, args):
+    try:
+        message = (True, function(*args))
+    except Exception as error:  # noqa: BLE001 (raised again in the parent)
+        message = (False, error)
+    sender.send(message)
+    sender.close()

@@ -45,6 +45,7 @@ class RunModel:
         self.size = self.vector.size
         self.solutions = self.replayed = None  # of the last replay: solutions, points
         self.starts = None  # per-row warm starts of a Jacobian's columns (set by the fit)
+        self._last_replay = None  # ((x, run, gravity), solutions, points, failed) of a whole one
         self.rotation = robot.base_rotation.copy()  # tracker <- base, updated by the fit
         # the registration that turns gravity into the base frame: the one before the replay
         # being fitted (its solutions and their Jacobian are of that robot)
@@ -109,9 +110,19 @@ class RunModel:
         ``starts``: per-row warm starts (:func:`replay.replay_solutions`); the solutions are
         kept in :attr:`solutions` for the next call's.
         """
-        points, failed, self.solutions = replay_solutions(
-            self.robot_for(x), self.run if run is None else run, starts)
+        run = self.run if run is None else run
+        robot = self.robot_for(x)
+        # a whole replay of the robot and run the last whole replay solved gives its result
+        # again (the fit's last evaluation is its end; the end's train errors): not re-solved
+        key = (np.array(x, dtype=float), run, robot.gravity)
+        last = self._last_replay
+        if (starts is None and last is not None and last[0][1] is run
+                and np.array_equal(last[0][0], key[0]) and np.array_equal(last[0][2], key[2])):
+            self.solutions, self.replayed = last[1], last[2]
+            return last[2], last[3]
+        points, failed, self.solutions = replay_solutions(robot, run, starts)
         self.replayed = points
+        self._last_replay = (key, self.solutions, points, failed) if starts is None else None
         return points, failed
 
     def register(self, points, tips):

@@ -61,26 +61,43 @@ class RowModel:
         self.moment_map, self.friction = constants.kernel_map, constants.friction
         self.marker = np.asarray(robot.tip_marker, dtype=float)
         self.same_rod = rod is not None and _same_rod(robot, rod)
+        # the same rod and the same stretch of every cable at z (only zero offsets or
+        # pretension differ): the base's path_stretch at z is its own, only its free lengths
+        # differ
+        self.free_only = self.same_rod and _same_stretch(robot, rod)
         self.motions = None  # (rows, n) friction states of its own, else the row's
+        self.frees = None  # (rows, n) free lengths of a run's rows (:meth:`free_rows`)
 
-    def free(self, lengths):
-        """Free lengths (m) of motor-side ``lengths``."""
+    def free_rows(self, lengths):
+        """Keep the free lengths (m) of every row of motor-side ``lengths`` (rows, n)."""
+        self.frees = self.free(lengths)
+        return self
+
+    def free(self, lengths, row=None):
+        """Free lengths (m) of motor-side ``lengths`` (row ``row`` of :meth:`free_rows`)."""
+        if row is not None and self.frees is not None:
+            return self.frees[row]
         return self.robot.tendons.free_lengths(lengths, self.robot.straight_cable_lengths)
 
-    def at(self, z, lengths, motion):
+    def at(self, z, lengths, motion, row=None):
         """Return (balance (3,), gap (n,) m, marker point (3,) m, node states) at z."""
         at = self.robot.model.evaluate_at(
-            _NO_LOAD, _NO_LOAD, z, TendonArgs(self.moment_map, self.free(lengths),
+            _NO_LOAD, _NO_LOAD, z, TendonArgs(self.moment_map, self.free(lengths, row),
                                               self.friction * motion, self.compliance,
                                               self.base_axis, self.kappa, self.radius))
         return at.residual[:3], at.gap, self._point(at.states), at.states
 
-    def on(self, states, balance, z, lengths, motion):
+    def on(self, states, balance, z, lengths, motion, row=None):
         """:meth:`at` on another robot's IVP at z (``same_rod``): only the cables' stretch."""
+        consumed = self.consumed(states, z, motion)
+        return balance, self.free(lengths, row) - consumed, self._point(states), states
+
+    def consumed(self, states, z, motion):
+        """Free length (m) each cable's path and stretch consume on the IVP ``states`` at z."""
         consumed, _, _ = self.robot.model.path_stretch(
             states, self.base_axis, np.ascontiguousarray(z[3:]), self.friction * motion,
             self.compliance)
-        return balance, self.free(lengths) - consumed, self._point(states), states
+        return consumed
 
     def _point(self, states):
         return states[-1, POSITION] + states[-1, ROTATION].reshape(3, 3) @ self.marker
@@ -89,6 +106,14 @@ class RowModel:
 def _same_rod(a, b):
     """Whether robots a and b integrate the same IVP at every z (only tendons or marker differ)."""
     return all(np.array_equal(p, q) for p, q in zip(a.model.record, b.model.record))
+
+
+def _same_stretch(a, b):
+    """Whether robots a and b stretch cables alike (friction too) and track one tip point."""
+    ta, tb = a.tendons, b.tendons
+    return np.array_equal(a.tip_marker, b.tip_marker) and all(
+        np.array_equal(getattr(ta, name), getattr(tb, name))
+        for name in ('stiffness', 'friction', 'stick_length'))
 
 
 def stencil(x, step, low, high):
@@ -135,7 +160,7 @@ def row_sensitivities(base, variants, stencils, lengths, solution, row=None):
     taut = np.flatnonzero(~solution.slack)
     free_z = np.concatenate([np.arange(3), 3 + taut])
     n_eq = free_z.size
-    balance, _, _, states = base.at(z, lengths, motion)
+    balance, _, _, states = base.at(z, lengths, motion, row)
     e_z, p_z = np.empty((n_eq, n_eq)), np.empty((3, n_eq))
     units = np.where(free_z < 3, 1.0 / robot.length, base.t_ref)  # z's scales (u(0) L, t)
     for k, index in enumerate(free_z):
@@ -144,17 +169,25 @@ def row_sensitivities(base, variants, stencils, lengths, solution, row=None):
         for sign in (1.0, -1.0):
             trial = z.copy()
             trial[index] += sign * step
-            b, gap, point, _ = base.at(trial, lengths, motion)
+            b, gap, point, _ = base.at(trial, lengths, motion, row)
             sides.append((np.concatenate([b, gap[taut]]), point))
         e_z[:, k] = (sides[0][0] - sides[1][0]) / (2.0 * step)
         p_z[:, k] = (sides[0][1] - sides[1][1]) / (2.0 * step)
     m = len(variants)
     e_p, p_p = np.zeros((n_eq, m)), np.zeros((3, m))
+    stretched = None  # (consumed, point) of the base's cables at z, as on() has them
     for j, (models, (_, weights, step)) in enumerate(zip(variants, stencils)):
         for model, weight in zip(models, weights):
+            if model.free_only:  # on() with the base's stretch: one path_stretch a row
+                if stretched is None:
+                    stretched = (base.consumed(states, z, motion), base._point(states))
+                gap = model.free(lengths, row) - stretched[0]
+                e_p[:, j] += weight / step * np.concatenate([balance, gap[taut]])
+                p_p[:, j] += weight / step * stretched[1]
+                continue
             own = motion if model.motions is None else model.motions[row]
-            b, gap, point, _ = (model.on(states, balance, z, lengths, own) if model.same_rod
-                                else model.at(z, lengths, own))
+            b, gap, point, _ = (model.on(states, balance, z, lengths, own, row)
+                                if model.same_rod else model.at(z, lengths, own, row))
             e_p[:, j] += weight / step * np.concatenate([b, gap[taut]])
             p_p[:, j] += weight / step * point
     # solved in scaled z, as Newton's steps are: the columns O(1)
@@ -174,7 +207,7 @@ def point_sensitivities(model, x, solutions, workers=1):
     low, high = model.bounds()
     steps = model.vector.steps() * PARAMETER_STEP_FRACTION
     robot = model.robot_for(x)
-    base = RowModel(robot)
+    base = RowModel(robot).free_rows(model.run.lengths)
     stencils, variants = [], []
     for j in range(model.size):
         offsets, weights = stencil(x[j], steps[j], low[j], high[j])
@@ -183,7 +216,8 @@ def point_sensitivities(model, x, solutions, workers=1):
         for offset in offsets:
             trial = np.array(x, dtype=float)
             trial[j] += offset
-            models.append(RowModel(model.robot_for(trial), robot))
+            models.append(RowModel(model.robot_for(trial), robot).free_rows(
+                model.run.lengths))
         variants.append(models)
     solved = np.array([solution is not None for solution in solutions])
     for models in variants:

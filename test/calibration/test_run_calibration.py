@@ -358,6 +358,11 @@ def test_a_fit_of_more_names_starts_where_its_default_names_end(tmp_path):
     assert any(line.startswith('calibrate: first registration section_rotation stiffness')
                for line in lines)
     assert staged['rms_after'] <= plain['rms_after'] * (1.0 + 1e-6)
+    # where the time went: both fits' scans and steps, the file as given, the errors
+    assert {'read', 'scan', 'fit', 'before', 'validate'} <= set(staged['phases'])
+    assert all(entry['wall'] >= 0.0 and entry['cpu'] >= 0.0
+               for entry in staged['phases'].values())
+    assert staged['rms_before'] == pytest.approx(plain['rms_before'], rel=1e-12)
 
 
 def test_selection_does_not_score_a_name_that_changes_nothing_on_the_run():
