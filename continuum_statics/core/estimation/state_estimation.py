@@ -203,6 +203,21 @@ def estimate_state(robot, lengths, tip_force, tip_moment, tensions, sensors, sta
                                sensitivity=sensitivity)
 
 
+def stale_columns(robot, estimate):
+    """Return True when ``estimate``'s load columns were made further than REFRESH_DISTANCE.
+
+    The distance is from the model tip (the estimate's tip without its correction). A bounded
+    call keeps such columns (it refreshes one every COLUMN_EVERY calls); a call solved to the
+    end makes them again.
+    """
+    sensitivity = getattr(estimate, 'sensitivity', None)
+    if sensitivity is None or not len(sensitivity.tips):
+        return False
+    tip = estimate.shape.tip_position - sensitivity.positions[-1] @ estimate.unmodelled.mean
+    moved = np.linalg.norm(sensitivity.tips - tip, axis=1)
+    return bool(np.max(moved) > REFRESH_DISTANCE * robot.length)
+
+
 def _readings(robot, sensors):
     """Check ``sensors`` ({name: reading}) against the robot file's; return {Sensor: reading}."""
     if not sensors:
