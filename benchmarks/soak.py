@@ -7,6 +7,14 @@ resident memory at the start (after the first goal) and at the end, the number o
 error lines it logged, how often a node's diagnostics still said WARN (or worse) one second after
 a goal ended, and statics' processed rate. Figures only; the exit code is 1 when a reachable goal
 was not reached or bringup died. Not part of ``make test`` (it takes minutes).
+
+``--normal-use`` models a lab's normal use instead (``benchmarks/soak_use.py``): the simulated
+driver in motion (``--dynamics``), a noisy tip tracker with dropouts (``--tracker``), goals from
+the ``move_tip`` action and the ``tip_goal`` service, some cancelled or pre-empted
+(``--actions``), and one SIGINT and restart of bringup half way (``--restart``); each can be
+given alone. Its exit code is 1 when a goal went unanswered, a callback raised (a log line with
+``callback of node``, ``Traceback`` or ``ERROR``), an exit code at a SIGINT was not 0 or
+``tip_pose`` carried a non-finite value.
 """
 import argparse
 import os
@@ -18,7 +26,7 @@ import time
 
 import numpy as np
 
-from continuum_statics.config_paths import default_robot_file
+from continuum_statics.config_paths import default_robot_file, share_dir
 from continuum_statics.core.statics.workspace import reachable_tips
 from continuum_statics.tools.processes import ros_environment, stop
 
@@ -159,16 +167,46 @@ def main(argv=None):
                                      description=__doc__.splitlines()[0])
     parser.add_argument('--minutes', type=float, default=10.0, help='duration (default 10)')
     parser.add_argument('--period', type=float, default=2.0, help='s between goals')
-    parser.add_argument('--rate', type=float, default=1000.0, help='cable_states rate, Hz')
+    parser.add_argument('--rate', type=float, default=None,
+                        help="cable_states rate, Hz (default 1000; 200, the driver's own "
+                        'default, with any normal-use option)')
     parser.add_argument('--noise', type=float, default=0.0,
                         help='sim encoder noise, m (statics is told the same)')
     parser.add_argument('--tolerance', type=float, default=1e-3, help='goal tolerance, m')
     parser.add_argument('--seed', type=int, default=1, help='goal sequence seed')
-    parser.add_argument('--robot', default=default_robot_file(), help='robot description YAML')
+    parser.add_argument('--robot', default=None, help='robot description YAML (default: '
+                        'config/tendon_robot.yaml; config/tendon_robot_dynamic.yaml with '
+                        '--dynamics)')
+    use = parser.add_argument_group('normal use (all off by default; --normal-use: all on)')
+    use.add_argument('--normal-use', action='store_true',
+                     help='--dynamics --tracker --actions --restart')
+    use.add_argument('--dynamics', action='store_true',
+                     help='the simulated driver in motion (sim.dynamics:=true)')
+    use.add_argument('--tracker', action='store_true',
+                     help="a tip tracker: sim/tip_pose_true plus noise on the robot file's tip "
+                     'sensor topic (a copy with one if it has none), occluded 1-3 s every ~20 s '
+                     '(needs --dynamics)')
+    use.add_argument('--tracker-noise', type=float, default=3e-4,
+                     help='tracker noise, m (default 3e-4)')
+    use.add_argument('--tracker-rate', type=float, default=100.0, help='tracker rate, Hz')
+    use.add_argument('--actions', action='store_true',
+                     help='goals from move_tip and tip_goal, some cancelled or pre-empted')
+    use.add_argument('--restart', action='store_true',
+                     help='SIGINT bringup half way (a goal in flight) and start it again')
     parser.add_argument('--statics-only', type=float, metavar='SECONDS',
                         help='instead: statics alone, fed --rate Hz of lengths with --noise for '
                         'this long; prints its processed rate')
     options = parser.parse_args(list(sys.argv[1:] if argv is None else argv))
+    if options.normal_use:
+        options.dynamics = options.tracker = options.actions = options.restart = True
+    normal_use = options.dynamics or options.tracker or options.actions or options.restart
+    if options.tracker and not options.dynamics:
+        parser.error('--tracker needs --dynamics (it reads the simulated true tip)')
+    if options.rate is None:
+        options.rate = 200.0 if normal_use else 1000.0
+    if options.robot is None:
+        options.robot = (os.path.join(share_dir(), 'config', 'tendon_robot_dynamic.yaml')
+                         if options.dynamics else default_robot_file())
     ros_environment()
     if options.statics_only:
         figures = statics_rate(os.path.abspath(options.robot), options.rate,
@@ -179,6 +217,8 @@ def main(argv=None):
                   figures['dropped'], figures['latency_median_ms'], figures['latency_p99_ms'],
                   figures['statics_cpu_percent']))
         return 0
+    if normal_use:
+        return normal_use_main(options)
     print('soak: %g min, a goal every %g s, cable_states at %g Hz, noise %g m ...'
           % (options.minutes, options.period, options.rate, options.noise), flush=True)
     f = soak(os.path.abspath(options.robot), options.minutes, options.period, options.rate,
@@ -200,6 +240,26 @@ def main(argv=None):
     print('statics processed rate (median of its 1 s reports): %.1f Hz' % f['statics_rate_hz'])
     ok = f['reached'] == f['sent'] and f['tracebacks'] == 0 and f.get('alive', False)
     return 0 if ok else 1
+
+
+def normal_use_main(options):
+    """Run the soak of a lab's normal use (``benchmarks/soak_use.py``); return the exit code."""
+    from benchmarks import soak_use
+
+    parts = [name for name in ('dynamics', 'tracker', 'actions', 'restart')
+             if getattr(options, name)]
+    print('soak, normal use (%s): %g min, a goal every ~%g s, cable_states at %g Hz, '
+          'tolerance %g m%s ...' % (
+              ', '.join(parts), options.minutes, options.period, options.rate,
+              options.tolerance, ', tracker %g m at %g Hz' % (
+                  options.tracker_noise, options.tracker_rate) if options.tracker else ''),
+          flush=True)
+    folder = tempfile.mkdtemp(prefix='soak_')
+    figures = soak_use.normal_use_soak(
+        os.path.abspath(options.robot), options.minutes, options.period, options.rate,
+        options.tolerance, options.seed, options.dynamics, options.tracker, options.actions,
+        options.restart, options.tracker_noise, options.tracker_rate, folder)
+    return soak_use.report(figures)
 
 
 if __name__ == '__main__':
