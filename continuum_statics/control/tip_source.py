@@ -7,7 +7,10 @@ correction at a time. The tracker is trusted only while it agrees with the model
 within millimetres of the real tip (11 mm RMS held out on the v6 robot, README), so a tracker
 further away than a tenth of the rod length is more likely wrong than the model. Outside the
 bound the tracker is set aside for the rest of the goal, with a warning that names it, and the
-goal continues on the model. No ROS.
+goal continues on the model. A reading is compared with the model's tip of its own time (the
+sample nearest its stamp): while the tip moves, the newest reading, up to ``max_state_age``
+old, lay 30-49 mm from the newest model tip though within 0.2-4 mm of the one of its time, and
+an honest tracker was set aside 74 times in ten minutes of normal use (issue 43). No ROS.
 """
 import numpy as np
 
@@ -41,7 +44,8 @@ class TipSource:
         if not tracker or self.set_aside:
             return model, model_tips, 'tip_pose', ''
         if model is not None:
-            gap = float(np.linalg.norm(measured.position - model.position))
+            then = at_time_of(measured, model_tips) or model
+            gap = float(np.linalg.norm(measured.position - then.position))
             if gap > self.bound:
                 self.set_aside = (
                     'tracker set aside: tip_pose_measured is %.1f mm from the model tip '
@@ -50,3 +54,24 @@ class TipSource:
                     'model' % (gap * 1e3, self.bound * 1e3))
                 return model, model_tips, 'tip_pose', self.set_aside
         return measured, measured_tips, 'tip_pose_measured', ''
+
+
+def at_time_of(sample, samples):
+    """Return the sample of ``samples`` (oldest first) nearest ``sample`` in time, or None.
+
+    By stamp when both carry one (the measurement's time), else by arrival.
+    """
+    def time_of(other):
+        return other.stamp_ns * 1e-9 if stamped else other.received
+
+    best, gap = None, np.inf
+    stamped = bool(sample.stamp_ns)
+    when = time_of(sample)
+    for other in reversed(samples):  # newest first: the nearest is usually among the last
+        if stamped and not other.stamp_ns:
+            continue
+        distance = abs(time_of(other) - when)
+        if distance > gap:
+            break  # samples are in time order: further back only gets further
+        best, gap = other, distance
+    return best

@@ -67,6 +67,28 @@ def test_a_tracker_beyond_the_bound_is_set_aside_for_the_rest_of_the_goal():
     assert source.judged(0.0, near, [near], model, [model], 0.5, True)[0] is near
 
 
+def test_a_tracker_reading_is_compared_with_the_model_tip_of_its_own_time():
+    # issue 43: the newest reading (0.2 s old while the tip moves 0.2 m/s) lay 40 mm from the
+    # newest model tip though 0.5 mm from the one of its time: before, an honest tracker was set
+    # aside (74 times in ten minutes of normal use)
+    source = TipSource(disagreement_bound(ROBOT.length, 0.0))
+    model_tips = [TipSample(np.array([0.2 * t, 0.0, 0.3]), int(t * 1e9), t + 0.001)
+                  for t in np.arange(0.0, 1.0, 0.01)]
+    reading = TipSample(np.array([0.2 * 0.8 + 5e-4, 0.0, 0.3]), int(0.8e9), 0.85)
+    tip, _, name, warning = source.judged(1.0, reading, [reading], model_tips[-1], model_tips,
+                                          0.5, True)
+    assert name == 'tip_pose_measured' and not warning
+    # unstamped: matched by arrival
+    unstamped = [TipSample(m.position, 0, m.received) for m in model_tips]
+    reading = TipSample(reading.position, 0, 0.811)
+    assert source.judged(1.0, reading, [reading], unstamped[-1], unstamped, 0.5,
+                         True)[2] == 'tip_pose_measured'
+    # a frozen tracker is still set aside: at its own time the model is 40 mm away
+    frozen = TipSample(np.array([0.2 * 0.6, 0.0, 0.3]), int(0.8e9), 0.85)
+    assert 'tracker set aside' in source.judged(1.0, frozen, [frozen], model_tips[-1],
+                                                model_tips, 0.5, True)[3]
+
+
 def straight_run_to_a_goal(settings):
     """Return (run, goal, start): a GoalRun from the straight robot towards a bent goal."""
     run = GoalRun(ROBOT, settings)
