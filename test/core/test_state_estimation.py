@@ -269,6 +269,51 @@ def test_the_documented_call_on_a_recorded_run_is_the_exact_estimate():
             k: v.used for k, v in exact.sensors.items()}
 
 
+def _drifting_tracker(robot, rate, noise, seconds=40.0, hz=20.0, drift_until=30.0, seed=3):
+    """Return (worst fused tip error, m; first set-aside time and reason; s back after)."""
+    rng = np.random.default_rng(seed)
+    lengths = _pulled(robot)
+    sensor = robot.sensors[0]
+    model = robot.estimate_shape(lengths, exact=True).shape
+    truth = model.tip_position + model.tip_rotation @ sensor.offset
+    estimate, worst, aside, back = None, 0.0, None, None
+    for k in range(int(seconds * hz)):
+        t = k / hz
+        drift = np.array([rate * min(t, drift_until), 0.0, 0.0]) if t < drift_until else 0.0
+        reading = SensorReading(truth + drift + rng.normal(0.0, noise, 3), stamp=t)
+        estimate = robot.estimate_shape(lengths, warm_start=estimate, stamp=t,
+                                        sensors={sensor.name: reading})
+        shape = estimate.shape
+        worst = max(worst, float(np.linalg.norm(
+            shape.tip_position + shape.tip_rotation @ sensor.offset - truth)))
+        verdict = estimate.sensors[sensor.name]
+        if not verdict.used and aside is None and 'drifting' in verdict.reason:
+            aside = (t, verdict.reason)
+        if t >= drift_until and verdict.used and back is None:
+            back = t - drift_until
+    return worst, aside, back
+
+
+@pytest.mark.parametrize('rate', [1e-3, 5e-3], ids=['1 mm/s', '5 mm/s'])
+def test_a_drifting_tracker_is_set_aside_before_it_walks_the_estimate_away(rate):
+    # issue 43 item 6, before: each reading passed the gate against an estimate the tracker had
+    # already moved; 1 / 5 mm/s for 45 s walked the fused tip 45 / 224 mm, nothing named
+    robot = load_robot(SENSOR_ROBOT)
+    worst, aside, back = _drifting_tracker(robot, rate, 5e-4)
+    assert aside is not None, 'never set aside'
+    bound = float(aside[1].split('(')[1].split(' mm')[0]) * 1e-3  # 3 sigma there: 13.0 mm
+    assert bound < 0.015
+    assert worst <= bound + 2e-3, (worst, aside)  # + the reading noise's share
+    assert back is not None and back <= 1.0  # the honest tracker is taken back
+
+
+def test_an_honest_noisy_tracker_is_never_set_aside_as_drifting():
+    robot = load_robot(SENSOR_ROBOT)
+    worst, aside, _ = _drifting_tracker(robot, 0.0, 5e-4, seconds=60.0)
+    assert aside is None, aside
+    assert worst < 2e-3
+
+
 def test_calibrate_recovers_a_known_hidden_offset():
     """A synthetic run: the tracker sees the model plus an offset process of known sigma, tau."""
     robot = load_robot(REPO / 'config' / 'tendon_robot_real_tendons.yaml')

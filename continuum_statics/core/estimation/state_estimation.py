@@ -59,6 +59,10 @@ COLUMN_DISTANCE = 0.01
 #: ... at most one column every this many calls (a node at 1 kHz: ~7 columns a second; a
 #: column is two bounded solves, which must stay out of the 99th percentile).
 COLUMN_EVERY = 150
+#: How far (in sigmas of the model uncertainty, along its direction) the correction at a
+#: sensor may go before its readings are set aside (a slow drift): 3, a 0.3 % chance that an
+#: honest model error lies beyond.
+CORRECTION_SIGMAS = 3.0
 #: Central-difference step of an ideal cable's length column, as a fraction of its prior sigma:
 #: small enough that the moved lengths still fit a shape (one sigma of one cable does not: a
 #: slack solve), large against the solver's tolerance; ideal cables act through geometry,
@@ -382,7 +386,41 @@ def _update(robot, shape, sensitivity, prior, readings, stamp):
         return prior, verdicts
     mean, covariance = fused(mean, covariance, np.vstack(rows), np.concatenate(residuals),
                              _block_diagonal(noises))
+    beyond = _beyond_the_prior(robot, shape, sensitivity, readings, verdicts, mean)
+    if beyond:  # a fault slower than the gate: the correction it adds up to is judged too
+        for name in beyond:
+            verdicts[name] = SensorVerdict(False, verdicts[name].chi2, beyond[name])
+        return prior, verdicts
     return dataclasses.replace(prior, mean=mean, covariance=covariance), verdicts
+
+
+def _beyond_the_prior(robot, shape, sensitivity, readings, verdicts, mean):
+    """Return {name: reason} of the used readings whose correction lies beyond the prior.
+
+    The gate judges a reading against an estimate the same sensor already moved, so a sensor
+    drifting slower than one gate walks the correction anywhere (1 mm/s: 45 mm in 45 s, every
+    reading used). The correction the estimate now applies at each sensor, G m, is judged
+    against what the model's uncertainty allows there (G P0 G^T): beyond CORRECTION_SIGMAS
+    along its direction, the readings are set aside and the correction kept where it was.
+    """
+    p0 = _prior(robot)[1]
+    beyond = {}
+    for sensor in readings:
+        if not verdicts[sensor.name].used:
+            continue
+        _, jac, _ = _sensor_rows(shape, sensitivity, sensor)
+        correction = jac[:3] @ mean
+        size = float(np.linalg.norm(correction))
+        if size == 0.0:
+            continue
+        direction = correction / size
+        allowed = math.sqrt(max(float(direction @ jac[:3] @ p0 @ jac[:3].T @ direction), 0.0))
+        if size > CORRECTION_SIGMAS * allowed:
+            beyond[sensor.name] = (
+                'its readings would correct the model by %.1f mm at the sensor, more than %g '
+                'sigma of the model uncertainty there (%.1f mm): a drifting or biased sensor?'
+                % (1e3 * size, CORRECTION_SIGMAS, 1e3 * CORRECTION_SIGMAS * allowed))
+    return beyond
 
 
 def _block_diagonal(blocks):
