@@ -165,6 +165,9 @@ class ShapeTracker:
                 capped = estimate.capped
             if capped:  # the best state reached: the next measurement goes on from it
                 self.warm = estimate
+            if not estimate.residual <= thresholds.drop and np.any(load):
+                estimate, capped = self._under_no_load(lengths, load, tensions, estimate, capped,
+                                                       thresholds, notes, stamp)
         except ValueError as error:
             return TrackResult(rejection=str(error), load_problem=notes['load_problem'])
         residual = float(estimate.residual)
@@ -192,6 +195,25 @@ class ShapeTracker:
                            converged=(bool(estimate.converged) or capped) and good_fit,
                            capped=capped, best_fit=not good_fit,
                            tensions_used=tensions is not None, **notes)
+
+    def _under_no_load(self, lengths, load, tensions, estimate, capped, thresholds, notes,
+                       stamp):
+        """Return (estimate, capped): the shape under zero tip load when that one fits.
+
+        A tip load (an estimator's, a topic's) the lengths fit no shape under must not silence
+        statics: with tip_wrench_source estimate it dropped every cable_states for 13 s
+        (issue 43). The shape under the load's prior (zero), solved to the end, is published
+        instead, and the load named on diagnostics.
+        """
+        plain = self._estimate(self.robot, lengths, np.zeros(6), tensions, None, notes, None,
+                               None, stamp)
+        if not plain.residual <= thresholds.drop:
+            return estimate, capped  # not the load: the lengths fit no shape at all
+        notes['load_problem'] = ('cable lengths fit no shape under tip load %s (RMS residual '
+                                 '%.3g m): the shape under zero load instead'
+                                 % (np.array2string(np.asarray(load), precision=3),
+                                    estimate.residual))
+        return plain, False
 
     @staticmethod
     def _estimate(robot, lengths, load, tensions, warm, notes, tracking=None, sensors=None,

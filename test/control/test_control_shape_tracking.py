@@ -42,6 +42,22 @@ def test_lengths_no_shape_fits_are_dropped_and_a_small_misfit_is_a_best_fit():
     assert result.rejection == '' and result.best_fit and 'best fit' in result.message
 
 
+def test_lengths_no_shape_fits_under_the_load_give_the_shape_under_zero_load():
+    # issue 43 item 4, before: a tip load estimate the lengths fit no shape under (RMS 17.6 mm)
+    # dropped every cable_states ("cable lengths fit no shape"): statics silent for 13 s
+    shape = ROBOT.solve_ivp([2.0, -1.0, 0.0])
+    load = np.array([5.0, 5.0, 0.0, 0.0, 0.0, 0.0])
+    result = tracker().update(ROBOT.cable_lengths(shape), None, load, THRESHOLDS, 100.0)
+    assert result.rejection == '', result.rejection
+    assert 'fit no shape under tip load [5. 5. 0. 0. 0. 0.]' in result.load_problem
+    np.testing.assert_allclose(result.estimate.shape.tip_position, shape.tip_position,
+                               atol=1e-6)
+    # lengths no shape fits under any load are still dropped
+    pulled = ROBOT.straight_cable_lengths - 0.004
+    result = tracker().update(pulled, None, load, THRESHOLDS, 100.0)
+    assert 'fit no shape' in result.rejection and not result.load_problem
+
+
 def test_every_cable_paid_out_is_the_passive_rod_with_slack_cables():
     # real robots under displacement control: the cables go slack and the rod hangs passive
     lengths = ROBOT.straight_cable_lengths + 0.004
