@@ -9,6 +9,7 @@ import contextlib
 import gc
 import multiprocessing
 import os
+import pickle
 
 
 class SerialPool:
@@ -103,6 +104,10 @@ def _send_result(sender, function, args):
     try:
         message = (True, function(*args))
     except Exception as error:  # noqa: BLE001 (raised again in the parent)
+        try:  # an exception whose __init__ takes other arguments does not unpickle
+            pickle.loads(pickle.dumps(error))
+        except Exception:  # noqa: BLE001
+            error = RuntimeError(repr(error))
         message = (False, error)
     sender.send(message)
     sender.close()

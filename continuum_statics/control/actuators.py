@@ -30,6 +30,7 @@ class Actuators:
         self.backend = None  # created by configure, released by release
         self.lock = threading.Lock()
         self.reconnects = 0
+        self.failure = ''  # why the last switch_power failed
         self.max_interval = 10.0  # reconnect_max_interval, s
         self._logged = {}  # what -> monotonic s of its last throttled log line
 
@@ -76,7 +77,10 @@ class Actuators:
         self._throttled('error', what, 'backend %s' % self.gate.backend_error)
 
     def switch_power(self, on) -> bool:
-        """Lifecycle (de)activation: power on/off, holding; False when the backend failed."""
+        """Lifecycle (de)activation: power on/off, holding; False when the backend failed.
+
+        Why it failed is then in :attr:`failure` ('' after a success).
+        """
         gate = self.gate
         if self.backend is None:
             gate.active = on
@@ -93,8 +97,11 @@ class Actuators:
             except ConnectionLost as error:
                 self._lost(error, now)  # the reconnection does it
             except Exception as error:
-                self.log.error('%s failed: %s' % ('activate' if on else 'deactivate', error))
-                return False
+                # the transition fails: the lifecycle stays where it was, and so does the gate
+                gate.active = not on
+                self.failure = '%s failed: %s' % ('activate' if on else 'deactivate', error)
+                return False  # the node logs it and puts it on /diagnostics
+        self.failure = ''
         return True
 
     def release(self) -> None:

@@ -26,9 +26,10 @@ class AnsweringActionServer(ActionServer):
     """
 
     def __init__(self, *args, **kwargs):
-        super().__init__(*args, **kwargs)
+        # before the base registers the server with a node that may already spin
         self._owed = {}  # id(request header) -> header: asked for and not sent yet
         self._owed_lock = threading.Lock()
+        super().__init__(*args, **kwargs)
 
     def owed(self):
         """Return how many result requests have not been answered yet."""

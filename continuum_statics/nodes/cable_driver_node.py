@@ -101,7 +101,7 @@ class CableDriverNode(RunnerHooks, TransitionFailures, LifecycleNode):
         # lifecycle, connection and fault state, and what a command becomes (control/)
         self.gate = CommandGate(self.cable_names, self._limits, self.robot.straight_cable_lengths)
         # every backend call, under one lock (the executor and the publish loop both call in)
-        self.actuators = Actuators(self.gate, self._backend_cls.name, self._recording())
+        self.actuators = Actuators(self.gate, self._backend_cls.name, self.get_logger())
         self.actuators.max_interval = self._params['reconnect_max_interval']
         self._state_msg = JointState()
         self._diagnostics = self.create_publisher(diag.DiagnosticArray, '/diagnostics', 10)
@@ -159,7 +159,7 @@ class CableDriverNode(RunnerHooks, TransitionFailures, LifecycleNode):
                                         self.robot.straight_cable_lengths,
                                         **self._backend_options, **extra)
         except Exception as error:  # bad options a parameter check could not see
-            return self._transition_failed('configure', error)  # on /diagnostics too
+            return self._transition_failed('configure failed: %s' % error)  # /diagnostics too
         if backend.takes_tip_wrench:
             try:
                 backend.set_tip_wrench(self._hidden_load)
@@ -190,7 +190,7 @@ class CableDriverNode(RunnerHooks, TransitionFailures, LifecycleNode):
     def on_cleanup(self, state):
         """Release the actuators and the port or bus."""
         self.actuators.release()
-        return TransitionCallbackReturn.SUCCESS
+        return self._transition_done()
 
     def on_shutdown(self, state):
         """Power off and release, from any state (finalized: no transition leads back)."""
@@ -200,7 +200,7 @@ class CableDriverNode(RunnerHooks, TransitionFailures, LifecycleNode):
 
     def _switch_power(self, on):
         if not self.actuators.switch_power(on):
-            return self._transition_failed('activate' if on else 'deactivate')
+            return self._transition_failed(self.actuators.failure)
         self.get_logger().info('cable_driver %s' % ('active: torque on, commands accepted' if on
                                                     else 'inactive: torque off, holding'))
         return self._transition_done()

@@ -8,6 +8,7 @@ import struct
 import numpy as np
 from sensor_msgs.msg import JointState
 
+from continuum_statics.core.estimation.load_estimation import DEFAULT_NOISE, slack_band
 from continuum_statics.nodes.ros_conversions import cable_index
 
 
@@ -55,10 +56,10 @@ _STAMP = struct.Struct('<iI')
 CDR_LE = b'\x00\x01'
 #: Smallest serialized JointState: encapsulation, stamp, empty frame_id, four empty sequences.
 MIN_JOINT_STATE_BYTES = 32
-#: How far below zero a measured tension is still a slack cable's zero, N: three standard
-#: deviations of the default tension noise (0.05 N, load_estimation.DEFAULT_NOISE). Beyond it the
-#: effort is not a tension (a signed motor current, a load cell's lost zero).
-ZERO_BAND = 0.15
+#: How far below zero a measured tension is still a slack cable's zero, N: 3 sigma of the
+#: default tension noise (0.15 N). Beyond it the effort is not a tension (a signed motor
+#: current, a load cell's lost zero).
+ZERO_BAND = slack_band(DEFAULT_NOISE['tension'])
 
 
 def _aligned(offset, size):

@@ -50,7 +50,8 @@ def max_stamp_offset_spec():
     """Return the stamp rule's parameter (:mod:`continuum_statics.control.stamps`)."""
     return ParamSpec('max_stamp_offset', 1.0, 'an input stamped further than this from the '
                      "node's clock, or going backwards, is stamped on arrival instead (with a "
-                     'warning), s (1e12: effectively off)', 1e-3, 1e12)
+                     "warning); statics sets such a sensor reading aside; s (1e12: "
+                     'effectively off)', 1e-3, 1e12)
 
 
 def statics_parameters():

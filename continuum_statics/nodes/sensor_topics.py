@@ -73,8 +73,8 @@ class SensorTopics:
             except ValueError as error:
                 self.inbox.reject(sensor.name, str(error))
                 return
-            # judged by the node's max_stamp_offset, as cable_states' stamps are (read each time:
-            # a parameter change holds at once)
+            # the node's max_stamp_offset (read each time: a parameter change holds at once);
+            # a reading beyond it is set aside, not re-stamped as cable_states are
             self.inbox.max_offset = self._node.get_parameter('max_stamp_offset').value
             if isinstance(msg, PoseWithCovarianceStamped):  # accepted readings: PoseStamped
                 msg = PoseStamped(header=msg.header, pose=msg.pose.pose)

@@ -39,7 +39,7 @@ from continuum_statics.control.stamps import StampRule
 from continuum_statics.core.estimation.load_estimation import (
     load_model,
     plausible_tip_load,
-    tension_sigma,
+    slack_band,
 )
 from continuum_statics.core.warmup import warm_up
 from continuum_statics.nodes import diagnostics_util as diag
@@ -139,8 +139,8 @@ class TipLoadEstimatorNode(RunnerHooks, Node):
             return
         # a slack cable read within 3 sigma of its noise below zero is zero (the estimate went
         # stale on each such message before: issue 43)
-        band = 3.0 * tension_sigma(self._noise()['tension'], [0.0])[0]
-        tensions, problem = self._cable_states.tensions(view, zero_band=band)
+        tensions, problem = self._cable_states.tensions(
+            view, zero_band=slack_band(self._noise()['tension']))
         if problem:
             self._problems.reject('cable_states', problem)
         self._stamp_ns, taken = self._judged('cable_states', view.sec * NS + view.nanosec)

@@ -10,45 +10,15 @@ from rclpy.lifecycle import TransitionCallbackReturn
 from continuum_statics.control.health import ERROR
 
 
-class _ErrorRecorder:
-    """A logger that keeps the text of its last ``error`` line (the actuators' failures)."""
-
-    def __init__(self, logger):
-        self._logger = logger
-        self.last_error = ''
-
-    def error(self, text, *args, **kwargs):
-        """Log ``text`` as an error and keep it."""
-        self.last_error = str(text)
-        return self._logger.error(text, *args, **kwargs)
-
-    def __getattr__(self, name):  # info, warning, ...: the node's logger's own
-        return getattr(self._logger, name)
-
-
 class TransitionFailures:
     """Mixin of a lifecycle node: the last failed transition and its reason, while it holds."""
 
     _transition_failure = ''
-    _error_recorder = None
 
-    def _recording(self):
-        """Return the node's logger, wrapped so that its last error can name a failure."""
-        self._error_recorder = _ErrorRecorder(self.get_logger())
-        return self._error_recorder
-
-    def _transition_failed(self, transition, error=None):
-        """Log and keep why ``transition`` failed; return FAILURE for the transition callback.
-
-        ``error`` None: the reason is the last error the recorded logger saw (the actuators log
-        why a backend refused to power on or off).
-        """
-        if error is not None:
-            self._transition_failure = '%s failed: %s' % (transition, error)
-            self.get_logger().error(self._transition_failure)
-        else:
-            seen = self._error_recorder.last_error if self._error_recorder else ''
-            self._transition_failure = seen or '%s failed (see its log)' % transition
+    def _transition_failed(self, reason):
+        """Keep (and log) ``reason``, e.g. 'activate failed: ...'; return FAILURE."""
+        self._transition_failure = reason
+        self.get_logger().error(reason)
         return TransitionCallbackReturn.FAILURE
 
     def _transition_done(self):

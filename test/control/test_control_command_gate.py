@@ -240,3 +240,19 @@ def test_a_rejection_is_logged_at_most_once_per_throttle_per_kind():
                      'dropped cable_states: bad later']
     assert problems.counts == {'cable_states': 3, 'tip_wrench': 1}
     assert problems.last_reason == 'cable_states: bad later'
+
+
+def test_a_refused_activate_leaves_commands_refused_and_says_why():
+    # review of issue 44: switch_power set gate.active before enable() raised, so after a failed
+    # activate (lifecycle back to inactive) the gate accepted commands
+    class Refusing(Flaky):
+        def enable(self, now):
+            raise RuntimeError('torque refused')
+
+    gate = CommandGate(NAMES, LIMITS, STRAIGHT)
+    actuators = Actuators(gate, 'refusing', Log())
+    actuators.configure(Refusing(NAMES, LIMITS, STRAIGHT))
+    assert not actuators.switch_power(True)
+    assert not gate.active and actuators.failure == 'activate failed: torque refused'
+    with pytest.raises(CommandRefused):
+        actuators.command(np.array([0]), [0.31], margin=0.0)

@@ -354,17 +354,15 @@ def test_transition_failures_keep_the_reason_until_a_transition_succeeds():
             return self.logger
 
     node = Node()
-    log = node._recording()
     health = (0, 'unconfigured (lifecycle)', {'lifecycle': 'unconfigured'})
     assert node._with_transition_failure(health)[0] == 0
-    assert node._transition_failed('configure', ValueError('no tendons')) == \
+    assert node._transition_failed('configure failed: no tendons') == \
         TransitionCallbackReturn.FAILURE
     level, message, values = node._with_transition_failure(health)
     # before: the reason was in the log only; /diagnostics said "unconfigured", level OK
-    assert level == ERROR_LEVEL
+    assert level == ERROR_LEVEL and node.logger.lines == ['configure failed: no tendons']
     assert values['transition_failure'] == 'configure failed: no tendons'
-    log.error('activate failed: torque refused')  # what the actuators log
-    node._transition_failed('activate')
+    node._transition_failed('activate failed: torque refused')  # Actuators.failure
     assert node._with_transition_failure(health)[2]['transition_failure'] == \
         'activate failed: torque refused'
     node._transition_done()

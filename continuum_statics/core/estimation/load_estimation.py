@@ -276,6 +276,11 @@ def noise_levels(noise):
     return levels
 
 
+def slack_band(level):
+    """How far below zero (N) a measured tension is still a slack cable's zero: 3 sigma."""
+    return 3.0 * float(tension_sigma(level, [0.0])[0])
+
+
 def tension_sigma(level, tensions):
     """Per-cable tension standard deviations (N) of a noise level (N or 'P%')."""
     if isinstance(level, str):
