@@ -386,8 +386,11 @@ def _update(robot, shape, sensitivity, prior, readings, stamp):
         return prior, verdicts
     mean, covariance = fused(mean, covariance, np.vstack(rows), np.concatenate(residuals),
                              _block_diagonal(noises))
-    beyond = _beyond_the_prior(robot, shape, sensitivity, readings, verdicts, mean)
-    if beyond:  # a fault slower than the gate: the correction it adds up to is judged too
+    # a fault slower than the gate: the correction readings add up to over calls is judged too
+    # (a first correction, from nothing carried, is the gate's alone)
+    beyond = np.any(prior.mean) and _beyond_the_prior(robot, shape, sensitivity, readings,
+                                                     verdicts, mean)
+    if beyond:
         for name in beyond:
             verdicts[name] = SensorVerdict(False, verdicts[name].chi2, beyond[name])
         return prior, verdicts
