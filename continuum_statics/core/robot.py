@@ -408,7 +408,10 @@ class Robot:
     # -- cables ----------------------------------------------------------------------------
     def cable_lengths(self, shape) -> np.ndarray:
         """Cable lengths (n_cables,) in m of a shape, order ``cable_names`` (eq. 11, errata)."""
-        return self.model.cable_lengths(np.ascontiguousarray(shape.states)[None])[0]
+        states = np.ascontiguousarray(shape.states)
+        if not states.flags.writeable:  # a Shape's: the kernel's one specialisation is writable
+            states = states.copy()
+        return self.model.cable_lengths(states[None])[0]
 
     # -- Jacobians -------------------------------------------------------------------------
     def force_step(self) -> float:

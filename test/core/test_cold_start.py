@@ -4,8 +4,10 @@ The rest of the suite runs with kernels that ``conftest.py`` compiled at session
 tests give their subprocesses an empty ``NUMBA_CACHE_DIR``, so every kernel is compiled there,
 and require that nothing is served before it is ready: the demo reaches every goal on its first
 run, and a goal sent 0.2 s after the service appears is reached (it waits for the first state
-instead of failing). Each compiles for 20-60 s.
+instead of failing); the warm-up compiles each kernel once, for one type specialisation, in the
+two worker processes as in one. Each compiles for 20-60 s.
 """
+import json
 import os
 import subprocess
 import sys
@@ -44,6 +46,43 @@ def test_demo_reaches_every_goal_on_its_first_run_with_an_empty_kernel_cache(tmp
     assert 'figures: 5/5 reachable goals reached' in result.stdout, result.stdout
     # issue 44: the deliberately unreachable goal is announced before the controller WARNs
     assert 'a goal 2 m away on purpose' in result.stdout, result.stdout
+
+
+def test_a_cold_warm_up_compiles_each_kernel_once_for_one_type_specialisation(tmp_path):
+    """Each kernel has exactly its specialisations, and two workers compile each kernel once.
+
+    In one process every callee is compiled there too (a loaded caller hides its callees'), so
+    the counts are exact; the ``warmup`` tool's two workers then compile each kernel once in all.
+    """
+    from continuum_statics.core.warmup import SPECIALISATIONS
+
+    script = ('import json\n'
+              'from continuum_statics.core.warmup import (_dispatchers, kernel_signatures,\n'
+              '                                           warm_up)\n'
+              'warm_up(workers=0, dynamics=True)\n'
+              'kernels = _dispatchers()\n'
+              'print(json.dumps({name: (count, kernels[name].targetoptions.get("inline") == '
+              '"always") for name, count in kernel_signatures().items()}))\n')
+    result = subprocess.run([sys.executable, '-c', script], cwd=REPO, env=cold_env(tmp_path),
+                            capture_output=True, text=True, timeout=COMPILE_S * 2)
+    assert result.returncode == 0, result.stdout + result.stderr
+    counts = json.loads(result.stdout.splitlines()[-1])
+    wrong = {name: count for name, (count, inline) in counts.items()
+             if count != (0 if inline else SPECIALISATIONS.get(name, 1))}
+    assert not wrong, wrong
+
+    env = cold_env(tmp_path)
+    env['NUMBA_CACHE_DIR'] = str(tmp_path / 'parallel_cache')
+    result = subprocess.run([sys.executable, '-m', 'continuum_statics', 'warmup', '--workers',
+                             '2'], cwd=REPO, env=env, capture_output=True, text=True,
+                            timeout=COMPILE_S * 2)
+    assert result.returncode == 0, result.stdout + result.stderr
+    compiled = [line.split()[2] for line in result.stdout.splitlines()
+                if line.startswith('warmup: compiled ') and ' kernels: ' not in line]
+    expected = {name.replace('continuum_statics.core.', '')
+                for name, (count, inline) in counts.items() if count}
+    assert sorted(compiled) == sorted(expected), result.stdout  # each once, in some process
+    assert 'compiled in 2 processes' in result.stdout, result.stdout
 
 
 def test_a_goal_sent_just_after_the_service_appears_is_reached_from_a_cold_bringup(tmp_path):

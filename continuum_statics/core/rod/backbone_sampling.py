@@ -54,7 +54,12 @@ class BackboneSampler:
         """Return positions (count, 3), m, and quaternions (count, 4) [x, y, z, w]."""
         points = np.empty((self.count, 3))
         quaternions = np.empty((self.count, 4))
-        _sample(np.ascontiguousarray(positions, dtype=float),
-                np.ascontiguousarray(rotations, dtype=float), self._lower, self._upper,
+        _sample(_writable(positions), _writable(rotations), self._lower, self._upper,
                 self._weight, self._nearest, points, quaternions)
         return points, quaternions
+
+
+def _writable(array):
+    """``array`` as a writable C float64 array (one kernel specialisation; a copy if need be)."""
+    array = np.ascontiguousarray(array, dtype=float)
+    return array if array.flags.writeable else array.copy()

@@ -558,7 +558,7 @@ def advance(model, coefficients, memory, x, last_x, inverse, pivots, tip, cables
         x[i] = 3.0 * (x[i] - last_x[0, i]) + last_x[1, i]
     converged, ivps, refreshes = solve_step(model, c0, history, x, inverse, pivots, tip, cables,
                                             states, left, stages, motor, tolerance,
-                                            max_iterations, False)
+                                            max_iterations, np.bool_(False))  # not Literal
     if not converged:
         x[:] = saved[0]
         states[:, :] = saved[1]

@@ -558,7 +558,9 @@ def integrate_passive(s_grid, params, tip_force, base_bending):
     for i in range(3):
         if not (math.isfinite(tip_force[i]) and math.isfinite(base_bending[i])):
             return np.empty((0, STATE_SIZE))
-    states = integrate_batch(s_grid, params, POINT_MOMENT, tip_force.reshape((1, 3)),
+    # np.int64: a bare constant is typed Literal[int](0), a second specialisation of
+    # integrate_batch (~3 s CPU more of cold compile); one signature per kernel (warmup.py)
+    states = integrate_batch(s_grid, params, np.int64(POINT_MOMENT), tip_force.reshape((1, 3)),
                              base_bending.reshape((1, 3)), np.zeros((1, 0, 3)), np.zeros((1, 0)),
                              np.zeros((1, 0)), np.zeros(s_grid.shape[0] - 1, dtype=np.bool_),
                              np.zeros(0, dtype=np.int64), np.zeros(0, dtype=np.int64))

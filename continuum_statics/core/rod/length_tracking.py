@@ -132,7 +132,7 @@ def evaluate_at(model, tip_force, tip_moment, z, tendon):
     x = np.empty(tendon.moment_map.shape[0] + 3)
     fixed = np.empty(n)
     _state_of(z, code, tendon.moment_map, x, fixed)
-    probed = probe(model, tip_force, tip_moment, fixed, x, 0)
+    probed = probe(model, tip_force, tip_moment, fixed, x, np.int64(0))  # not Literal[int]
     values, states = probed.values, probed.states
     friction, compliance = tendon.friction, tendon.compliance
     tensions = np.ascontiguousarray(z[3:])

@@ -61,6 +61,8 @@ def rotation_to_quaternion(rotations):
     """Return unit quaternions ``[x, y, z, w]`` (w >= 0) of rotation matrices (..., 3, 3)."""
     m = np.asarray(rotations, dtype=float)
     flat = np.ascontiguousarray(m).reshape(-1, 3, 3)
+    if not flat.flags.writeable:  # a Shape's: one specialisation of the kernels (writable)
+        flat = flat.copy()
     out = np.empty((flat.shape[0], 4))
     _quaternions(flat, out)
     return out.reshape(m.shape[:-2] + (4,))

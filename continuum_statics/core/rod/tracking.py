@@ -225,7 +225,7 @@ def track(model, tip_force, tip_moment, fixed, measured, warm, limits):
                                                          con_jac, 0.0)
                         c_trial = c_trial + correction
                         c_res, c_con, c_states, c_jac, c_jac_con = _evaluate(
-                            problem, c_trial, measured, 0)
+                            problem, c_trial, measured, np.int64(0))  # not Literal[int]
                         runs += 1
                         c_merit = c_res @ c_res + penalty * (c_con @ c_con)
                         if np.isfinite(c_merit) and c_merit < current:
