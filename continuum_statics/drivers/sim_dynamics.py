@@ -11,6 +11,8 @@ import time
 
 import numpy as np
 
+from continuum_statics.core.warmup import warm_up_dynamics
+
 #: most simulated time (s) one reading integrates; beyond it the simulation drops the backlog
 #: (slower than real time: counted, and the real-time factor on /diagnostics says so)
 MAX_CATCH_UP = 0.05
@@ -38,6 +40,9 @@ class SimulatedRod:
             raise ValueError('sim.dynamics needs real tendons (a tendons block in the robot '
                              'file: stiffness, pretension): the motors drive the rod through '
                              'their stretch; robot %r has ideal cables' % robot.name)
+        # the rod-in-motion kernels are not in the nodes' warm-up: compiled (or loaded from the
+        # cache) here, at configure, rather than at the first step of the real-time loop
+        warm_up_dynamics()
         self.robot = robot
         self.dynamics = robot.dynamics(tip_mass=tip_mass)
         self.dt = self.dynamics.dt
