@@ -194,12 +194,12 @@ def _calibration_age(path):
 
 
 def check_kernels(observation):
-    """Check that the kernels are in numba's cache (else each start compiles for a minute)."""
+    """Check that the kernels are in numba's cache (else each start compiles for ~22 s)."""
     cached, total = observation.kernels_cached
     if total and cached == total:
         return [Finding(OK, 'kernels', 'all %d kernels compiled in the numba cache' % total)]
     return [Finding(WARN, 'kernels', '%d of %d kernels in the numba cache: each node compiles '
-                    'the rest at start (20-60 s, status "starting")' % (cached, total),
+                    'the rest at start (~22 s on two cores, status "starting")' % (cached, total),
                     'run `python -m continuum_statics warmup` once as the user that runs the '
                     'nodes (or set NUMBA_CACHE_DIR to a writable directory)')]
 
