@@ -144,9 +144,9 @@ class CableDriverNode(RunnerHooks, TransitionFailures, LifecycleNode):
         self.get_logger().info('cable_driver: backend %s, %d cables (%s), %g Hz' % (
             self._backend_cls.name, len(self.cable_names), ', '.join(self.cable_names),
             self._params['publish_rate']))
-        if self._params['autostart']:
-            self.trigger_configure()
-            self.trigger_activate()
+        configured = self._params['autostart'] and self.trigger_configure()
+        if configured == TransitionCallbackReturn.SUCCESS:  # Jazzy raises for an activate
+            self.trigger_activate()                         # from unconfigured
 
     # -- lifecycle --------------------------------------------------------------------------
     def on_configure(self, state):
