@@ -8,6 +8,7 @@ disk; the distributed model turns it into the least-norm non-negative cable tens
 slack) and loads the rod with them all along the cables. Equilibrium is the tip moment balance
 (:func:`kernel.probe` rows ``balance``): three equations whatever the number of sections.
 """
+import copy
 import dataclasses
 import functools
 import math
@@ -23,6 +24,7 @@ from continuum_statics.core.description.layout import (
     Probe,
     ProbeRows,
 )
+from continuum_statics.core.description.obstacles import in_base_frame
 from continuum_statics.core.description.robot_file import read_robot_description
 from continuum_statics.core.description.routing import Routing
 from continuum_statics.core.description.sensors import default_model_uncertainty
@@ -32,7 +34,7 @@ from continuum_statics.core.rod.kernel import DISTRIBUTED, POINT_MOMENT, pack_pa
 from continuum_statics.core.rod.model import Model
 from continuum_statics.core.rod.rotations import quaternion_to_rotation
 from continuum_statics.core.rod.shape import Shape
-from continuum_statics.core.statics import bvp, length_statics, tip_goal
+from continuum_statics.core.statics import bvp, contact, length_statics, tip_goal
 
 
 def load_robot(path) -> 'Robot':
@@ -154,6 +156,8 @@ class Robot:
         # the point a tip tracker follows, in the tip frame (m): calibration and tip_pose_measured
         self.tip_marker = (np.zeros(3) if description.tip_marker is None
                            else np.array(description.tip_marker, dtype=float))
+        self.clearance = description.clearance
+        self.obstacles = in_base_frame(description.obstacles, self.base_frame_id)
         self.c = rod.bending_stiffness
         self.d = rod.shear_stiffness
         # distributed weight rho*A*g*e_g (N/m), the body force f of eqs. 3, 4 and 8
@@ -230,6 +234,11 @@ class Robot:
                                        self.bending_step(), **tables), self.force_step())
         self.state_size = column
         self.observable_bending = column - 3
+        # what must clear an obstacle (m): the file's body_radius, else the outermost cable
+        # hole (the disks reach at least that far), else the rod's own radius
+        holes = np.hypot(self.hole_offsets[..., 0], self.hole_offsets[..., 1])
+        self.body_radius = (self.description.body_radius if self.description.body_radius
+                            else max(float(np.max(holes, initial=0.0)), 0.5 * self.rod.diameter))
         # IVPs in one probe with Jacobians: point moments at the tip have exact columns
         tip = len(self.s_grid) - 1
         exact = sum(int(r) for r, n in zip(self.section_ranks, self.section_end_node)
@@ -257,6 +266,26 @@ class Robot:
         """Copy of this robot with some solver settings replaced (e.g. ``steps=200``)."""
         solver = dataclasses.replace(self.solver, **settings)
         return Robot(dataclasses.replace(self.description, solver=solver))
+
+    def with_node_forces(self, forces) -> 'Robot':
+        """Copy of this robot with point forces (N, global; (N, 3), one per node) on the rod.
+
+        Carried as the disks' weights are (eq. 3 with point loads: n jumps at the node): the
+        contact forces of :mod:`contact`. Every solver runs on the copy unchanged.
+        """
+        beyond = np.cumsum(np.asarray(forces, dtype=float)[::-1], axis=0)[::-1][1:]
+        other = copy.copy(self)
+        other.interval_weight = (beyond if self.interval_weight is None
+                                 else self.interval_weight + beyond)
+        other.params = other.params_for()
+        other.model = Model(self.model.record._replace(params=other.params),
+                            self.model.force_step)
+        return other
+
+    def obstacles_or_file(self, obstacles):
+        """Return the obstacles of a solve: the robot file's for None, else these (base frame)."""
+        return self.obstacles if obstacles is None else in_base_frame(obstacles,
+                                                                      self.base_frame_id)
 
     def with_model_uncertainty(self, uncertainty) -> 'Robot':
         """Copy of this robot with another :class:`sensors.ModelUncertainty` (None: none)."""
@@ -349,12 +378,21 @@ class Robot:
         return RodDynamics(self, dt, alpha, tip_mass)
 
     def solve_tensions(self, tensions, tip_force=(0.0, 0.0, 0.0), tip_moment=(0.0, 0.0, 0.0),
-                       warm_start=None) -> Shape:
+                       warm_start=None, obstacles=None) -> Shape:
         """Forward statics: the shape under cable tensions (N, >= 0) and a tip load (global).
 
         A boundary-value problem on u(0) with the robot's cable model; ``warm_start`` is a
-        previous result (shape, estimate or solution). Raises ``ConvergenceError``.
+        previous result (shape, estimate or solution). ``obstacles``: a sequence of
+        :class:`~continuum_statics.core.description.obstacles.Obstacle` in the base frame
+        (None: the robot file's; ``()``: none): the body rests on them, ``shape.contacts``
+        says where (:mod:`contact`). Raises ``ConvergenceError``.
         """
+        obstacles = self.obstacles_or_file(obstacles)
+        if obstacles:
+            return contact.solve_in_contact(
+                self, obstacles, self.body_radius,
+                lambda robot, warm: Robot.solve_tensions(robot, tensions, tip_force, tip_moment,
+                                                         warm, ()), warm_start)
         tensions = as_vector(tensions, len(self.cable_names), 'tensions')
         if np.any(tensions < 0.0):
             raise ValueError('tensions must be >= 0 N (cables only pull), got %s'
@@ -370,12 +408,19 @@ class Robot:
                                tensions)
 
     def solve_lengths(self, lengths, tip_force=(0.0, 0.0, 0.0), tip_moment=(0.0, 0.0, 0.0),
-                      warm_start=None) -> length_statics.LengthSolution:
+                      warm_start=None, obstacles=None) -> length_statics.LengthSolution:
         """Equilibrium when the motors hold cable lengths (m): shape, tensions, slack cables.
 
         The tendon model of the robot file (stiffness, pretension, friction, zero offsets);
         ``warm_start`` is the previous result of the same sequence. See :mod:`length_statics`.
+        ``obstacles`` as :meth:`solve_tensions`: ``solution.shape.contacts``.
         """
+        obstacles = self.obstacles_or_file(obstacles)
+        if obstacles:
+            return contact.solve_in_contact(
+                self, obstacles, self.body_radius,
+                lambda robot, warm: length_statics.solve_lengths(robot, lengths, tip_force,
+                                                                 tip_moment, warm), warm_start)
         return length_statics.solve_lengths(self, lengths, tip_force, tip_moment, warm_start)
 
     def equilibrium_between(self, start, goal, fraction, tip_force=(0.0, 0.0, 0.0),
@@ -443,7 +488,7 @@ class Robot:
     def estimate_shape(self, cable_lengths, tip_force=(0.0, 0.0, 0.0),
                        tip_moment=(0.0, 0.0, 0.0), tensions=None, warm_start=None,
                        u0_guess=None, tracking=None, exact=False, sensors=None,
-                       stamp=None) -> shape_estimation.ShapeEstimate:
+                       stamp=None, obstacles=None) -> shape_estimation.ShapeEstimate:
         """Shape from measured cable lengths (m) and a tip load (N, N m); :mod:`estimation`.
 
         Warm-started (``warm_start`` the previous estimate), a call first does bounded work
@@ -464,8 +509,16 @@ class Robot:
         ``position_covariance`` and ``tip_covariance``; ``stamp`` (s) times the unmodelled
         loads' decay since ``warm_start``. A non-finite ``stamp`` or reading stamp is refused
         (ValueError): it would carry NaN into every later warm-started estimate.
+        ``obstacles`` as :meth:`solve_tensions`: ``estimate.shape.contacts``.
         """
         _check_stamps(stamp, sensors)
+        obstacles = self.obstacles_or_file(obstacles)
+        if obstacles:
+            return contact.solve_in_contact(
+                self, obstacles, self.body_radius,
+                lambda robot, warm: Robot.estimate_shape(
+                    robot, cable_lengths, tip_force, tip_moment, tensions, warm, u0_guess,
+                    tracking, exact, sensors, stamp, ()), warm_start)
         jacobians = getattr(warm_start, 'jacobians', None)
         if jacobians is not None and jacobians[0].shape != (len(self.cable_names),
                                                             self.state_size):

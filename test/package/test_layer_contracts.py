@@ -21,7 +21,7 @@ NAME = PACKAGE.name
 ROS_MODULES = {
     'rclpy', 'rcl_interfaces', 'builtin_interfaces', 'std_msgs', 'std_srvs', 'geometry_msgs',
     'sensor_msgs', 'nav_msgs', 'visualization_msgs', 'diagnostic_msgs', 'tf2_msgs', 'tf2_ros',
-    'action_msgs', 'unique_identifier_msgs', 'lifecycle_msgs', 'rosgraph_msgs',
+    'action_msgs', 'unique_identifier_msgs', 'lifecycle_msgs', 'rosgraph_msgs', 'shape_msgs',
     'ament_index_python', 'launch', 'launch_ros', 'rosbag2_py',
     'continuum_statics_interfaces',
 }

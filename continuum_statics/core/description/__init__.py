@@ -4,6 +4,7 @@
 - :mod:`.routing`: the cable holes along the rod (straight, helical, per-disk offsets)
 - :mod:`.tendons`: real tendons (stretch, pretension, capstan friction, zero offsets)
 - :mod:`.sensors`: the robot file's sensors, their readings and verdicts, model uncertainty
+- :mod:`.obstacles`: obstacles around the robot (the file's ``obstacles:``), signed distances
 - :mod:`.layout`: the named layouts of every array a kernel reads or writes
 - :mod:`.inputs`: argument checks shared by the API (vectors of a length, finite)
 """

@@ -9,6 +9,7 @@ import math
 import numpy as np
 import yaml
 
+from continuum_statics.core.description.obstacles import parse_obstacles
 from continuum_statics.core.description.routing import GuideOffsets, Helix, Straight
 from continuum_statics.core.description.sensors import (
     ModelUncertainty,
@@ -174,6 +175,9 @@ class RobotDescription:
     ``cable_offsets`` is each cable's hole at its end disk; ``cable_routes`` holds, per cable,
     its :mod:`~continuum_statics.core.description.routing` route when the file gives ``offsets`` or
     ``helix`` (None: straight at ``cable_offsets``, what calibration may change).
+    ``obstacles`` (:mod:`~continuum_statics.core.description.obstacles`), ``clearance`` (m, the
+    tip goals' default) and ``body_radius`` (m; None: the robot's default) are the
+    "Obstacles and contact" keys.
     """
 
     name: str
@@ -196,6 +200,9 @@ class RobotDescription:
     sensors: tuple = ()
     model_uncertainty: ModelUncertainty = None
     dynamics: DynamicsSettings = DynamicsSettings()
+    obstacles: tuple = ()
+    clearance: float = 0.0
+    body_radius: float = None
 
     def routes(self):
         """One route per cable (:mod:`~continuum_statics.core.description.routing`), straight."""
@@ -218,7 +225,7 @@ MAX_DISK_MASS = 1.0
 BENDING_SCALE_RANGE = (0.1, 100.0)
 _TOP_KEYS = {'name', 'description', 'rod', 'base', 'gravity', 'cables', 'guides', 'solver',
              'sections', 'cable_model', 'tendons', 'tip_marker', 'sensors', 'model_uncertainty',
-             'dynamics'}
+             'dynamics', 'obstacles', 'clearance', 'body_radius'}
 
 
 def _frozen(array):
@@ -675,7 +682,18 @@ def parse_robot_description(data, source='robot file'):
         tip_marker=_frozen(tip_marker),
         sensors=parse_sensors(data.get('sensors'), rod.length, guides, tip_marker),
         model_uncertainty=parse_model_uncertainty(data.get('model_uncertainty')),
-        dynamics=_parse_dynamics(data))
+        dynamics=_parse_dynamics(data), obstacles=parse_obstacles(data.get('obstacles')),
+        clearance=_clearance(data.get('clearance', 0.0), 'clearance'),
+        body_radius=(None if data.get('body_radius') is None
+                     else _positive(data['body_radius'], 'body_radius')))
+
+
+def _clearance(value, field):
+    """Check a clearance (m): >= 0 and under 1 m (mm given as m is the usual mistake)."""
+    value = _number(value, field)
+    if not 0.0 <= value < 1.0:
+        raise ValueError('%s must be in [0, 1) m, got %g' % (field, value))
+    return value
 
 
 def _parse_dynamics(data):

@@ -23,9 +23,12 @@ class Shape:
     :ivar d: (3,) shear/axial stiffness diagonal D (N)
     :ivar state: solver state (see :mod:`continuum_statics.core.robot`), or None
     :ivar fixed_tensions: (n_cables,) tensions given to the solver (N), or None
+    :ivar contacts: where the body presses on obstacles, a tuple of
+        :class:`~continuum_statics.core.statics.contact.Contact` (empty: touching nothing)
     """
 
-    __slots__ = ('s', 'states', 'u0', 'tip_force', 'c', 'd', 'state', 'fixed_tensions')
+    __slots__ = ('s', 'states', 'u0', 'tip_force', 'c', 'd', 'state', 'fixed_tensions',
+                 'contacts')
 
     def __init__(self, s, states, u0, tip_force, c, d, state=None, fixed_tensions=None):
         states.setflags(write=False)
@@ -33,6 +36,7 @@ class Shape:
             s, states, u0, tip_force, c, d)
         # the solver state this shape was integrated from (warm starts, interpolation)
         self.state, self.fixed_tensions = state, fixed_tensions
+        self.contacts = ()
 
     @property
     def positions(self):

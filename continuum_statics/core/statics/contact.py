@@ -1,0 +1,260 @@
+"""Contact statics: the rod pressed on rigid, frictionless obstacles.
+
+A contact c is a point force ``f_c n_c`` where the backbone's gap to an obstacle,
+g(s) = d(r(s)) - rho (the obstacle's signed distance minus the body radius rho), has a local
+minimum s_c; n_c is the obstacle's outward normal there. Signorini's conditions (frictionless
+unilateral contact): f_c >= 0, g(s_c) >= 0, f_c g(s_c) = 0.
+
+In the rod's equations a point force is a jump of the internal force n at s_c (eq. 3 with a
+Dirac load; m stays continuous). It is split between the two integration nodes that bracket
+s_c in proportion to their distance (the lever rule: the same resultant, the moment off by
+O(kappa h^2) of the step h) and the kernel carries it as it carries the guide disks' weights
+(:meth:`Robot.with_node_forces`), so every solver of the package (tensions, lengths, the
+estimator) solves with contact unchanged. The magnitudes solve G(f) = g(s_c(f)) = 0 on the set of
+active contacts by Newton's method with a finite-difference Jacobian (one solve per contact),
+projected onto f >= 0: a contact whose force would turn negative lets go, and a new local
+minimum of the gap below zero joins the set. The gap between nodes is that of the cubic Hermite
+curve through the nodes' positions and tangents (error O(h^4)), so contacts are not tied to the
+grid.
+
+Not modelled: friction at the contact, the contact's moment (the body's radius is a clearance,
+not a lever arm), obstacles that move or deform.
+"""
+from dataclasses import dataclass
+
+import numpy as np
+
+#: Gap (m) within which an active contact counts as touching (and a free one as not inside).
+GAP_TOLERANCE = 1e-8
+#: Newton iterations on the contact forces at most.
+MAX_ITERATIONS = 40
+#: Contacts one solve may hold at most (a body lying along a plane needs a few).
+MAX_CONTACTS = 24
+#: Finite-difference step on a contact force, relative to the rod's load scale E I / L^2.
+FORCE_STEP = 1e-5
+#: Samples of the Hermite curve per interval when a gap minimum is located.
+SAMPLES = 8
+
+
+@dataclass(frozen=True, eq=False)
+class Contact:
+    """Where the body touches an obstacle and how hard (base frame, SI units).
+
+    :ivar obstacle: the obstacle's name
+    :ivar s: arc length along the backbone (m)
+    :ivar point: (3,) the touching point on the obstacle's surface (m)
+    :ivar normal: (3,) unit, from the obstacle towards the body (the force's direction)
+    :ivar force: magnitude of the force on the body (N, >= 0)
+    """
+
+    obstacle: str
+    s: float
+    point: np.ndarray
+    normal: np.ndarray
+    force: float
+
+
+class ContactError(RuntimeError):
+    """The contact forces did not reach complementarity (the message says how far)."""
+
+
+@dataclass
+class _Active:
+    obstacle: int
+    s: float
+    force: float
+    gap: float = 0.0
+    point: np.ndarray = None
+    normal: np.ndarray = None
+
+
+def shape_of(result):
+    """Return the :class:`Shape` of a solver's result (a shape, a solution or an estimate)."""
+    return getattr(result, 'shape', result)
+
+
+def solve_in_contact(robot, obstacles, radius, solve, warm_start=None):
+    """Solve with the contact forces the obstacles put on the body.
+
+    :param solve: ``solve(robot_like, warm_start) -> result`` the contact-free solver (a result
+        with a ``shape``, or a shape), called on copies of ``robot`` with contact forces
+    :param obstacles: obstacles in the base frame; ``radius`` the body radius (m)
+    :param warm_start: a previous result: its shape's contacts start the forces
+    :returns: the result whose shape holds ``contacts`` (a tuple of :class:`Contact`)
+    :raises ContactError: no complementary set of forces within the iteration limit
+    """
+    result = solve(robot, warm_start)
+    names = [obstacle.name for obstacle in obstacles]
+    active = [_Active(names.index(c.obstacle), c.s, c.force)
+              for c in getattr(shape_of(warm_start), 'contacts', ()) if c.obstacle in names]
+    if active:
+        result = solve(_loaded(robot, obstacles, radius, active, shape_of(result)), result)
+    scale = FORCE_STEP * robot.c[0] / robot.length ** 2
+    for _ in range(MAX_ITERATIONS):
+        shape = shape_of(result)
+        moved = 0.0
+        for contact in active:  # follow each contact's gap minimum as the shape moves
+            before = contact.s, contact.normal
+            _measure(contact, obstacles, radius, shape, _refined_minimum(
+                obstacles[contact.obstacle], radius, shape, contact.s))
+            if before[1] is not None:
+                moved = max(moved, abs(contact.s - before[0]) / robot.length,
+                            float(np.max(np.abs(contact.normal - before[1]))))
+        active = [c for c in active if c.force > 0.0 or c.gap < -GAP_TOLERANCE]
+        fresh = _penetrations(obstacles, radius, shape, active)
+        if not fresh and all(abs(c.gap) <= GAP_TOLERANCE for c in active):
+            return _with_contacts(result, obstacles, active)
+        active += fresh[:max(0, MAX_CONTACTS - len(active))]
+        if moved > 1e-9:  # the forces moved with their points: the nominal of this loading
+            result = solve(_loaded(robot, obstacles, radius, active, shape), result)
+            shape = shape_of(result)
+            for contact in active:
+                contact.gap = _gap_at(obstacles[contact.obstacle], radius, shape, contact.s)[0]
+        gaps_now = np.array([c.gap for c in active])
+        # d gap / d force at fixed points and normals, one solve per contact (a minimum's
+        # point moves the gap to second order only)
+        jacobian = np.empty((len(active), len(active)))
+        for k, contact in enumerate(active):
+            contact.force += scale
+            pushed = shape_of(solve(_loaded(robot, obstacles, radius, active, shape), result))
+            contact.force -= scale
+            for i, other in enumerate(active):
+                jacobian[i, k] = (_gap_at(obstacles[other.obstacle], radius, pushed, other.s)[0]
+                                  - other.gap) / scale
+        try:
+            step = np.linalg.solve(jacobian, -gaps_now)
+        except np.linalg.LinAlgError:
+            step = np.linalg.lstsq(jacobian, -gaps_now, rcond=None)[0]
+        for contact, change in zip(active, step):
+            contact.force = max(0.0, contact.force + change)
+        result = solve(_loaded(robot, obstacles, radius, active, shape), result)
+    worst = max((abs(c.gap) for c in active), default=0.0)
+    raise ContactError('contact forces on %s did not converge in %d iterations (gap %.3g m '
+                       'off, tolerance %g m)' % (sorted({names[c.obstacle] for c in active}),
+                                                 MAX_ITERATIONS, worst, GAP_TOLERANCE))
+
+
+def gaps(obstacles, radius, positions):
+    """Gaps (n_obstacles, n) of points to each obstacle (m) and their normals (.., 3)."""
+    table = [obstacle.distance(positions) for obstacle in obstacles]
+    return (np.array([d for d, _ in table]) - radius, np.array([n for _, n in table]))
+
+
+def nearest(obstacles, radius, shape):
+    """(gap m, obstacle index, s m) of the backbone's point nearest any obstacle.
+
+    Located between nodes on the Hermite curve, as contacts are.
+    """
+    table, _ = gaps(obstacles, radius, shape.positions)
+    k, node = np.unravel_index(np.argmin(table), table.shape)
+    s = _refined_minimum(obstacles[k], radius, shape, shape.s[node])
+    return _gap_at(obstacles[k], radius, shape, s)[0], int(k), s
+
+
+def _loaded(robot, obstacles, radius, active, shape):
+    """Return a copy of ``robot`` carrying the active contacts' forces at their nodes."""
+    forces = np.zeros((len(robot.s_grid), 3))
+    s_grid = robot.s_grid
+    for contact in active:
+        if contact.normal is None:  # a warm-started contact: its normal on this shape
+            _measure(contact, obstacles, radius, shape, contact.s)
+        k = min(max(int(np.searchsorted(s_grid, contact.s)) - 1, 0), len(s_grid) - 2)
+        t = (contact.s - s_grid[k]) / (s_grid[k + 1] - s_grid[k])
+        force = contact.force * contact.normal
+        forces[k] += (1.0 - t) * force
+        forces[k + 1] += t * force
+    return robot.with_node_forces(forces)
+
+
+def _measure(contact, obstacles, radius, shape, s):
+    contact.s = s
+    contact.gap, contact.point, contact.normal = _gap_at(obstacles[contact.obstacle], radius,
+                                                         shape, s)
+
+
+def _penetrations(obstacles, radius, shape, active):
+    """Return new contacts: gap minima below -tolerance away from the active contacts."""
+    table, _ = gaps(obstacles, radius, shape.positions)
+    s_grid = shape.s
+    fresh = []
+    for k, row in enumerate(table):
+        inside = np.nonzero(row < -GAP_TOLERANCE)[0]
+        for node in inside[inside > 0]:
+            if row[node] > row[node - 1] or (node + 1 < len(row) and row[node] > row[node + 1]):
+                continue  # not a local minimum
+            s = _refined_minimum(obstacles[k], radius, shape, s_grid[node])
+            near = [c for c in active + fresh if c.obstacle == k
+                    and abs(c.s - s) <= 2.0 * (s_grid[1] - s_grid[0]) + 1e-12]
+            if near:
+                continue
+            contact = _Active(k, s, 0.0)
+            _measure(contact, obstacles, radius, shape, s)
+            fresh.append(contact)
+    return sorted(fresh, key=lambda c: c.gap)
+
+
+def _curve(shape, s):
+    """Backbone point at arc lengths ``s`` (m): the cubic Hermite of the nodes and tangents."""
+    s_grid = shape.s
+    s = np.clip(np.atleast_1d(s), 0.0, s_grid[-1])
+    k = np.clip(np.searchsorted(s_grid, s) - 1, 0, len(s_grid) - 2)
+    h = s_grid[k + 1] - s_grid[k]
+    t = ((s - s_grid[k]) / h)[:, None]
+    tangents = np.einsum('nij,nj->ni', shape.rotations, shape.v)  # r' = R v (eq. 1)
+    p0, p1 = shape.positions[k], shape.positions[k + 1]
+    m0, m1 = tangents[k] * h[:, None], tangents[k + 1] * h[:, None]
+    t2, t3 = t * t, t * t * t
+    return ((2 * t3 - 3 * t2 + 1) * p0 + (t3 - 2 * t2 + t) * m0 + (-2 * t3 + 3 * t2) * p1
+            + (t3 - t2) * m1)
+
+
+def _gap_at(obstacle, radius, shape, s):
+    """(gap m, touching point on the surface, normal) at arc length ``s``."""
+    point = _curve(shape, s)
+    distance, normal = obstacle.distance(point)
+    return float(distance[0] - radius), point[0] - (distance[0]) * normal[0], normal[0]
+
+
+def _refined_minimum(obstacle, radius, shape, s):
+    """Arc length (m) of the gap's local minimum nearest ``s`` on the Hermite curve."""
+    s_grid = shape.s
+    node = int(np.argmin(np.abs(s_grid - s)))
+    low, high = s_grid[max(node - 1, 0)], s_grid[min(node + 1, len(s_grid) - 1)]
+    for _ in range(3):  # sample, then narrow around the best sample
+        grid = np.linspace(low, high, 2 * SAMPLES + 1)
+        values = obstacle.distance(_curve(shape, grid))[0]
+        best = int(np.argmin(values))
+        if best in (0, len(grid) - 1) and grid[best] not in (0.0, s_grid[-1]):
+            # the minimum is past the bracket: move it there (a contact sliding along)
+            width = high - low
+            low, high = max(grid[best] - 0.5 * width, 0.0), min(grid[best] + 0.5 * width,
+                                                                 s_grid[-1])
+            continue
+        step = grid[1] - grid[0]
+        low, high = max(grid[best] - step, 0.0), min(grid[best] + step, s_grid[-1])
+    # golden section inside the last bracket (the gap is smooth there)
+    ratio = 0.5 * (np.sqrt(5.0) - 1.0)
+    a, b = low, high
+    c, d = b - ratio * (b - a), a + ratio * (b - a)
+    fc = obstacle.distance(_curve(shape, c))[0][0]
+    fd = obstacle.distance(_curve(shape, d))[0][0]
+    for _ in range(30):
+        if b - a <= 1e-9:
+            break
+        if fc < fd:
+            b, d, fd = d, c, fc
+            c = b - ratio * (b - a)
+            fc = obstacle.distance(_curve(shape, c))[0][0]
+        else:
+            a, c, fc = c, d, fd
+            d = a + ratio * (b - a)
+            fd = obstacle.distance(_curve(shape, d))[0][0]
+    return float(0.5 * (a + b))
+
+
+def _with_contacts(result, obstacles, active):
+    shape = shape_of(result)
+    shape.contacts = tuple(
+        Contact(obstacles[c.obstacle].name, c.s, c.point, c.normal, c.force)
+        for c in sorted(active, key=lambda c: (c.obstacle, c.s)) if c.force > 0.0)
+    return result
