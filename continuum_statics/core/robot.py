@@ -514,11 +514,19 @@ class Robot:
         _check_stamps(stamp, sensors)
         obstacles = self.obstacles_or_file(obstacles)
         if obstacles:
-            return contact.solve_in_contact(
-                self, obstacles, self.body_radius,
-                lambda robot, warm: Robot.estimate_shape(
-                    robot, cable_lengths, tip_force, tip_moment, tensions, warm, u0_guess,
-                    tracking, exact, sensors, stamp, ()), warm_start)
+            try:
+                return contact.solve_in_contact(
+                    self, obstacles, self.body_radius,
+                    lambda robot, warm: Robot.estimate_shape(
+                        robot, cable_lengths, tip_force, tip_moment, tensions, warm, u0_guess,
+                        tracking, exact, sensors, stamp, ()), warm_start)
+            except contact.ContactError as error:  # the lengths pin the shape: report it
+                free = self.estimate_shape(cable_lengths, tip_force, tip_moment, tensions,
+                                           warm_start, u0_guess, tracking, exact, sensors,
+                                           stamp, ())
+                note = 'contact not resolved: %s' % error
+                return dataclasses.replace(free, message='; '.join(
+                    filter(None, (free.message, note))))
         jacobians = getattr(warm_start, 'jacobians', None)
         if jacobians is not None and jacobians[0].shape != (len(self.cable_names),
                                                             self.state_size):
@@ -559,11 +567,17 @@ class Robot:
 
     def solve_tip_goal(self, goal_position, tip_force=(0.0, 0.0, 0.0), tolerance=None,
                        goal_direction=None, warm_start=None, tip_moment=(0.0, 0.0, 0.0),
-                       u0_guess=None) -> tip_goal.TipGoalSolution:
-        """Cable lengths that put the tip at a goal (m), inside their limits; :mod:`tip_goal`."""
+                       u0_guess=None, clearance=None,
+                       obstacles=None) -> tip_goal.TipGoalSolution:
+        """Cable lengths that put the tip at a goal (m), inside their limits; :mod:`tip_goal`.
+
+        With obstacles (None: the robot file's) the whole body keeps ``clearance`` (m; None: the
+        file's) from them, at the answer and along the way from ``warm_start``
+        (``solution.waypoints``), or the goal is not reached and the message names where.
+        """
         return tip_goal.solve_tip_goal(self, goal_position, tip_force, tolerance,
                                        goal_direction, _warm_or_guess(self, warm_start, u0_guess),
-                                       tip_moment)
+                                       tip_moment, clearance, obstacles)
 
     def _straight_shape(self):
         """Return the straight, unloaded rod (for the reference cable lengths)."""

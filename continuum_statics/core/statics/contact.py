@@ -32,6 +32,8 @@ MAX_ITERATIONS = 40
 MAX_CONTACTS = 24
 #: Finite-difference step on a contact force, relative to the rod's load scale E I / L^2.
 FORCE_STEP = 1e-5
+#: A contact's point (relative to L) and normal settled when they move less than this.
+MOVED = 1e-7
 #: Samples of the Hermite curve per interval when a gap minimum is located.
 SAMPLES = 8
 
@@ -61,11 +63,15 @@ class ContactError(RuntimeError):
 @dataclass
 class _Active:
     obstacle: int
-    s: float
-    force: float
+    s: float  # where its force is applied (m)
+    vector: np.ndarray  # the force on the body (3,) N
     gap: float = 0.0
     point: np.ndarray = None
     normal: np.ndarray = None
+
+    @property
+    def force(self):
+        return float(self.vector @ self.normal)
 
 
 def shape_of(result):
@@ -76,6 +82,11 @@ def shape_of(result):
 def solve_in_contact(robot, obstacles, radius, solve, warm_start=None):
     """Solve with the contact forces the obstacles put on the body.
 
+    Each contact's force is a vector v (3 unknowns); its equations are the gap at its point
+    (= 0) and v's two components across the normal there (= 0: frictionless), so Newton's
+    method sees how the normal turns with the shape (a rod sliding round a sphere) instead of
+    a fixed point on the direction. A contact whose force would pull lets go (v = 0).
+
     :param solve: ``solve(robot_like, warm_start) -> result`` the contact-free solver (a result
         with a ``shape``, or a shape), called on copies of ``robot`` with contact forces
     :param obstacles: obstacles in the base frame; ``radius`` the body radius (m)
@@ -85,53 +96,83 @@ def solve_in_contact(robot, obstacles, radius, solve, warm_start=None):
     """
     result = solve(robot, warm_start)
     names = [obstacle.name for obstacle in obstacles]
-    active = [_Active(names.index(c.obstacle), c.s, c.force)
+    active = [_Active(names.index(c.obstacle), c.s, c.force * np.asarray(c.normal))
               for c in getattr(shape_of(warm_start), 'contacts', ()) if c.obstacle in names]
     if active:
-        result = solve(_loaded(robot, obstacles, radius, active, shape_of(result)), result)
+        result = solve(_loaded(robot, active), result)
     scale = FORCE_STEP * robot.c[0] / robot.length ** 2
     for _ in range(MAX_ITERATIONS):
         shape = shape_of(result)
         moved = 0.0
         for contact in active:  # follow each contact's gap minimum as the shape moves
-            before = contact.s, contact.normal
+            applied = contact.s
             _measure(contact, obstacles, radius, shape, _refined_minimum(
                 obstacles[contact.obstacle], radius, shape, contact.s))
-            if before[1] is not None:
-                moved = max(moved, abs(contact.s - before[0]) / robot.length,
-                            float(np.max(np.abs(contact.normal - before[1]))))
+            moved = max(moved, abs(contact.s - applied) / robot.length)
         active = [c for c in active if c.force > 0.0 or c.gap < -GAP_TOLERANCE]
         fresh = _penetrations(obstacles, radius, shape, active)
-        if not fresh and all(abs(c.gap) <= GAP_TOLERANCE for c in active):
-            return _with_contacts(result, obstacles, active)
+        if not fresh and moved <= MOVED and all(_settled(c, scale) for c in active):
+            return _with_contacts(result, obstacles, active)  # the forces where reported
         active += fresh[:max(0, MAX_CONTACTS - len(active))]
-        if moved > 1e-9:  # the forces moved with their points: the nominal of this loading
-            result = solve(_loaded(robot, obstacles, radius, active, shape), result)
+        if moved > MOVED:  # the forces moved with their points: the nominal of this loading
+            result = solve(_loaded(robot, active), result)
             shape = shape_of(result)
             for contact in active:
-                contact.gap = _gap_at(obstacles[contact.obstacle], radius, shape, contact.s)[0]
-        gaps_now = np.array([c.gap for c in active])
-        # d gap / d force at fixed points and normals, one solve per contact (a minimum's
-        # point moves the gap to second order only)
-        jacobian = np.empty((len(active), len(active)))
+                _measure(contact, obstacles, radius, shape, contact.s)
+        bases = [_across(c.normal) for c in active]
+        residual = np.concatenate([_residual(c, c.gap, c.normal, t) for c, t in
+                                   zip(active, bases)])
+        # d residual / d v at fixed points, one solve per force component (a minimum's point
+        # moves the gap to second order only)
+        jacobian = np.empty((len(residual), len(residual)))
         for k, contact in enumerate(active):
-            contact.force += scale
-            pushed = shape_of(solve(_loaded(robot, obstacles, radius, active, shape), result))
-            contact.force -= scale
-            for i, other in enumerate(active):
-                jacobian[i, k] = (_gap_at(obstacles[other.obstacle], radius, pushed, other.s)[0]
-                                  - other.gap) / scale
+            for axis in range(3):
+                contact.vector[axis] += scale
+                pushed = shape_of(solve(_loaded(robot, active), result))
+                column = [_residual(other, *_gap_at(obstacles[other.obstacle], radius, pushed,
+                                                    other.s)[::2], t)
+                          for other, t in zip(active, bases)]
+                contact.vector[axis] -= scale
+                jacobian[:, 3 * k + axis] = (np.concatenate(column) - residual) / scale
+        pinned = [names[c.obstacle] for k, c in enumerate(active)
+                  if np.linalg.norm(jacobian[3 * k]) * robot.c[0] < 1e-9 * robot.length ** 3]
+        if pinned:  # no force there moves the body: what is given fixes the shape
+            raise ContactError('no contact force moves the body at %s: the inputs fix the '
+                               'shape there (gap %.3g mm)' % (pinned, 1e3 * max(
+                                   abs(c.gap) for c in active)))
         try:
-            step = np.linalg.solve(jacobian, -gaps_now)
+            step = np.linalg.solve(jacobian, -residual)
         except np.linalg.LinAlgError:
-            step = np.linalg.lstsq(jacobian, -gaps_now, rcond=None)[0]
-        for contact, change in zip(active, step):
-            contact.force = max(0.0, contact.force + change)
-        result = solve(_loaded(robot, obstacles, radius, active, shape), result)
+            step = np.linalg.lstsq(jacobian, -residual, rcond=None)[0]
+        for k, contact in enumerate(active):
+            contact.vector = contact.vector + step[3 * k:3 * k + 3]
+            if contact.vector @ contact.normal <= 0.0:
+                contact.vector = np.zeros(3)  # a frictionless contact cannot pull: it lets go
+        result = solve(_loaded(robot, active), result)
     worst = max((abs(c.gap) for c in active), default=0.0)
     raise ContactError('contact forces on %s did not converge in %d iterations (gap %.3g m '
                        'off, tolerance %g m)' % (sorted({names[c.obstacle] for c in active}),
                                                  MAX_ITERATIONS, worst, GAP_TOLERANCE))
+
+
+def _across(normal):
+    """Return two unit vectors (2, 3) across ``normal``."""
+    helper = np.eye(3)[int(np.argmin(np.abs(normal)))]
+    first = np.cross(normal, helper)
+    first /= np.linalg.norm(first)
+    return np.stack([first, np.cross(normal, first)])
+
+
+def _residual(contact, gap, normal, across):
+    """Return [gap (m); v across the normal (N), in the basis ``across``] of one contact."""
+    tangential = contact.vector - (contact.vector @ normal) * normal
+    return np.concatenate([[gap], across @ tangential])
+
+
+def _settled(contact, scale):
+    tangential = contact.vector - contact.force * contact.normal
+    return (abs(contact.gap) <= GAP_TOLERANCE
+            and float(np.linalg.norm(tangential)) <= 1e-6 * scale)
 
 
 def gaps(obstacles, radius, positions):
@@ -151,18 +192,15 @@ def nearest(obstacles, radius, shape):
     return _gap_at(obstacles[k], radius, shape, s)[0], int(k), s
 
 
-def _loaded(robot, obstacles, radius, active, shape):
+def _loaded(robot, active):
     """Return a copy of ``robot`` carrying the active contacts' forces at their nodes."""
     forces = np.zeros((len(robot.s_grid), 3))
     s_grid = robot.s_grid
     for contact in active:
-        if contact.normal is None:  # a warm-started contact: its normal on this shape
-            _measure(contact, obstacles, radius, shape, contact.s)
         k = min(max(int(np.searchsorted(s_grid, contact.s)) - 1, 0), len(s_grid) - 2)
         t = (contact.s - s_grid[k]) / (s_grid[k + 1] - s_grid[k])
-        force = contact.force * contact.normal
-        forces[k] += (1.0 - t) * force
-        forces[k + 1] += t * force
+        forces[k] += (1.0 - t) * contact.vector
+        forces[k + 1] += t * contact.vector
     return robot.with_node_forces(forces)
 
 
@@ -187,7 +225,7 @@ def _penetrations(obstacles, radius, shape, active):
                     and abs(c.s - s) <= 2.0 * (s_grid[1] - s_grid[0]) + 1e-12]
             if near:
                 continue
-            contact = _Active(k, s, 0.0)
+            contact = _Active(k, s, np.zeros(3))
             _measure(contact, obstacles, radius, shape, s)
             fresh.append(contact)
     return sorted(fresh, key=lambda c: c.gap)

@@ -16,7 +16,7 @@ one more constraint). Whatever happens, the answer's lengths are inside the limi
 ends outside them, the answer is the equilibrium furthest along the way from the start to it that
 stays inside, reported as not reached.
 """
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 import math
 
 import numpy as np
@@ -26,6 +26,7 @@ from continuum_statics.core.description.layout import ProbeRows
 from continuum_statics.core.rod.goal_tracking import GoalLimits, GoalRows
 from continuum_statics.core.rod.shape import Shape
 from continuum_statics.core.statics import bvp
+from continuum_statics.core.statics import clearance as clear
 
 #: Slack on the length limits (m) for round-off.
 LIMIT_SLACK = 1e-9
@@ -46,6 +47,10 @@ class TipGoalSolution:
     :ivar iterations: Gauss-Newton iterations used, over all rounds
     :ivar limited_cables: names of cables held at a length limit
     :ivar message: why the goal was not reached, empty when it was
+    :ivar waypoints: solutions to pass through, in order, before this one (a clearance goal
+        whose direct path passes too close: :mod:`clearance`); empty for a direct path
+    :ivar clearance: closest approach of the body to an obstacle on the way (m beyond the body
+        radius), NaN without obstacles
     """
 
     shape: Shape
@@ -56,6 +61,8 @@ class TipGoalSolution:
     iterations: int
     limited_cables: tuple
     message: str
+    waypoints: tuple = ()
+    clearance: float = math.nan
 
     @property
     def state(self):
@@ -64,7 +71,8 @@ class TipGoalSolution:
 
 
 def solve_tip_goal(robot, goal_position, tip_force=(0.0, 0.0, 0.0), tolerance=None,
-                   goal_direction=None, start=None, tip_moment=(0.0, 0.0, 0.0)):
+                   goal_direction=None, start=None, tip_moment=(0.0, 0.0, 0.0),
+                   clearance=None, obstacles=None):
     """Find the equilibrium whose tip is at ``goal_position`` (m, base frame), lengths in limits.
 
     :param tip_force: external tip force (N); ``tip_moment`` external tip moment (N m)
@@ -72,6 +80,9 @@ def solve_tip_goal(robot, goal_position, tip_force=(0.0, 0.0, 0.0), tolerance=No
         direction tolerance is tolerance / L (rad)
     :param goal_direction: unit vector (base frame) for the tip's local z axis, or None
     :param start: solver state to start from (the current estimate); default passive
+    :param obstacles: base-frame obstacles (None: the robot file's); the whole body keeps
+        ``clearance`` (m; None: the file's) from them at the answer and on the way there from
+        ``start`` (:mod:`clearance`), or the goal is not reached and the message says where
     """
     goal = as_vector(goal_position, 3, 'goal_position')
     tip_force = as_vector(tip_force, 3, 'tip_force')
@@ -79,6 +90,10 @@ def solve_tip_goal(robot, goal_position, tip_force=(0.0, 0.0, 0.0), tolerance=No
     tolerance = robot.solver.goal_tolerance if tolerance is None else float(tolerance)
     if not np.isfinite(tolerance) or tolerance <= 0.0:
         raise ValueError('tolerance must be a finite number > 0 m, got %r' % tolerance)
+    clearance = robot.clearance if clearance is None else float(clearance)
+    if not (math.isfinite(clearance) and clearance >= 0.0):
+        raise ValueError('clearance must be a finite number >= 0 m, got %r' % clearance)
+    obstacles = robot.obstacles_or_file(obstacles)
     direction = None
     if goal_direction is not None:
         direction = as_vector(goal_direction, 3, 'goal_direction')
@@ -86,6 +101,14 @@ def solve_tip_goal(robot, goal_position, tip_force=(0.0, 0.0, 0.0), tolerance=No
         if norm < 1e-9:
             raise ValueError('goal_direction must be a non-zero vector')
         direction = direction / norm
+    solution = _solve_plain(robot, goal, direction, tip_force, tip_moment, tolerance, start)
+    if not obstacles:
+        return solution
+    return _keep_clear(robot, solution, goal, direction, tip_force, tip_moment, tolerance,
+                       start, obstacles, clearance)
+
+
+def _solve_plain(robot, goal, direction, tip_force, tip_moment, tolerance, start):
     if start is None:
         return _solve(robot, goal, direction, tip_force, tip_moment, tolerance, None)
     # A warm start can lead the solve astray (another branch of the redundant solutions, a
@@ -95,6 +118,107 @@ def solve_tip_goal(robot, goal_position, tip_force=(0.0, 0.0, 0.0), tolerance=No
         return warm
     cold = _solve(robot, goal, direction, tip_force, tip_moment, tolerance, None)
     return cold if cold.converged or cold.error < warm.error else warm
+
+
+def _keep_clear(robot, solution, goal, direction, tip_force, tip_moment, tolerance, start,
+                obstacles, clearance):
+    """Return ``solution`` if it and its path keep clear, else a clear one, else a refusal."""
+    if start is None:
+        start = robot.passive_state(bvp.linear_guess(robot, tip_force, tip_moment))
+    begin = robot.make_shape(start, tip_force, robot.integrate_state(start, tip_force))
+    # a path may not come closer than the body already is (it may start resting on one)
+    floor = min(clearance, clear.closest(robot, begin, obstacles).gap) - clear.SLACK
+    problem = _Problem(robot, goal, direction, tip_force, tip_moment, tolerance, start)
+    worst = clear.closest(robot, solution.shape, obstacles)
+    if solution.converged and worst.gap >= clearance - clear.SLACK:
+        path = clear.along_path(robot, begin, solution.shape, obstacles, tip_force, tip_moment,
+                                floor)
+        if path.gap >= floor:
+            return replace(solution, clearance=min(worst.gap, path.gap))
+        worst = path
+    if not solution.converged:
+        return replace(solution, clearance=worst.gap)
+    found = None  # the first clear answer at the goal, whatever its path
+    for plan in _plans(robot, begin.tip_position, goal, tip_force, tip_moment):
+        if isinstance(plan, str):  # staged from the start to that answer
+            if found is None:
+                continue
+            plan = _staged(robot, start, found.state, tip_force, tip_moment, plan) + [goal]
+        legs, previous = [], begin
+        for k, target in enumerate(plan):
+            last = k == len(plan) - 1
+            if isinstance(target, Shape):  # home or a stage: a given equilibrium
+                shape, leg = target, None
+            else:
+                x = clear.solve_clear(robot, target, direction if last else None, tip_force,
+                                      tip_moment, tolerance, start, (previous.state,
+                                      solution.state, _arc_guess(robot, target)), obstacles,
+                                      clearance)
+                if x is None:
+                    break
+                leg = problem.answer(x, 0, '')  # judged against the goal: a waypoint is not it
+                shape = leg.shape
+                if last and leg.converged and found is None:
+                    found = leg
+            path = clear.along_path(robot, previous, shape, obstacles, tip_force, tip_moment,
+                                    floor)
+            if path.gap < floor:
+                worst = path
+                break
+            legs.append(leg or _home_answer(robot, shape))
+            previous = shape
+        if len(legs) == len(plan) and legs[-1].converged:
+            final = legs[-1]
+            return replace(final, waypoints=tuple(legs[:-1]),
+                           clearance=clear.closest(robot, final.shape, obstacles).gap)
+    message = 'goal not reached with clearance: ' + worst.says(clearance)
+    return replace(solution, converged=False, message=message, clearance=worst.gap)
+
+
+def _plans(robot, tip0, goal, tip_force, tip_moment):
+    """Yield the sequences of targets a clear goal tries, in order.
+
+    Direct; split on the tip's straight line; staged section by section (a name, built once
+    a clear answer is known); back through home (the rod with no cable load), then on.
+    """
+    yield [goal]
+    for count in clear.MAX_LEGS:
+        yield [tip0 + (goal - tip0) * k / count for k in range(1, count)] + [goal]
+    yield 'base first'  # staged, section by section, to the first clear answer
+    yield 'tip first'
+    home = bvp.solve_loaded(robot, robot.passive_state(), None, tip_force, tip_moment)
+    yield [robot.make_shape(home, tip_force, robot.integrate_state(home, tip_force)), goal]
+
+
+def _staged(robot, start, goal_state, tip_force, tip_moment, order):
+    """Return the equilibria that move one section at a time from ``start`` to the goal's.
+
+    How an operator reaches under a shelf: curl the tip section in first (``'tip first'``),
+    then swing the others, or the reverse (``'base first'``); empty with one section.
+    """
+    stages, x = [], np.array(start, dtype=float)
+    sections = range(len(robot.sections) - 1)
+    if order == 'tip first':
+        sections = range(len(robot.sections) - 1, 0, -1)
+    for k in sections:
+        first, rank = robot.section_state_index[k], robot.section_ranks[k]
+        if first < 0:
+            continue
+        x = x.copy()
+        x[first:first + rank] = goal_state[first:first + rank]
+        state, converged = bvp.solve_fixed_loads(robot, x, None, tip_force, tip_moment)
+        if not converged:
+            return []
+        stages.append(robot.make_shape(state, tip_force, robot.integrate_state(state,
+                                                                                tip_force)))
+    return stages
+
+
+def _home_answer(robot, shape):
+    """Return a waypoint at ``shape`` (home, a stage): its lengths, nothing judged."""
+    return TipGoalSolution(shape=shape, u0=shape.u0, cable_lengths=robot.cable_lengths(shape),
+                           converged=False, error=math.nan, iterations=0, limited_cables=(),
+                           message='home')
 
 
 def _solve(robot, goal, direction, tip_force, tip_moment, tolerance, start):
