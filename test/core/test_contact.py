@@ -181,8 +181,10 @@ SCENE = [{'name': 'shelf', 'box': {'size': [0.15, 0.3, 0.01]}, 'position': [0.16
 @pytest.mark.parametrize('robot_file, count, reached', [('two_section_robot.yaml', 12, 0.75),
                                                         ('three_section_robot.yaml', 8, 0.75)])
 def test_clearance_goals_keep_the_body_and_the_way_clear(robot_file, count, reached):
-    """Random goals reachable with clearance (the tip of a clear configuration), in sequence
-    as a controller sends them: every answer and every equilibrium on its way clears.
+    """Random goals reachable with clearance, sent in sequence as a controller sends them.
+
+    A goal is the tip of a random configuration that clears; every answer and every
+    equilibrium on its way clears (or the goal is refused naming where).
     """
     robot = load_robot(CONFIG_DIR / robot_file)
     entries = [dict(e) for e in SCENE]
