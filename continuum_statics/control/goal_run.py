@@ -71,6 +71,7 @@ class RunSettings:
     max_state_age: float = 0.5
     min_tension: float = 0.0
     max_correction: float = math.inf  # m: the corrections of a goal add up to at most this
+    clearance: float = None  # m the body keeps from obstacles; None or < 0: the robot file's
 
 
 @dataclass(eq=False)
@@ -161,6 +162,9 @@ class GoalRun:
         self._target = None
         self._corrected_goal = None
         self._path = None  # (start, goal solution, tip load) of the ramp in progress
+        self._legs = []  # solutions still to ramp to after the current one (waypoints)
+        #: obstacles the body keeps clear of (base frame; None: the robot file's)
+        self.obstacles = None
         self._fraction = 0.0
         self._fraction_step = 0.05
         self._straight = False  # no equilibrium path found: straight in cable space
@@ -172,6 +176,12 @@ class GoalRun:
     def fraction(self) -> float:
         """How far the ramp in progress is (0..1)."""
         return self._fraction
+
+    @property
+    def clearance(self):
+        """Clearance (m) of the goals' solves: the setting, None for the robot file's."""
+        value = self.settings.clearance
+        return None if value is None or value < 0.0 else float(value)
 
     def model_tolerance(self, tolerance) -> float:
         """Solve the model well inside the goal's tolerance, so the tip lands near its centre."""
@@ -225,7 +235,9 @@ class GoalRun:
         for warm_start in (start, None):
             trial = robot.solve_tip_goal(position, tip_force=load[:3], tip_moment=load[3:],
                                          tolerance=self.model_tolerance(tolerance),
-                                         goal_direction=direction, warm_start=warm_start)
+                                         goal_direction=direction, warm_start=warm_start,
+                                         clearance=self.clearance,
+                                         obstacles=self.obstacles)
             if solution is None or trial.error < solution.error:
                 solution = trial
             if solution.error <= tolerance:
@@ -240,6 +252,10 @@ class GoalRun:
                                  '%s' % (*position, np.round(direction, 3).tolist(),
                                          solution.error * 1e3, angle, tolerance * 1e3,
                                          tolerance / robot.length, solution.message))
+        if math.isfinite(solution.clearance) and not solution.converged and (
+                solution.error <= tolerance):
+            raise ValueError('goal (%.4f, %.4f, %.4f) m refused: %s'
+                             % (*position, solution.message))
         if not solution.error <= tolerance:
             limited = ', '.join(solution.limited_cables)
             raise ValueError('unreachable goal (%.4f, %.4f, %.4f) m: the nearest reachable tip '
@@ -250,6 +266,8 @@ class GoalRun:
             raise ValueError('the solver returned non-finite cable lengths')
         try:
             target = self.command(solution)
+            for leg in solution.waypoints:  # the way round an obstacle must be commandable too
+                self.command(leg)
         except ValueError as error:
             raise ValueError('goal (%.4f, %.4f, %.4f) m %s' % (*position, error)) from None
         return Plan(start, solution, np.array(load, dtype=float), commanded, recover, target)
@@ -304,6 +322,12 @@ class GoalRun:
         return True
 
     def _start_path(self, start, solution, load, target):
+        legs = list(getattr(solution, 'waypoints', ()))
+        if legs:  # around an obstacle: ramp through each waypoint, the goal last
+            self._legs = legs[1:] + [(solution, target)]
+            solution, target = legs[0], self.command(legs[0])
+        else:
+            self._legs = []
         self._path = (start, solution, load)
         self._target = target
         self._fraction = 0.0
@@ -348,6 +372,12 @@ class GoalRun:
         elif self.phase is Phase.RAMP:
             try:
                 self._advance(budget)
+                if self._fraction >= 1.0 and self._legs:  # on to the next waypoint
+                    leg = self._legs.pop(0)
+                    solution, target = leg if isinstance(leg, tuple) else (leg,
+                                                                           self.command(leg))
+                    self._path = (self._path[1], solution, self._path[2])
+                    self._target, self._fraction = target, 0.0
             except ValueError as error:
                 self.finish(goal, False, 'ramp failed: %s' % error)
                 return None
@@ -466,7 +496,7 @@ class GoalRun:
             solution = self.robot.solve_tip_goal(
                 self._corrected_goal, tip_force=load[:3], tip_moment=load[3:],
                 tolerance=self.model_tolerance(goal.tolerance), goal_direction=goal.direction,
-                warm_start=start)
+                warm_start=start, clearance=self.clearance, obstacles=self.obstacles)
         except ValueError as error:
             self.finish(goal, False, 'correction failed: %s' % error)
             return

@@ -521,9 +521,7 @@ class Robot:
                         robot, cable_lengths, tip_force, tip_moment, tensions, warm, u0_guess,
                         tracking, exact, sensors, stamp, ()), warm_start)
             except contact.ContactError as error:  # the lengths pin the shape: report it
-                free = self.estimate_shape(cable_lengths, tip_force, tip_moment, tensions,
-                                           warm_start, u0_guess, tracking, exact, sensors,
-                                           stamp, ())
+                free = error.free
                 note = 'contact not resolved: %s' % error
                 return dataclasses.replace(free, message='; '.join(
                     filter(None, (free.message, note))))

@@ -21,6 +21,7 @@ Not modelled: friction at the contact, the contact's moment (the body's radius i
 not a lever arm), obstacles that move or deform.
 """
 from dataclasses import dataclass
+import math
 
 import numpy as np
 
@@ -85,74 +86,108 @@ def solve_in_contact(robot, obstacles, radius, solve, warm_start=None):
     Each contact's force is a vector v (3 unknowns); its equations are the gap at its point
     (= 0) and v's two components across the normal there (= 0: frictionless), so Newton's
     method sees how the normal turns with the shape (a rod sliding round a sphere) instead of
-    a fixed point on the direction. A contact whose force would pull lets go (v = 0).
+    a fixed point on the direction. A contact whose force would pull lets go (v = 0). The
+    Jacobian (one solve per force component) is kept while the steps converge (chord steps,
+    one solve each) and handed to the next call with the contacts (a warm start's).
 
     :param solve: ``solve(robot_like, warm_start) -> result`` the contact-free solver (a result
         with a ``shape``, or a shape), called on copies of ``robot`` with contact forces
     :param obstacles: obstacles in the base frame; ``radius`` the body radius (m)
     :param warm_start: a previous result: its shape's contacts start the forces
     :returns: the result whose shape holds ``contacts`` (a tuple of :class:`Contact`)
-    :raises ContactError: no complementary set of forces within the iteration limit
+    :raises ContactError: no complementary set of forces within the iteration limit (its
+        ``free`` is the contact-free result)
     """
-    result = solve(robot, warm_start)
+    free = result = solve(robot, warm_start)
     names = [obstacle.name for obstacle in obstacles]
+    warm = getattr(shape_of(warm_start), 'contacts', ())
     active = [_Active(names.index(c.obstacle), c.s, c.force * np.asarray(c.normal))
-              for c in getattr(shape_of(warm_start), 'contacts', ()) if c.obstacle in names]
+              for c in warm if c.obstacle in names]
+    jacobian = getattr(warm, 'jacobian', None) if len(active) == len(warm) else None
     if active:
         result = solve(_loaded(robot, active), result)
     scale = FORCE_STEP * robot.c[0] / robot.length ** 2
+    last, taken = math.inf, None  # the gaps' size, the last (residual, step) for Broyden
     for _ in range(MAX_ITERATIONS):
         shape = shape_of(result)
         moved = 0.0
         for contact in active:  # follow each contact's gap minimum as the shape moves
             applied = contact.s
             _measure(contact, obstacles, radius, shape, _refined_minimum(
-                obstacles[contact.obstacle], radius, shape, contact.s))
+                obstacles[contact.obstacle], radius, shape, contact.s, 1e-3 * robot.length))
             moved = max(moved, abs(contact.s - applied) / robot.length)
-        active = [c for c in active if c.force > 0.0 or c.gap < -GAP_TOLERANCE]
-        fresh = _penetrations(obstacles, radius, shape, active)
-        if not fresh and moved <= MOVED and all(_settled(c, scale) for c in active):
-            return _with_contacts(result, obstacles, active)  # the forces where reported
-        active += fresh[:max(0, MAX_CONTACTS - len(active))]
-        if moved > MOVED:  # the forces moved with their points: the nominal of this loading
-            result = solve(_loaded(robot, active), result)
-            shape = shape_of(result)
-            for contact in active:
-                _measure(contact, obstacles, radius, shape, contact.s)
+        kept = [c for c in active if c.force > 0.0 or c.gap < -GAP_TOLERANCE]
+        fresh = _penetrations(obstacles, radius, shape, kept)
+        if not fresh and moved <= MOVED and all(_settled(c, scale) for c in kept):
+            return _with_contacts(result, obstacles, kept, jacobian)  # forces where reported
+        if fresh or len(kept) != len(active):
+            jacobian = taken = None  # another set of contacts
+        active = kept + fresh[:max(0, MAX_CONTACTS - len(kept))]
         bases = [_across(c.normal) for c in active]
         residual = np.concatenate([_residual(c, c.gap, c.normal, t) for c, t in
                                    zip(active, bases)])
-        # d residual / d v at fixed points, one solve per force component (a minimum's point
-        # moves the gap to second order only)
-        jacobian = np.empty((len(residual), len(residual)))
-        for k, contact in enumerate(active):
-            for axis in range(3):
-                contact.vector[axis] += scale
-                pushed = shape_of(solve(_loaded(robot, active), result))
-                column = [_residual(other, *_gap_at(obstacles[other.obstacle], radius, pushed,
-                                                    other.s)[::2], t)
-                          for other, t in zip(active, bases)]
-                contact.vector[axis] -= scale
-                jacobian[:, 3 * k + axis] = (np.concatenate(column) - residual) / scale
-        pinned = [names[c.obstacle] for k, c in enumerate(active)
-                  if np.linalg.norm(jacobian[3 * k]) * robot.c[0] < 1e-9 * robot.length ** 3]
-        if pinned:  # no force there moves the body: what is given fixes the shape
-            raise ContactError('no contact force moves the body at %s: the inputs fix the '
-                               'shape there (gap %.3g mm)' % (pinned, 1e3 * max(
-                                   abs(c.gap) for c in active)))
+        size = float(np.linalg.norm(residual[::3])) / robot.length  # the gaps, relative
+        if jacobian is not None and taken is not None:  # Broyden's update of the last step
+            change = residual - taken[0] - jacobian @ taken[1]
+            jacobian = jacobian + np.outer(change, taken[1]) / float(taken[1] @ taken[1])
+        if jacobian is None or (size > last and size * robot.length > 100.0 * GAP_TOLERANCE):
+            # no Jacobian for these contacts, or the updated one diverged: a fresh one
+            if moved > MOVED:  # the nominal of this loading, the forces at their points
+                result = solve(_loaded(robot, active), result)
+                shape = shape_of(result)
+                for contact in active:
+                    _measure(contact, obstacles, radius, shape, contact.s)
+                residual = np.concatenate([_residual(c, c.gap, c.normal, t) for c, t in
+                                           zip(active, bases)])
+            jacobian = _jacobian(robot, obstacles, radius, solve, active, bases, residual,
+                                 result, scale)
+            taken = None
+            pinned = [names[c.obstacle] for k, c in enumerate(active) if np.linalg.norm(
+                jacobian[3 * k]) * robot.c[0] < 1e-9 * robot.length ** 3]
+            if pinned:  # no force there moves the body: what is given fixes the shape
+                error = ContactError('no contact force moves the body at %s: the inputs fix '
+                                     'the shape there (gap %.3g mm)' % (pinned, 1e3 * max(
+                                         abs(c.gap) for c in active)))
+                error.free = free
+                raise error
+        last = size
         try:
             step = np.linalg.solve(jacobian, -residual)
         except np.linalg.LinAlgError:
             step = np.linalg.lstsq(jacobian, -residual, rcond=None)[0]
+        before = np.concatenate([c.vector for c in active])
         for k, contact in enumerate(active):
             contact.vector = contact.vector + step[3 * k:3 * k + 3]
             if contact.vector @ contact.normal <= 0.0:
                 contact.vector = np.zeros(3)  # a frictionless contact cannot pull: it lets go
+        taken = (residual, np.concatenate([c.vector for c in active]) - before)
+        if not np.any(taken[1]):
+            taken = None
         result = solve(_loaded(robot, active), result)
     worst = max((abs(c.gap) for c in active), default=0.0)
-    raise ContactError('contact forces on %s did not converge in %d iterations (gap %.3g m '
-                       'off, tolerance %g m)' % (sorted({names[c.obstacle] for c in active}),
-                                                 MAX_ITERATIONS, worst, GAP_TOLERANCE))
+    error = ContactError('contact forces on %s did not converge in %d iterations (gap %.3g m '
+                         'off, tolerance %g m)' % (sorted({names[c.obstacle] for c in active}),
+                                                   MAX_ITERATIONS, worst, GAP_TOLERANCE))
+    error.free = free
+    raise error
+
+
+def _jacobian(robot, obstacles, radius, solve, active, bases, residual, result, scale):
+    """Return d residual / d v at fixed points, one solve per force component.
+
+    A gap minimum's point moves the gap to second order only, so fixed points suffice.
+    """
+    jacobian = np.empty((len(residual), len(residual)))
+    for k, contact in enumerate(active):
+        for axis in range(3):
+            contact.vector[axis] += scale
+            pushed = shape_of(solve(_loaded(robot, active), result))
+            column = [_residual(other, *_gap_at(obstacles[other.obstacle], radius, pushed,
+                                                other.s)[::2], t)
+                      for other, t in zip(active, bases)]
+            contact.vector[axis] -= scale
+            jacobian[:, 3 * k + axis] = (np.concatenate(column) - residual) / scale
+    return jacobian
 
 
 def _across(normal):
@@ -171,8 +206,9 @@ def _residual(contact, gap, normal, across):
 
 def _settled(contact, scale):
     tangential = contact.vector - contact.force * contact.normal
-    return (abs(contact.gap) <= GAP_TOLERANCE
-            and float(np.linalg.norm(tangential)) <= 1e-6 * scale)
+    return (abs(contact.gap) <= GAP_TOLERANCE  # and along the normal within 1e-7 rad
+            and float(np.linalg.norm(tangential)) <= MOVED * max(
+                float(np.linalg.norm(contact.vector)), scale))
 
 
 def gaps(obstacles, radius, positions):
@@ -236,11 +272,13 @@ def _curve(shape, s):
     s_grid = shape.s
     s = np.clip(np.atleast_1d(s), 0.0, s_grid[-1])
     k = np.clip(np.searchsorted(s_grid, s) - 1, 0, len(s_grid) - 2)
-    h = s_grid[k + 1] - s_grid[k]
-    t = ((s - s_grid[k]) / h)[:, None]
-    tangents = np.einsum('nij,nj->ni', shape.rotations, shape.v)  # r' = R v (eq. 1)
+    h = (s_grid[k + 1] - s_grid[k])[:, None]
+    t = (s[:, None] - s_grid[k][:, None]) / h
+    # r' = R v (eq. 1) at the interval's two nodes
+    rotations, v = shape.rotations, shape.v
+    m0 = np.einsum('nij,nj->ni', rotations[k], v[k]) * h
+    m1 = np.einsum('nij,nj->ni', rotations[k + 1], v[k + 1]) * h
     p0, p1 = shape.positions[k], shape.positions[k + 1]
-    m0, m1 = tangents[k] * h[:, None], tangents[k + 1] * h[:, None]
     t2, t3 = t * t, t * t * t
     return ((2 * t3 - 3 * t2 + 1) * p0 + (t3 - 2 * t2 + t) * m0 + (-2 * t3 + 3 * t2) * p1
             + (t3 - t2) * m1)
@@ -253,46 +291,56 @@ def _gap_at(obstacle, radius, shape, s):
     return float(distance[0] - radius), point[0] - (distance[0]) * normal[0], normal[0]
 
 
-def _refined_minimum(obstacle, radius, shape, s):
-    """Arc length (m) of the gap's local minimum nearest ``s`` on the Hermite curve."""
+def _refined_minimum(obstacle, radius, shape, s, width=None):
+    """Arc length (m) of the gap's local minimum nearest ``s`` on the Hermite curve.
+
+    Nine samples across ``width`` (m) each side (default one interval), then the vertex of the
+    parabola through the best three, again round it on a bracket a sixteenth as wide, until
+    the vertex stays put (the gap is smooth there, so each round gains about three digits); a
+    minimum at the bracket's edge slides the bracket (a contact sliding along).
+    """
     s_grid = shape.s
-    node = int(np.argmin(np.abs(s_grid - s)))
-    low, high = s_grid[max(node - 1, 0)], s_grid[min(node + 1, len(s_grid) - 1)]
-    for _ in range(3):  # sample, then narrow around the best sample
-        grid = np.linspace(low, high, 2 * SAMPLES + 1)
+    length = s_grid[-1]
+    if width is None:
+        node = min(int(np.searchsorted(s_grid, s)), len(s_grid) - 1)
+        width = s_grid[node] - s_grid[max(node - 1, 0)] or s_grid[1]
+    vertex = math.inf
+    for _ in range(16):
+        grid = np.clip(np.linspace(s - width, s + width, 9), 0.0, length)
         values = obstacle.distance(_curve(shape, grid))[0]
         best = int(np.argmin(values))
-        if best in (0, len(grid) - 1) and grid[best] not in (0.0, s_grid[-1]):
-            # the minimum is past the bracket: move it there (a contact sliding along)
-            width = high - low
-            low, high = max(grid[best] - 0.5 * width, 0.0), min(grid[best] + 0.5 * width,
-                                                                 s_grid[-1])
+        if best in (0, 8):
+            if grid[best] in (0.0, length):
+                return float(grid[best])  # at the rod's end
+            s = float(grid[best])  # past the bracket: slide it there
             continue
-        step = grid[1] - grid[0]
-        low, high = max(grid[best] - step, 0.0), min(grid[best] + step, s_grid[-1])
-    # golden section inside the last bracket (the gap is smooth there)
-    ratio = 0.5 * (np.sqrt(5.0) - 1.0)
-    a, b = low, high
-    c, d = b - ratio * (b - a), a + ratio * (b - a)
-    fc = obstacle.distance(_curve(shape, c))[0][0]
-    fd = obstacle.distance(_curve(shape, d))[0][0]
-    for _ in range(30):
-        if b - a <= 1e-9:
-            break
-        if fc < fd:
-            b, d, fd = d, c, fc
-            c = b - ratio * (b - a)
-            fc = obstacle.distance(_curve(shape, c))[0][0]
-        else:
-            a, c, fc = c, d, fd
-            d = a + ratio * (b - a)
-            fd = obstacle.distance(_curve(shape, d))[0][0]
-    return float(0.5 * (a + b))
+        (x0, x1, x2), (a, b, c) = grid[best - 1:best + 2], values[best - 1:best + 2]
+        # vertex of the parabola through three points (spacing uneven only when clipped)
+        top = (x1 - x0) ** 2 * (b - c) - (x1 - x2) ** 2 * (b - a)
+        bottom = (x1 - x0) * (b - c) - (x1 - x2) * (b - a)
+        new = float(x1 - 0.5 * top / bottom) if bottom != 0.0 else float(x1)
+        new = min(max(new, x0), x2)
+        if abs(new - vertex) <= 1e-8 * length or width <= 1e-9 * length:
+            return new
+        s, vertex, width = new, new, width / 16.0
+    return float(s)
 
 
-def _with_contacts(result, obstacles, active):
+class Contacts(tuple):
+    """A shape's contacts (a tuple of :class:`Contact`) and the solve's Jacobian.
+
+    The Jacobian is kept for the next call that starts from these contacts.
+    """
+
+    jacobian = None
+
+
+def _with_contacts(result, obstacles, active, jacobian):
     shape = shape_of(result)
-    shape.contacts = tuple(
-        Contact(obstacles[c.obstacle].name, c.s, c.point, c.normal, c.force)
-        for c in sorted(active, key=lambda c: (c.obstacle, c.s)) if c.force > 0.0)
+    touching = [c for c in active if c.force > 0.0]
+    contacts = Contacts(Contact(obstacles[c.obstacle].name, c.s, c.point, c.normal, c.force)
+                        for c in touching)
+    if len(touching) == len(active):  # the Jacobian's columns are these contacts'
+        contacts.jacobian = jacobian
+    shape.contacts = contacts
     return result
