@@ -9,7 +9,9 @@ import sys
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1] / 'test'))
 
+from obstacle_scene import CLEARANCE, scene  # noqa: E402
 from recorded_v6 import V6_COLUMNS, V6_DATA, V6_ROBOT  # noqa: E402
 from reference_motion import RATE, SPEED, motion, scipy_estimate  # noqa: E402
 
-__all__ = ['V6_COLUMNS', 'V6_DATA', 'V6_ROBOT', 'RATE', 'SPEED', 'motion', 'scipy_estimate']
+__all__ = ['CLEARANCE', 'scene', 'V6_COLUMNS', 'V6_DATA', 'V6_ROBOT', 'RATE', 'SPEED', 'motion',
+           'scipy_estimate']

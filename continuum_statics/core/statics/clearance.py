@@ -22,10 +22,10 @@ import numpy as np
 from scipy.optimize import minimize
 
 from continuum_statics.core.description.layout import MOMENT_AT, POSITION, ROTATION_AT
-from continuum_statics.core.statics import contact
+from continuum_statics.core.statics import bvp, contact
 
-#: Steps along the start -> answer path at which clearance is checked (a ramp's resolution).
-PATH_STEPS = 16
+#: Nodes an RRT-connect search adds at most before the goal is refused.
+MAX_TREE_NODES = 60
 #: Legs a goal may be split into when the direct path passes too close.
 MAX_LEGS = (2, 4)
 #: Clearance slack (m) for round-off between nodes and the Hermite curve.
@@ -57,22 +57,128 @@ def closest(robot, shape, obstacles):
     return Clearance(gap, obstacles[index].name, s)
 
 
-def along_path(robot, start, goal, obstacles, tip_force, tip_moment, floor):
+def along_path(robot, start, goal, obstacles, tip_force, tip_moment, floor, clearance=0.0):
     """Return the closest approach on the equilibria from ``start`` to ``goal`` (both results).
 
-    ``floor``: gaps at or above it stop the scan early (the path is clear enough).
+    By bisection: a stretch of the way between two checked equilibria needs no check inside
+    when its closer end clears the floor by the most any node moves across it (a gap changes
+    no faster than the body moves, and a node's way is taken as at most twice its straight
+    displacement); otherwise its middle is solved and both halves
+    are judged the same way, down to stretches that move no node more than a quarter of the
+    clearance (0.5 mm at the finest). The search stops at the first gap below ``floor``.
     """
-    worst, warm = None, start
-    for k in range(1, PATH_STEPS + 1):
-        step = robot.equilibrium_between(start, goal, k / PATH_STEPS, tip_force, tip_moment,
-                                         warm_start=warm)
-        warm = step
-        here = closest(robot, step.shape, obstacles)
-        if worst is None or here.gap < worst.gap:
-            worst = here
-        if worst.gap < floor:
-            break
-    return worst
+    radius = robot.body_radius
+    resolution = max(0.25 * clearance, 5e-4)
+
+    def gap(shape):
+        return float(np.min(contact.gaps(obstacles, radius, shape.positions)[0]))
+
+    ends = [(0.0, start, gap(start)), (1.0, goal, gap(goal))]
+    worst = min(ends[1:], key=lambda end: end[2])
+    stack = [tuple(ends)]
+    while stack and worst[2] >= floor:
+        a, b = stack.pop()
+        move = float(np.max(np.linalg.norm(b[1].positions - a[1].positions, axis=1)))
+        if min(a[2], b[2]) - move >= floor or move <= resolution:
+            continue
+        fraction = 0.5 * (a[0] + b[0])
+        middle = robot.equilibrium_between(start, goal, fraction, tip_force, tip_moment,
+                                           warm_start=a[1]).shape
+        checked = (fraction, middle, gap(middle))
+        worst = min(worst, checked, key=lambda end: end[2])
+        stack += [(checked, b), (a, checked)]
+    return closest(robot, worst[1], obstacles)  # between the nodes of the closest one
+
+
+def connect(robot, start, goal, obstacles, tip_force, tip_moment, floor, clearance, seed=0):
+    """Return equilibria from ``start`` to ``goal`` (shapes) whose way keeps clear, or None.
+
+    A bidirectional rapidly-exploring random tree (RRT-connect, Kuffner & LaValle 2000) over
+    the section moment coordinates of the solver state: each node an equilibrium (u(0)
+    solved, :func:`bvp.solve_fixed_loads`) that clears, each edge the equilibria between two
+    nodes (what the controller commands) checked by :func:`along_path`. The path found is
+    shortened by skipping nodes whose neighbours see each other. For goals no straight or
+    staged way reaches (under a shelf from above it).
+    """
+    rng = np.random.default_rng(seed)
+    moments = slice(3, None)
+    bound = 1.5 * max(float(np.max(np.abs(start.state[moments]), initial=0.0)),
+                      float(np.max(np.abs(goal.state[moments]), initial=0.0)),
+                      2.0 / robot.length)
+    reach = 0.3 * bound  # the longest edge, in the moment coordinates (1/m)
+    trees = ([start], [goal])
+    parents = ({0: None}, {0: None})
+
+    def clear(a, b):
+        return along_path(robot, a, b, obstacles, tip_force, tip_moment, floor,
+                          clearance).gap >= floor
+
+    def node(q, near):
+        x = np.concatenate([near.state[:3], q])
+        state, converged = bvp.solve_fixed_loads(robot, x, None, tip_force, tip_moment)
+        if not converged:
+            return None
+        shape = robot.make_shape(state, tip_force, robot.integrate_state(state, tip_force))
+        lengths = robot.cable_lengths(shape)
+        limits = robot.cable_length_limits
+        if np.any(lengths < limits[:, 0]) or np.any(lengths > limits[:, 1]):
+            return None
+        return shape
+
+    def extend(k, q):
+        """Grow tree ``k`` one edge toward ``q``; the new node's index or None."""
+        tree = trees[k]
+        distances = [np.linalg.norm(n.state[moments] - q) for n in tree]
+        nearest = int(np.argmin(distances))
+        base = tree[nearest]
+        step = q - base.state[moments]
+        if distances[nearest] > reach:
+            step *= reach / distances[nearest]
+        new = node(base.state[moments] + step, base)
+        if new is None or not clear(base, new):
+            return None
+        tree.append(new)
+        parents[k][len(tree) - 1] = nearest
+        return len(tree) - 1
+
+    for _ in range(MAX_TREE_NODES):
+        k = len(trees[0]) > len(trees[1])  # grow the smaller tree
+        added = extend(int(k), rng.uniform(-bound, bound, len(start.state) - 3))
+        if added is None:
+            continue
+        target = trees[int(k)][added].state[moments]
+        other = extend(int(not k), target)  # and the other one toward the new node
+        while other is not None:
+            if np.linalg.norm(trees[int(not k)][other].state[moments] - target) < 1e-9:
+                half = [_branch(trees[int(k)], parents[int(k)], added),
+                        _branch(trees[int(not k)], parents[int(not k)], other)]
+                if k:
+                    half.reverse()
+                path = half[0][::-1] + half[1][1:]
+                return _shortened(path, clear)
+            other = extend(int(not k), target)
+    return None
+
+
+def _branch(tree, parents, index):
+    """Return the nodes from ``index`` up to the tree's root."""
+    branch = []
+    while index is not None:
+        branch.append(tree[index])
+        index = parents[index]
+    return branch
+
+
+def _shortened(path, clear):
+    """Drop the nodes a path does not need (its neighbours see each other), ends kept."""
+    kept, i = [path[0]], 0
+    while i < len(path) - 1:
+        j = len(path) - 1
+        while j > i + 1 and not clear(path[i], path[j]):
+            j -= 1
+        kept.append(path[j])
+        i = j
+    return kept
 
 
 def solve_clear(robot, goal, direction, tip_force, tip_moment, tolerance, start, guesses,

@@ -25,8 +25,13 @@ import math
 
 import numpy as np
 
-#: Gap (m) within which an active contact counts as touching (and a free one as not inside).
-GAP_TOLERANCE = 1e-8
+from continuum_statics.core.description.layout import POSITION, ROTATION, STRETCH
+
+#: Gap (m) within which an active contact counts as touching (and a free one as not inside):
+#: a thousandth of the 0.1 mm the model is checked to, and of what a tracker sees.
+GAP_TOLERANCE = 1e-7
+#: A contact force is along its normal within this angle (rad): frictionless.
+DIRECTION = 1e-6
 #: Newton iterations on the contact forces at most.
 MAX_ITERATIONS = 40
 #: Contacts one solve may hold at most (a body lying along a plane needs a few).
@@ -98,14 +103,14 @@ def solve_in_contact(robot, obstacles, radius, solve, warm_start=None):
     :raises ContactError: no complementary set of forces within the iteration limit (its
         ``free`` is the contact-free result)
     """
-    free = result = solve(robot, warm_start)
     names = [obstacle.name for obstacle in obstacles]
     warm = getattr(shape_of(warm_start), 'contacts', ())
     active = [_Active(names.index(c.obstacle), c.s, c.force * np.asarray(c.normal))
               for c in warm if c.obstacle in names]
     jacobian = getattr(warm, 'jacobian', None) if len(active) == len(warm) else None
-    if active:
-        result = solve(_loaded(robot, active), result)
+    # from the warm start's contacts straight away; the contact-free result only without
+    free = None if active else solve(robot, warm_start)
+    result = solve(_loaded(robot, active), warm_start) if active else free
     scale = FORCE_STEP * robot.c[0] / robot.length ** 2
     last, taken = math.inf, None  # the gaps' size, the last (residual, step) for Broyden
     for _ in range(MAX_ITERATIONS):
@@ -148,7 +153,7 @@ def solve_in_contact(robot, obstacles, radius, solve, warm_start=None):
                 error = ContactError('no contact force moves the body at %s: the inputs fix '
                                      'the shape there (gap %.3g mm)' % (pinned, 1e3 * max(
                                          abs(c.gap) for c in active)))
-                error.free = free
+                error.free = free if free is not None else solve(robot, warm_start)
                 raise error
         last = size
         try:
@@ -168,7 +173,7 @@ def solve_in_contact(robot, obstacles, radius, solve, warm_start=None):
     error = ContactError('contact forces on %s did not converge in %d iterations (gap %.3g m '
                          'off, tolerance %g m)' % (sorted({names[c.obstacle] for c in active}),
                                                    MAX_ITERATIONS, worst, GAP_TOLERANCE))
-    error.free = free
+    error.free = free if free is not None else solve(robot, warm_start)
     raise error
 
 
@@ -191,11 +196,14 @@ def _jacobian(robot, obstacles, radius, solve, active, bases, residual, result, 
 
 
 def _across(normal):
-    """Return two unit vectors (2, 3) across ``normal``."""
-    helper = np.eye(3)[int(np.argmin(np.abs(normal)))]
-    first = np.cross(normal, helper)
-    first /= np.linalg.norm(first)
-    return np.stack([first, np.cross(normal, first)])
+    """Return two unit vectors (2, 3) across the unit ``normal``."""
+    x, y, z = normal
+    if abs(x) < 0.9:  # normal x e1, then normal x that
+        first = np.array([0.0, z, -y]) / math.hypot(y, z)
+    else:  # normal x e2
+        first = np.array([-z, 0.0, x]) / math.hypot(x, z)
+    a, b, c = first
+    return np.array([first, (y * c - z * b, z * a - x * c, x * b - y * a)])
 
 
 def _residual(contact, gap, normal, across):
@@ -206,8 +214,8 @@ def _residual(contact, gap, normal, across):
 
 def _settled(contact, scale):
     tangential = contact.vector - contact.force * contact.normal
-    return (abs(contact.gap) <= GAP_TOLERANCE  # and along the normal within 1e-7 rad
-            and float(np.linalg.norm(tangential)) <= MOVED * max(
+    return (abs(contact.gap) <= GAP_TOLERANCE
+            and float(np.linalg.norm(tangential)) <= DIRECTION * max(
                 float(np.linalg.norm(contact.vector)), scale))
 
 
@@ -269,18 +277,23 @@ def _penetrations(obstacles, radius, shape, active):
 
 def _curve(shape, s):
     """Backbone point at arc lengths ``s`` (m): the cubic Hermite of the nodes and tangents."""
-    s_grid = shape.s
-    s = np.clip(np.atleast_1d(s), 0.0, s_grid[-1])
-    k = np.clip(np.searchsorted(s_grid, s) - 1, 0, len(s_grid) - 2)
+    s_grid, states = shape.s, shape.states
+    s = np.atleast_1d(s)
+    k = np.minimum(np.maximum(np.searchsorted(s_grid, s) - 1, 0), len(s_grid) - 2)
     h = (s_grid[k + 1] - s_grid[k])[:, None]
     t = (s[:, None] - s_grid[k][:, None]) / h
-    # r' = R v (eq. 1) at the interval's two nodes
-    rotations, v = shape.rotations, shape.v
-    m0 = np.einsum('nij,nj->ni', rotations[k], v[k]) * h
-    m1 = np.einsum('nij,nj->ni', rotations[k + 1], v[k + 1]) * h
-    p0, p1 = shape.positions[k], shape.positions[k + 1]
-    t2, t3 = t * t, t * t * t
-    return ((2 * t3 - 3 * t2 + 1) * p0 + (t3 - 2 * t2 + t) * m0 + (-2 * t3 + 3 * t2) * p1
+    ends = np.concatenate([k, k + 1])
+    rows = states[ends]
+    # r' = R v (eq. 1) at the interval's two nodes: R row-major, v = (v - e3) + e3
+    rotation = rows[:, ROTATION].reshape(-1, 3, 3)
+    stretch = rows[:, STRETCH] + (0.0, 0.0, 1.0)
+    tangents = (rotation @ stretch[:, :, None])[:, :, 0]
+    count = len(s)
+    m0, m1 = tangents[:count] * h, tangents[count:] * h
+    p0, p1 = rows[:count, POSITION], rows[count:, POSITION]
+    t2 = t * t
+    t3 = t2 * t
+    return ((2 * t3 - 3 * t2 + 1) * p0 + (t3 - 2 * t2 + t) * m0 + (3 * t2 - 2 * t3) * p1
             + (t3 - t2) * m1)
 
 
@@ -296,8 +309,9 @@ def _refined_minimum(obstacle, radius, shape, s, width=None):
 
     Nine samples across ``width`` (m) each side (default one interval), then the vertex of the
     parabola through the best three, again round it on a bracket a sixteenth as wide, until
-    the vertex stays put (the gap is smooth there, so each round gains about three digits); a
-    minimum at the bracket's edge slides the bracket (a contact sliding along).
+    the bracket is a thousandth of the rod or the vertex stays put (the gap is smooth, a
+    parabola to round-off that close to its minimum); a minimum at the bracket's edge slides
+    the bracket (a contact sliding along).
     """
     s_grid = shape.s
     length = s_grid[-1]
@@ -320,8 +334,8 @@ def _refined_minimum(obstacle, radius, shape, s, width=None):
         bottom = (x1 - x0) * (b - c) - (x1 - x2) * (b - a)
         new = float(x1 - 0.5 * top / bottom) if bottom != 0.0 else float(x1)
         new = min(max(new, x0), x2)
-        if abs(new - vertex) <= 1e-8 * length or width <= 1e-9 * length:
-            return new
+        if abs(new - vertex) <= 1e-8 * length or width <= 1e-3 * length:
+            return new  # on a bracket this narrow the gap is a parabola to round-off
         s, vertex, width = new, new, width / 16.0
     return float(s)
 

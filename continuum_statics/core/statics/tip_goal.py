@@ -132,7 +132,7 @@ def _keep_clear(robot, solution, goal, direction, tip_force, tip_moment, toleran
     worst = clear.closest(robot, solution.shape, obstacles)
     if solution.converged and worst.gap >= clearance - clear.SLACK:
         path = clear.along_path(robot, begin, solution.shape, obstacles, tip_force, tip_moment,
-                                floor)
+                                floor, clearance)
         if path.gap >= floor:
             return replace(solution, clearance=min(worst.gap, path.gap))
         worst = path
@@ -161,7 +161,7 @@ def _keep_clear(robot, solution, goal, direction, tip_force, tip_moment, toleran
                 if last and leg.converged and found is None:
                     found = leg
             path = clear.along_path(robot, previous, shape, obstacles, tip_force, tip_moment,
-                                    floor)
+                                    floor, clearance)
             if path.gap < floor:
                 worst = path
                 break
@@ -171,6 +171,13 @@ def _keep_clear(robot, solution, goal, direction, tip_force, tip_moment, toleran
             final = legs[-1]
             return replace(final, waypoints=tuple(legs[:-1]),
                            clearance=clear.closest(robot, final.shape, obstacles).gap)
+    if found is not None:  # a clear answer no simple way reaches: search for a way
+        way = clear.connect(robot, begin, found.shape, obstacles, tip_force, tip_moment, floor,
+                            clearance, seed=int(np.abs(goal * 1e6).sum()) % 2 ** 32)
+        if way is not None:
+            return replace(found, waypoints=tuple(_home_answer(robot, shape)
+                                                  for shape in way[1:-1]),
+                           clearance=clear.closest(robot, found.shape, obstacles).gap)
     message = 'goal not reached with clearance: ' + worst.says(clearance)
     return replace(solution, converged=False, message=message, clearance=worst.gap)
 
@@ -178,12 +185,18 @@ def _keep_clear(robot, solution, goal, direction, tip_force, tip_moment, toleran
 def _plans(robot, tip0, goal, tip_force, tip_moment):
     """Yield the sequences of targets a clear goal tries, in order.
 
-    Direct; split on the tip's straight line; staged section by section (a name, built once
-    a clear answer is known); back through home (the rod with no cable load), then on.
+    Direct; split on the tip's straight line; down to the goal's height near the base axis,
+    then out (under a shelf); staged section by section (a name, built once a clear answer is
+    known); back through home (the rod with no cable load), then on.
     """
     yield [goal]
     for count in clear.MAX_LEGS:
         yield [tip0 + (goal - tip0) * k / count for k in range(1, count)] + [goal]
+    # down to the goal's height near the base axis, then out to it (under a shelf)
+    axis, base = robot.base_rotation[:, 2], robot.base_position
+    height = (goal - base) @ axis
+    inward = base + height * axis + 0.3 * (goal - base - height * axis)
+    yield [inward, 0.5 * (inward + goal), goal]
     yield 'base first'  # staged, section by section, to the first clear answer
     yield 'tip first'
     home = bvp.solve_loaded(robot, robot.passive_state(), None, tip_force, tip_moment)
