@@ -9,14 +9,20 @@ the tensions are measured). ``--plot FILE.png`` draws the backbone in 3-D.
 with its standard deviations and the directions the measurements do not see; ``--load`` the
 load model (``weight``: a payload's mass along gravity, printed in g; ``force``; ``wrench``;
 ``direction DX DY DZ``: the force's size along a known direction).
+``--obstacles FILE``: obstacles (a YAML list, or a mapping with an ``obstacles:`` list, as in a
+robot file) instead of the robot file's; the body rests on them and the contacts are printed.
 """
 import argparse
 import json
 import sys
 import time
 
+import yaml
+
 from continuum_statics import ConvergenceError, load_robot
+from continuum_statics.core.description.obstacles import parse_obstacles
 from continuum_statics.core.rod.rotations import rotation_to_quaternion
+from continuum_statics.core.statics.contact import ContactError
 
 
 def solve_main(argv=None):
@@ -53,6 +59,9 @@ def solve_main(argv=None):
                         'tip_position (m), tip_angle (rad); repeatable')
     parser.add_argument('--plot', default=None, metavar='FILE.png',
                         help='draw the backbone in 3-D into this PNG')
+    parser.add_argument('--obstacles', default=None, metavar='FILE',
+                        help="obstacles (YAML, the robot file's obstacles: form) the body rests "
+                             "on, instead of the robot file's; the contacts are printed")
     parser.add_argument('--json', action='store_true', help='print the whole shape as JSON')
     args = parser.parse_args(argv)
     estimate = None
@@ -74,30 +83,35 @@ def solve_main(argv=None):
         if args.tip_position is not None or args.moment or args.noise or args.load:
             raise ValueError('--tip-position, --moment, --load and --noise go with '
                              '--estimate-load')
+        obstacles = _obstacles(args.obstacles, robot)
         start = time.perf_counter()
         if args.cable_lengths is not None:
             extra = {} if args.tensions is None else {'tensions': args.tensions}
             estimate = robot.estimate_shape(args.cable_lengths, tip_force=args.tip_force,
-                                            tip_moment=args.tip_moment, **extra)
+                                            tip_moment=args.tip_moment, obstacles=obstacles,
+                                            **extra)
             shape = estimate.shape
-        elif args.tensions is not None:
-            shape = robot.solve_tensions(args.tensions, tip_force=args.tip_force,
-                                         tip_moment=args.tip_moment)
+        elif args.tensions is not None or obstacles:
+            tensions = args.tensions or [0.0] * len(robot.cable_names)  # slack: solve_bvp's
+            shape = robot.solve_tensions(tensions, tip_force=args.tip_force,
+                                         tip_moment=args.tip_moment, obstacles=obstacles)
         else:
             shape = robot.solve_bvp(tip_force=args.tip_force, tip_moment=args.tip_moment)
         elapsed = time.perf_counter() - start
-    except (ValueError, ConvergenceError) as error:
+    except (ValueError, ConvergenceError, ContactError) as error:
         print('error: %s' % error, file=sys.stderr)
         return 1
     if args.plot:
         _plot(args, robot, shape)
+    contacts = [{'obstacle': c.obstacle, 's': c.s, 'point': c.point.tolist(),
+                 'normal': c.normal.tolist(), 'force': c.force} for c in shape.contacts]
     quaternion = rotation_to_quaternion(shape.tip_rotation)
     if args.json:
         result = {'robot': robot.name, 'frame_id': robot.base_frame_id,
                   'tip_position': shape.tip_position.tolist(),
                   'tip_quaternion_xyzw': quaternion.tolist(),
                   'cable_lengths': robot.cable_lengths(shape).tolist(),
-                  'shape': shape.to_dict()}
+                  'shape': shape.to_dict(), 'contacts': contacts}
         if estimate is not None:
             result['estimate'] = {'converged': bool(estimate.converged),
                                   'residual_m': float(estimate.residual),
@@ -117,6 +131,9 @@ def solve_main(argv=None):
     if robot.cable_names:
         print('cable lengths   [m]  %s' % '  '.join(
             '%s=%.6f' % item for item in zip(robot.cable_names, robot.cable_lengths(shape))))
+    for c in contacts:
+        print('contact with %-12s s=%.4f m  point %s m  normal %s  force %.4g N' % (
+            repr(c['obstacle']), c['s'], _triple(c['point']), _triple(c['normal']), c['force']))
     if estimate is not None:
         print('estimate: %s, cable length residual %.3g m, %d iterations%s' % (
             _estimate_status(estimate), estimate.residual, estimate.iterations,
@@ -124,6 +141,20 @@ def solve_main(argv=None):
     if args.plot:
         print('backbone drawn in %s' % args.plot)
     return 0
+
+
+def _obstacles(path, robot):
+    """``--obstacles FILE`` parsed (None without it: the robot file's obstacles)."""
+    if path is None:
+        return None
+    try:
+        with open(path, encoding='utf-8') as stream:
+            data = yaml.safe_load(stream)
+    except (OSError, yaml.YAMLError) as error:
+        raise ValueError('--obstacles %s: %s' % (path, error)) from None
+    if isinstance(data, dict):
+        data = data.get('obstacles')
+    return robot.obstacles_or_file(parse_obstacles(data, '%s: obstacles' % path))
 
 
 def _noise_value(kind, value):
