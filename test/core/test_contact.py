@@ -1,4 +1,4 @@
-"""Contact statics and clearance goals (ARCHITECTURE, "Obstacles and contact").
+"""Contact statics and clearance goals (doc/obstacles.md).
 
 Truths used here, none of them the package's own contact code: the contact-free solve (an open
 gap must change nothing), the rod's global force balance (the base's internal force carries

@@ -1,6 +1,6 @@
 """Obstacles around the robot: the robot file's ``obstacles:`` and their signed distances.
 
-Four rigid primitives (ARCHITECTURE.md, "Obstacles and contact"), each with a pose in its frame
+Four rigid primitives (doc/obstacles.md), each with a pose in its frame
 (the robot's base frame unless ``frame_id`` says otherwise):
 
 - ``sphere {radius}``;

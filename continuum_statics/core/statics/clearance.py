@@ -1,4 +1,4 @@
-"""Tip goals that keep the whole body clear of obstacles (ARCHITECTURE, "Obstacles and contact").
+"""Tip goals that keep the whole body clear of obstacles (doc/obstacles.md).
 
 Among the equilibria whose tip is at the goal, the one whose section moments change least from
 the start while every backbone node keeps ``clearance`` (plus the body radius) from every
