@@ -230,14 +230,14 @@ class GoalRun:
         begin = self.start_point(measured, load, snapshot, tip_fresh)
         start, recover, commanded = begin.state, begin.recover, begin.commanded
         solution = None
+        obstacles = self.obstacles  # one read: the node swaps in new sets under its lock
         # warm from the start, then cold: a warm start far from the goal can end in a local
         # minimum of the tip error and call a reachable goal unreachable (seen 1.5-3 mm away)
         for warm_start in (start, None):
             trial = robot.solve_tip_goal(position, tip_force=load[:3], tip_moment=load[3:],
                                          tolerance=self.model_tolerance(tolerance),
                                          goal_direction=direction, warm_start=warm_start,
-                                         clearance=self.clearance,
-                                         obstacles=self.obstacles)
+                                         clearance=self.clearance, obstacles=obstacles)
             if solution is None or trial.error < solution.error:
                 solution = trial
             if solution.error <= tolerance:

@@ -5,6 +5,11 @@ warm-started estimate (at most ``max_iterations`` and ``max_model_runs`` IVPs pe
 one more such estimate when still far off; an unfinished one warm-starts the next
 measurement), tensions that disagree with the lengths set aside, and the residual judged against
 the thresholds: published as a shape, published as a best fit (warn), or dropped. No ROS.
+
+Every solve is with :attr:`ShapeTracker.obstacles` (None: the robot file's; statics sets the
+robot file's merged with its ``obstacles`` topic, base frame): ``estimate.shape.contacts`` says
+where the body rests on them (contacts the core cannot resolve come back in the estimate's
+message; a contact solve that raises drops the measurement, as any other failed estimate).
 """
 from dataclasses import dataclass
 import math
@@ -15,6 +20,7 @@ import numpy as np
 from continuum_statics.control.sensor_readings import SensorInbox
 from continuum_statics.core.estimation.shape_estimation import Tracking
 from continuum_statics.core.rod.tracking import TRACK_RUNS
+from continuum_statics.core.statics.contact import ContactError
 from continuum_statics.core.statics.length_statics import MOTION_THRESHOLD
 
 
@@ -90,6 +96,8 @@ class ShapeTracker:
         limits = np.asarray(robot.cable_length_limits, dtype=float).reshape(-1, 2)
         self.low, self.high = limits[:, 0].copy(), limits[:, 1].copy()
         self.warm = None  # the last published (or unfinished) estimate: warm start of the next
+        #: the obstacles every estimate is solved with, base frame (None: the robot file's)
+        self.obstacles = None
         self.set_max_iterations(max_iterations)
         self.max_model_runs = max_model_runs
 
@@ -140,12 +148,13 @@ class ShapeTracker:
                     tension_limit, ', '.join('%s %.4g N' % (names[i], tensions[i])
                                              for i in high[:4])))
         notes = {'load_problem': '', 'distrust': ''}
+        obstacles = self.obstacles  # one read per measurement (statics swaps in new sets)
         try:
             # the first measurement (nothing to track from yet) is solved to the end, once
             tracking = None if self.warm is None else Tracking(
                 self.max_model_runs, thresholds.warn, thresholds.motion, thresholds.noise)
             estimate = self._estimate(self._tracking, lengths, load, tensions, self.warm, notes,
-                                      tracking, sensors, stamp)
+                                      tracking, sensors, stamp, obstacles)
             if tensions is not None and not estimate.residual <= thresholds.warn:
                 # tensions and lengths disagree: the lengths (encoders) are trusted, the
                 # tensions (a sensor, a current estimate) are not used for this shape
@@ -154,21 +163,21 @@ class ShapeTracker:
                                      % estimate.residual)
                 tensions = None
                 estimate = self._estimate(self._tracking, lengths, load, None, self.warm, notes,
-                                          tracking, sensors, stamp)
+                                          tracking, sensors, stamp, obstacles)
             capped = estimate.capped or (not estimate.converged
                                          and self._tracking is not self.robot)
             if capped and not estimate.residual <= thresholds.drop:
                 # far from the last shape (a jump, a restart): one more bounded estimate now,
                 # from this one (its readings are fused already)
                 estimate = self._estimate(self.robot, lengths, load, tensions, estimate, notes,
-                                          tracking, None, stamp)
+                                          tracking, None, stamp, obstacles)
                 capped = estimate.capped
             if capped:  # the best state reached: the next measurement goes on from it
                 self.warm = estimate
             if not estimate.residual <= thresholds.drop and np.any(load):
                 estimate, capped = self._under_no_load(lengths, load, tensions, estimate, capped,
-                                                       thresholds, notes, stamp)
-        except ValueError as error:
+                                                       thresholds, notes, stamp, obstacles)
+        except (ValueError, ContactError) as error:
             return TrackResult(rejection=str(error), load_problem=notes['load_problem'])
         residual = float(estimate.residual)
         good_fit = residual <= thresholds.warn
@@ -197,7 +206,7 @@ class ShapeTracker:
                            tensions_used=tensions is not None, **notes)
 
     def _under_no_load(self, lengths, load, tensions, estimate, capped, thresholds, notes,
-                       stamp):
+                       stamp, obstacles=None):
         """Return (estimate, capped): the shape under zero tip load when that one fits.
 
         A tip load (an estimator's, a topic's) the lengths fit no shape under must not silence
@@ -206,7 +215,7 @@ class ShapeTracker:
         instead, and the load named on diagnostics.
         """
         plain = self._estimate(self.robot, lengths, np.zeros(6), tensions, None, notes, None,
-                               None, stamp)
+                               None, stamp, obstacles)
         if not plain.residual <= thresholds.drop:
             return estimate, capped  # not the load: the lengths fit no shape at all
         notes['load_problem'] = ('cable lengths fit no shape under tip load %s (RMS residual '
@@ -217,27 +226,36 @@ class ShapeTracker:
 
     @staticmethod
     def _estimate(robot, lengths, load, tensions, warm, notes, tracking=None, sensors=None,
-                  stamp=None):
-        """Estimate; a tip load the model cannot take is replaced by zero (and noted)."""
+                  stamp=None, obstacles=None):
+        """Estimate; a tip load the model cannot take is replaced by zero (and noted).
+
+        ``obstacles``: base frame; None: the robot file's (the call as without obstacles).
+        """
+        more = {} if obstacles is None else {'obstacles': obstacles}
         try:
             return robot.estimate_shape(lengths, tip_force=load[:3], tip_moment=load[3:],
                                         tensions=tensions, warm_start=warm, tracking=tracking,
-                                        sensors=sensors, stamp=stamp)
+                                        sensors=sensors, stamp=stamp, **more)
         except ValueError as error:
             if not np.any(load):
                 raise
             notes['load_problem'] = ('the model has no finite shape under tip load %s (%s): '
                                      'using zero' % (np.array2string(load, precision=3), error))
             return robot.estimate_shape(lengths, tensions=tensions, warm_start=None,
-                                        sensors=sensors, stamp=stamp)
+                                        sensors=sensors, stamp=stamp, **more)
 
 
-def passive_shape(robot, load):
+def passive_shape(robot, load, obstacles=None):
     """Return (shape, '') of a passive rod under gravity and ``load`` (6,), or (None, reason).
 
-    None when the rod has no equilibrium under that load (the last shape stays published).
+    ``obstacles`` as :attr:`ShapeTracker.obstacles` (None: the robot file's): the rod rests on
+    them (``shape.contacts``). None when the rod has no equilibrium under that load (the last
+    shape stays published).
     """
     try:
+        if robot.obstacles_or_file(obstacles):  # no cables: the rod's own weight and the load
+            return robot.solve_tensions(np.zeros(0), load[:3], load[3:],
+                                        obstacles=obstacles), ''
         return robot.solve_bvp(tip_force=load[:3], tip_moment=load[3:]), ''
     except Exception as error:  # ConvergenceError, ValueError, a solver failure: never fatal
         return None, 'no equilibrium of the passive rod under %s: %s' % (

@@ -387,18 +387,21 @@ class Robot:
         (None: the robot file's; ``()``: none): the body rests on them, ``shape.contacts``
         says where (:mod:`contact`). Raises ``ConvergenceError``.
         """
-        obstacles = self.obstacles_or_file(obstacles)
-        if obstacles:
-            return contact.solve_in_contact(
-                self, obstacles, self.body_radius,
-                lambda robot, warm: Robot.solve_tensions(robot, tensions, tip_force, tip_moment,
-                                                         warm, ()), warm_start)
         tensions = as_vector(tensions, len(self.cable_names), 'tensions')
         if np.any(tensions < 0.0):
             raise ValueError('tensions must be >= 0 N (cables only pull), got %s'
                              % np.round(tensions, 6).tolist())
         tip_force = as_vector(tip_force, 3, 'tip_force')
         tip_moment = as_vector(tip_moment, 3, 'tip_moment')
+        obstacles = self.obstacles_or_file(obstacles)
+        if obstacles:
+            def scaled(fraction):
+                return lambda robot, warm: Robot.solve_tensions(
+                    robot, fraction * tensions, fraction * tip_force, fraction * tip_moment,
+                    warm, ())
+
+            return contact.solve_in_contact(self, obstacles, self.body_radius, scaled(1.0),
+                                            warm_start, scaled)
         start = _warm_state(self, warm_start)
         if start is not None:
             start = self.passive_state(start[:3])
@@ -417,10 +420,18 @@ class Robot:
         """
         obstacles = self.obstacles_or_file(obstacles)
         if obstacles:
-            return contact.solve_in_contact(
-                self, obstacles, self.body_radius,
-                lambda robot, warm: length_statics.solve_lengths(robot, lengths, tip_force,
-                                                                 tip_moment, warm), warm_start)
+            lengths = as_vector(lengths, len(self.cable_names), 'lengths')
+            tip_force = as_vector(tip_force, 3, 'tip_force')
+            tip_moment = as_vector(tip_moment, 3, 'tip_moment')
+            rest = self.straight_cable_lengths
+
+            def scaled(fraction):
+                return lambda robot, warm: length_statics.solve_lengths(
+                    robot, rest + fraction * (lengths - rest), fraction * tip_force,
+                    fraction * tip_moment, warm)
+
+            return contact.solve_in_contact(self, obstacles, self.body_radius, scaled(1.0),
+                                            warm_start, scaled)
         return length_statics.solve_lengths(self, lengths, tip_force, tip_moment, warm_start)
 
     def equilibrium_between(self, start, goal, fraction, tip_force=(0.0, 0.0, 0.0),

@@ -6,6 +6,7 @@ What a user can tell a node, in one place per node (``ros2 param describe`` show
 import math
 
 from continuum_statics.drivers import backend_class
+from continuum_statics.nodes.controller_obstacles import FILE_CLEARANCE, check_clearance
 from continuum_statics.nodes.node_params import (
     ParamSpec,
     diagnostics_rate_spec,
@@ -166,6 +167,10 @@ def tip_controller_parameters():
                   '(tip_wrench, a force sensor or your estimator) or estimate '
                   '(tip_wrench_estimate, from the tip_load_estimator node)', read_only=True,
                   check=_check_wrench_source),
+        ParamSpec('clearance', FILE_CLEARANCE, 'how far the whole body keeps from every '
+                  'obstacle (robot file and obstacles topic) on the way to a tip goal, m (-1: '
+                  "the robot file's clearance, 0 when it gives none)", -1.0, 1.0,
+                  check=check_clearance),
         ParamSpec('stop_on_contact', False, 'a goal running when tip_contact turns true '
                   '(the tip_load_estimator felt a contact) stops there and fails, naming it'),
         ParamSpec('max_state_age', 0.5, 'cable_states and tip_pose older than this mean a '

@@ -18,6 +18,15 @@ ACTION_SERVICE_QOS = QoSProfile(depth=1000, reliability=ReliabilityPolicy.RELIAB
 #: /tf as tf2_ros's TransformBroadcaster offers it: reliable, depth 100, volatile.
 TF_QOS = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=100,
                     reliability=ReliabilityPolicy.RELIABLE, durability=DurabilityPolicy.VOLATILE)
+#: The ``obstacles`` input: reliable, transient local (a latched sender's last message reaches a
+#: node started later), depth 10 (messages that add obstacles are not overwritten in the queue).
+OBSTACLES_QOS = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=10,
+                           reliability=ReliabilityPolicy.RELIABLE,
+                           durability=DurabilityPolicy.TRANSIENT_LOCAL)
+#: /tf_static as tf2_ros's static listener reads it: reliable, transient local, depth 100.
+TF_STATIC_QOS = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=100,
+                           reliability=ReliabilityPolicy.RELIABLE,
+                           durability=DurabilityPolicy.TRANSIENT_LOCAL)
 
 
 def measurement_queue_qos(depth):
@@ -25,3 +34,4 @@ def measurement_queue_qos(depth):
     return QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=depth,
                       reliability=ReliabilityPolicy.BEST_EFFORT,
                       durability=DurabilityPolicy.VOLATILE)
+

@@ -5,11 +5,18 @@ has passed since the last ones (a timer only draws a shape whose measurements st
 on the executor's thread instead, the 0.5 ms Python build held the GIL while the intake thread
 waited with the next measurement: it alone raised the p99 latency at 1 kHz from 1.2-1.9 ms to
 3.1-3.5 ms.
+
+With obstacles (the robot file's or the ``obstacles`` topic's) the array also holds them and the
+contacts of the shape (:mod:`.obstacle_markers`), and it is serialized by rclpy (the template
+holds the rod only; a contact solve costs far more than that); a changed obstacle set is drawn
+at the next period even when no new shape came.
 """
 import math
 import threading
 import time
 
+from builtin_interfaces.msg import Time
+from std_msgs.msg import Header
 from visualization_msgs.msg import MarkerArray
 
 from continuum_statics.core.rod.rotations import rotation_to_quaternion
@@ -19,6 +26,7 @@ from continuum_statics.nodes.marker_geometry import (
     section_of,
 )
 from continuum_statics.nodes.markers import BackboneMarkers
+from continuum_statics.nodes.obstacle_markers import ObstacleMarkers
 from continuum_statics.nodes.qos import LATCHED_QOS
 from continuum_statics.nodes.robot_description import disk_diameter
 from continuum_statics.nodes.timers import steady_timer
@@ -30,12 +38,18 @@ class ShapeMarkers:
     :param node: the statics node (publisher, timers, ``robot``, ``base_frame_id``)
     :param tube_diameter: callable returning the tube diameter parameter, m
     :param reject: ``reject(kind, reason)`` for a shape that cannot be drawn
+    :param obstacles: the obstacles drawn (``current``, ``version``: an
+        :class:`~continuum_statics.nodes.obstacle_topic.ObstacleTopic`), or None
     """
 
-    def __init__(self, node, tube_diameter, reject):
+    def __init__(self, node, tube_diameter, reject, obstacles=None):
         self._node, self._tube_diameter, self._reject = node, tube_diameter, reject
         robot = node.robot
         self._markers = BackboneMarkers(node.get_name(), tube_diameter(), disk_diameter(robot))
+        self._obstacles = obstacles
+        self._obstacle_markers = ObstacleMarkers(node.get_name(), robot.length,
+                                                 float(robot.c[0]) / robot.length ** 2)
+        self._drawn_version = None
         # Multi-section robots: each cable drawn to its own end disk, the tube by section.
         self._cable_ends, self._section_ends = section_layout(robot)
         self._cable_sections = section_of(self._cable_ends, self._section_ends)
@@ -79,22 +93,33 @@ class ShapeMarkers:
 
     def _draw(self):
         latest = self.latest
-        if latest is None or latest is self._drawn:
+        obstacles = self._obstacles
+        version = None if obstacles is None else obstacles.version
+        if latest is None or (latest is self._drawn and version == self._drawn_version):
             return
-        self._drawn = latest
+        self._drawn, self._drawn_version = latest, version
         self._due = time.monotonic() + self._period
         shape, sampler, stamp = latest
         robot = self._node.robot
+        frame_id = self._node.base_frame_id
         try:
             guide_points, guide_rotations, cable_points = guide_and_cable_points(
                 shape.s, shape.positions, shape.rotations, robot.guides,
                 robot.hole_offsets, self._cable_ends)
             positions, quaternions = sampler.sample(shape.positions, shape.rotations)
             self._markers.tube_diameter = self._tube_diameter()
-            markers = self._markers.encode(
-                self._node.base_frame_id, *stamp, positions, quaternions,
-                guide_points, rotation_to_quaternion(guide_rotations), cable_points,
-                section_of(sampler.s, self._section_ends), self._cable_sections)
+            rod = (positions, quaternions, guide_points, rotation_to_quaternion(guide_rotations),
+                   cable_points, section_of(sampler.s, self._section_ends),
+                   self._cable_sections)
+            header = Header(frame_id=frame_id, stamp=Time(sec=int(stamp[0]),
+                                                          nanosec=int(stamp[1])))
+            extra = [] if obstacles is None else self._obstacle_markers.markers(
+                header, obstacles.current, getattr(shape, 'contacts', ()))
+            if extra:  # obstacles drawn or deleted: rclpy serializes the whole array
+                array = self._markers.update(header, *rod)
+                markers = MarkerArray(markers=list(array.markers) + extra)
+            else:
+                markers = self._markers.encode(frame_id, *stamp, *rod)
         except ValueError as error:
             self._reject('markers', error)
             return

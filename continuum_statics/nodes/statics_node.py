@@ -1,15 +1,15 @@
 """statics: backbone shape and tip pose from measured cable lengths and a tip-load estimate.
 
 Subscribes ``cable_states`` (sensor_msgs/JointState: measured cable lengths in m by name; best
-effort) and ``tip_wrench``
-(geometry_msgs/WrenchStamped in the base frame; zero until received and after it is older than
-``tip_wrench_timeout``). Every measurement is solved with the numeric core, warm-started from the
-last estimate, and published as ``backbone`` (nav_msgs/Path, ``path_samples`` poses base -> tip)
-and ``tip_pose`` (geometry_msgs/PoseStamped), both latched, stamped with the measurement's stamp in
-the robot's base frame. ``backbone_markers`` (visualization_msgs/MarkerArray) follows at
-``marker_rate``; ``/diagnostics`` at 1 Hz.
-
-Markers are drawn by the thread that published the shape (:mod:`.shape_markers` says why).
+effort) and ``tip_wrench`` (geometry_msgs/WrenchStamped in the base frame; zero until received
+and after it is older than ``tip_wrench_timeout``). Every measurement is solved with the numeric
+core, warm-started from the last estimate, and published as ``backbone`` (nav_msgs/Path,
+``path_samples`` poses base -> tip) and ``tip_pose`` (geometry_msgs/PoseStamped), both latched,
+stamped with the measurement's stamp in the robot's base frame. ``backbone_markers``
+(visualization_msgs/MarkerArray) follows at ``marker_rate``, drawn by the thread that published
+the shape (:mod:`.shape_markers` says why); ``/diagnostics`` at 1 Hz. Obstacles (the robot
+file's and the ``obstacles`` topic's) rest the body in every solve; ``contacts`` goes out with
+every shape (:mod:`.statics_obstacles`).
 
 Newest measurement, no backlog: ``cable_states`` is served by a thread of its own
 (:mod:`~continuum_statics.nodes.dedicated_intake`) from a short queue (``input_queue_depth``) that
@@ -80,7 +80,8 @@ from continuum_statics.nodes.robot_description import publish_robot_description
 from continuum_statics.nodes.ros_conversions import tip_load
 from continuum_statics.nodes.sensor_topics import SensorTopics, tip_sigma_mm
 from continuum_statics.nodes.shape_markers import ShapeMarkers
-from continuum_statics.nodes.tf_outputs import tf_outputs
+from continuum_statics.nodes.statics_obstacles import StaticsObstacles
+from continuum_statics.nodes.tf_outputs import republish_tf, tf_outputs
 from continuum_statics.nodes.timers import steady_timer
 
 NS = 1_000_000_000
@@ -134,8 +135,10 @@ class StaticsNode(RunnerHooks, Node):
             self, self.robot, self._params['tip_frame_id'], self._params['tf_disks'],
             self._params['frame_prefix'])
         self._stamps = StampRule(self._params['max_stamp_offset'])
+        self._obstacles = StaticsObstacles(  # a passive rod re-solves on an obstacle change
+            self, self._tracker, (lambda: self._solve_passive(None)) if self._passive else None)
         self._markers = ShapeMarkers(self, lambda: self._params['tube_diameter'],
-                                     self._problems.reject)
+                                     self._problems.reject, self._obstacles.topic)
         # before the intake starts: its thread reads the sensors from the first message on
         self._sensors = (SensorTopics(self, self.robot, self._tracker.inbox,
                                       self._params['covariance_rate'])
@@ -238,16 +241,17 @@ class StaticsNode(RunnerHooks, Node):
     def _solve_passive(self, stamp):
         """Passive rod: solve and publish the shape under gravity and the current tip load."""
         load = self._current_tip_load(time.monotonic()).copy()
-        if self._passive_load is not None and np.array_equal(load, self._passive_load):
+        key = (self._obstacles.version, load.tobytes())  # a new load or new obstacles
+        if key == self._passive_load:
             return
         start = time.perf_counter()
-        shape, problem = passive_shape(self.robot, load)
+        shape, problem = passive_shape(self.robot, load, self._tracker.obstacles)
         if shape is None:
             self._problems.reject('tip_wrench', problem)
             return
         sec, nanosec = (0, 0) if stamp is None else (stamp.sec, stamp.nanosec)
         if self._publish_shape(shape, sec, nanosec, 'tip_wrench'):
-            self._passive_load = load
+            self._passive_load = key
             self.health.published()
             self.health.solved_passive(time.perf_counter() - start)
 
@@ -280,6 +284,7 @@ class StaticsNode(RunnerHooks, Node):
             return False
         self._backbone_pub.publish(backbone)
         self._tip_pub.publish(tip)
+        self._obstacles.published(shape, sec, nanosec, self._problems.reject)
         if self._tf is not None:
             publisher.publish(transforms)
         self._stamp = (sec, nanosec)
@@ -296,14 +301,9 @@ class StaticsNode(RunnerHooks, Node):
     def _republish_tf(self):
         """Passive rod: its frames again, stamped now (a listener started later sees them)."""
         latest = self._markers.latest
-        if self._tf is None or latest is None:
-            return
-        publisher, encoder, poses = self._tf
-        sec, nanosec = divmod(self.get_clock().now().nanoseconds, NS)
-        try:
-            publisher.publish(encoder.encode(sec, nanosec, *poses.of(latest[0])))
-        except ValueError as error:
-            self._problems.reject('shape', error)
+        if self._tf is not None and latest is not None:
+            republish_tf(self._tf, latest[0], self.get_clock().now().nanoseconds,
+                         self._problems.reject)
 
     def _publish_diagnostics(self):
         now = time.monotonic()
@@ -326,6 +326,7 @@ class StaticsNode(RunnerHooks, Node):
             values['tip_position_m'] = '%.5f %.5f %.5f' % tuple(self._tip_position)
         if self._sensors is not None:
             level, message = self._sensors.diagnose(level, message, values, self._tip_sigma)
+        level, message = self._obstacles.diagnose(level, message, values)
         self._diagnostics.publish(diag.diagnostic_array(
             self.get_clock().now().to_msg(), self.get_fully_qualified_name().lstrip('/'),
             self.robot.name, level, message, values))

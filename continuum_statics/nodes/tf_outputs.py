@@ -32,3 +32,16 @@ def tf_outputs(node, robot, tip_frame_id='', disks=False, prefix=''):
         node.tf_static.publish(TFMessage(transforms=[static]))
     return (node.create_publisher(TFMessage, '/tf', TF_QOS),
             TransformEncoder(robot.base_frame_id, names), FramePoses(arc_lengths))
+
+
+def republish_tf(tf, shape, now_ns, reject):
+    """Publish the frames of ``shape`` again on /tf (``tf``: :func:`tf_outputs`'s), stamped now.
+
+    A passive rod's, for listeners started later; ``reject(kind, reason)`` when not finite.
+    """
+    publisher, encoder, poses = tf
+    sec, nanosec = divmod(now_ns, 1_000_000_000)
+    try:
+        publisher.publish(encoder.encode(sec, nanosec, *poses.of(shape)))
+    except ValueError as error:
+        reject('shape', error)

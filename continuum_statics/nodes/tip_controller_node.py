@@ -32,7 +32,8 @@ unreachable position, no state yet, a robot without cables), not reached in time
 a newer goal; the reason is logged and on diagnostics. A failed goal leaves no trace: the next one
 is accepted as soon as the state is fresh. Every goal source (service, action, ``tip_goal_pose``,
 ``tip_goal_point``) runs in a reentrant callback group of its own, never the control timer's, so
-a waiting goal never blocks the running goal's ticks or the topics it waits for.
+a waiting goal never blocks the running goal's ticks or the topics it waits for. Goals keep the
+body ``clearance`` from the obstacles (:mod:`~continuum_statics.nodes.controller_obstacles`).
 """
 import sys
 
@@ -49,6 +50,7 @@ from continuum_statics.control.stamps import StampRule
 from continuum_statics.control.tip_control import TipControl
 from continuum_statics.core.rod.rotations import quaternion_to_rotation
 from continuum_statics.core.warmup import warm_up
+from continuum_statics.nodes import controller_obstacles as obstacles
 from continuum_statics.nodes import diagnostics_util as diag
 from continuum_statics.nodes.dedicated_intake import make_intake
 from continuum_statics.nodes.joint_state_parser import CableStatesReader, header_stamp_ns
@@ -112,8 +114,9 @@ class TipControllerNode(RunnerHooks, Node):
         self.goal_group = ReentrantCallbackGroup()
         self._waits = Waits(self, WAIT_PERIOD, MutuallyExclusiveCallbackGroup())
         self.goals_in_flight = InFlight()  # goals still to answer (the runner waits at shutdown)
-        self.control = TipControl(self.robot, self._params, self.get_logger(),
-                                  self._waits.until)
+        self.control = TipControl(self.robot, obstacles.ControlParameters(self._params),
+                                  self.get_logger(), self._waits.until)
+        self._obstacles = obstacles.follow_obstacles(self, self.control)
         self.control.on_goal_started = self._publish_active_goal
         self.health = ControllerHealth(self.control)
         self._stamps = StampRule(self._params['max_stamp_offset'])
@@ -176,7 +179,7 @@ class TipControllerNode(RunnerHooks, Node):
 
     def _on_parameter_change(self, name, value):
         # called before the table stores the new value
-        self.control.on_parameter_change(name, value)
+        self.control.on_parameter_change(name, obstacles.control_value(name, value))
         if name == 'control_rate':
             old, self._timer = self._timer, self._control_timer(value)
             self.destroy_timer(old)
@@ -318,6 +321,7 @@ class TipControllerNode(RunnerHooks, Node):
     def _publish_diagnostics(self):
         topic = self._command_pub.topic_name
         level, message, values = self.health.report(self.count_publishers(topic), topic)
+        level, message = self._obstacles.diagnose(level, message, values)
         self._diagnostics.publish(diag.diagnostic_array(
             self.get_clock().now().to_msg(), self.get_fully_qualified_name().lstrip('/'),
             self.robot.name, level, message, values))

@@ -151,9 +151,13 @@ def check_environment(observation):
 def check_robot_file(observation):
     """Check that the robot file loads and is plausible, and how old its calibration is."""
     if observation.robot is None:
+        frame = _OBSTACLE_FRAME.search(observation.robot_error)
         return [Finding(ERROR, 'robot_file', 'robot file %s does not load: %s' % (
             observation.robot_file or '(none)', observation.robot_error),
-            'fix the named field (format: doc/robot_files.md), then restart the nodes')]
+            'fix the named field (format: doc/robot_files.md), then restart the nodes'
+            if frame is None else 'give obstacle %s in the base frame %s in the robot file '
+            '(no frame_id), or publish it on the obstacles topic with header.frame_id %s: '
+            'statics and tip_controller map that through /tf' % frame.group(1, 3, 2))]
     robot = observation.robot
     findings = [Finding(OK, 'robot_file', '%s: robot %r, %d cable(s), %d section(s)' % (
         observation.robot_file, robot.name, len(robot.cable_names),
@@ -162,6 +166,26 @@ def check_robot_file(observation):
         findings.append(Finding(WARN, 'robot_file', 'implausible: %s' % warning,
                                 'check that value against the robot (a unit slip: mm for m?)'))
     findings += _calibration_age(observation.robot_file)
+    return findings
+
+
+#: The core's refusal of a robot file's obstacle in another frame (obstacles.in_base_frame).
+_OBSTACLE_FRAME = re.compile(r"obstacle ('[^']*') is in frame ('[^']*'), not the base frame "
+                             r"('[^']*')")
+
+
+def check_obstacles(observation):
+    """Name the obstacles a node refuses (a frame /tf does not reach, a malformed entry)."""
+    findings = []
+    for name in ('statics', 'tip_controller'):
+        status = observation.statuses.get(_node(observation, name).lstrip('/'))
+        refused = status[2].get('obstacles_refused') if status else None
+        if refused:
+            findings.append(Finding(WARN, 'obstacles', '%s leaves out obstacle(s) of the '
+                                    'obstacles topic: %s' % (name, refused),
+                                    'publish the named frame on /tf or /tf_static (a chain to '
+                                    'the base frame), or send the obstacle in the base frame; '
+                                    'fix a malformed entry as named'))
     return findings
 
 
@@ -611,7 +635,7 @@ def _home_action(driver, cables=''):
 
 #: Every check, in the order they are reported.
 CHECKS = (check_environment, check_robot_file, check_kernels, check_nodes, check_driver,
-          check_rates, check_tf, check_sensors, check_tensions)
+          check_rates, check_tf, check_sensors, check_tensions, check_obstacles)
 
 
 def diagnose(observation):

@@ -2,7 +2,8 @@
 
 Serves a 3-D page (``--port``, default 8080, on ``--host``) with the live backbone (``backbone``),
 guide disks and cables (``backbone_markers``; cables coloured by the tension ``cable_states``
-reports, blue 0 N to red ``--max-tension``, grey when no tension is measured), the tip trail
+reports, blue 0 N to red ``--max-tension``, grey when no tension is measured), the obstacles and
+contact forces statics draws there (:mod:`.view_obstacles`), the tip trail
 (``tip_pose``), the goal in force (``tip_goal_active``) and every node's status
 (``/diagnostics``). A draggable gizmo (or the goal fields) and the *Send goal* button publish a
 tip goal on ``tip_goal_pose``. The fields and gizmo follow the goal in force, whoever sent it,
@@ -19,6 +20,12 @@ import threading
 import time
 
 import numpy as np
+
+from continuum_statics.tools.view_obstacles import (
+    ObstacleDrawing,
+    contact_segments,
+    obstacle_shapes,
+)
 
 #: Tip poses kept in the trail.
 TRAIL = 300
@@ -41,6 +48,7 @@ class LiveState:
         self.frame_id = ''
         self.disks = []  # [(position (3,), quaternion xyzw (4,), diameter m)]
         self.cables = []  # [(name, (k, 3) points)]
+        self.obstacles, self.contacts = [], np.zeros((0, 2, 3))  # from backbone_markers
         self.tensions = {}  # cable name -> N
         self.trail = deque(maxlen=TRAIL)
         self.goal = None  # (3,) m
@@ -95,7 +103,8 @@ def ros_thread(namespace, state, outbox, stop):
                 points = _finite([(p.x, p.y, p.z) for p in marker.points])
                 if points is not None and len(points) >= 2:
                     cables.append((marker.id, points))
-        state.update(disks=disks, cables=cables)
+        state.update(disks=disks, cables=cables, obstacles=obstacle_shapes(msg.markers),
+                     contacts=contact_segments(msg.markers))
 
     def on_states(msg):
         if len(msg.effort) == len(msg.name):
@@ -213,6 +222,7 @@ class Page:
         self.goal_field.on_update(lambda _: self._move_gizmo(self.goal_field.value))
         server.scene.set_up_direction('+z')  # REP-103 base frame
         self._placed = set()  # clients whose camera looks at the robot
+        self._obstacles = ObstacleDrawing()
         server.scene.add_grid('/grid', width=0.6, height=0.6, cell_size=0.05)
 
     @staticmethod
@@ -258,7 +268,9 @@ class Page:
             tensions, trail = dict(state.tensions), np.array(state.trail)
             goal, statuses = state.goal, dict(state.statuses)
             frames = dict(state.frames)
+            obstacles, contacts = list(state.obstacles), state.contacts
         scene = self.server.scene
+        self._obstacles.draw(scene, obstacles, contacts)
         if backbone is not None:
             segments = np.stack([backbone[:-1], backbone[1:]], axis=1)
             scene.add_line_segments('/robot/backbone', segments, BACKBONE_RGB, thickness=0.008)

@@ -25,7 +25,7 @@ PARAMS = dict(max_cable_speed=0.02, settle_time=0.2, settled_cable_error=1e-6,
               tracker_max_disagreement=0.0, max_tip_speed=0.05, max_tip_rate=0.5,
               twist_timeout=0.5, goal_timeout=10.0, state_wait=3.0, tip_wrench_timeout=1.0,
               stop_on_contact=False, use_measured_tip=True, goal_orientation='ignore',
-              default_tolerance=1e-3, control_rate=50.0)
+              default_tolerance=1e-3, control_rate=50.0, clearance=None)
 DT = 1.0 / PARAMS['control_rate']
 
 

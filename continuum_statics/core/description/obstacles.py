@@ -183,7 +183,8 @@ def in_base_frame(obstacles, base_frame_id):
     """Return the obstacles as given, refusing one in another frame (ValueError names it)."""
     for obstacle in obstacles:
         if obstacle.frame_id not in (None, '', base_frame_id):
-            raise ValueError('obstacle %r is in frame %r, not the base frame %r: transform it '
-                             'first (statics does through /tf)'
-                             % (obstacle.name, obstacle.frame_id, base_frame_id))
+            raise ValueError('obstacle %r is in frame %r, not the base frame %r: give its pose '
+                             'in the base frame (the obstacles topic takes any frame /tf '
+                             'connects to it)' % (obstacle.name, obstacle.frame_id,
+                                                  base_frame_id))
     return tuple(obstacles)

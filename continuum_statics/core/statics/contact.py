@@ -40,6 +40,9 @@ MAX_CONTACTS = 24
 FORCE_STEP = 1e-5
 #: A contact's point (relative to L) and normal settled when they move less than this.
 MOVED = 1e-7
+#: Steps from the robot at rest when a solve from the warm start lands deep in an obstacle
+#: (smaller where a step fails, all tries at most MAX_STAGES).
+STAGES, MAX_STAGES = 8, 48
 #: Samples of the Hermite curve per interval when a gap minimum is located.
 SAMPLES = 8
 
@@ -85,7 +88,7 @@ def shape_of(result):
     return getattr(result, 'shape', result)
 
 
-def solve_in_contact(robot, obstacles, radius, solve, warm_start=None):
+def solve_in_contact(robot, obstacles, radius, solve, warm_start=None, scaled=None):
     """Solve with the contact forces the obstacles put on the body.
 
     Each contact's force is a vector v (3 unknowns); its equations are the gap at its point
@@ -95,14 +98,46 @@ def solve_in_contact(robot, obstacles, radius, solve, warm_start=None):
     Jacobian (one solve per force component) is kept while the steps converge (chord steps,
     one solve each) and handed to the next call with the contacts (a warm start's).
 
+    A body whose contact-free shape lies deep in an obstacle (its centreline inside) has no
+    side to be pushed out of: a real one came onto it from outside. Then, and when Newton's
+    method fails, the inputs are applied in :data:`STAGES` steps from the robot at rest
+    (``scaled``), each step's contacts starting the next (a quarter of the step where one
+    fails: a contact sliding off an edge), so the body comes onto the obstacle from the side
+    it starts on.
+
     :param solve: ``solve(robot_like, warm_start) -> result`` the contact-free solver (a result
         with a ``shape``, or a shape), called on copies of ``robot`` with contact forces
     :param obstacles: obstacles in the base frame; ``radius`` the body radius (m)
     :param warm_start: a previous result: its shape's contacts start the forces
+    :param scaled: ``scaled(fraction)``: ``solve`` with its inputs that fraction of the way
+        from the robot at rest (no cable and no tip load), or None (no staging)
     :returns: the result whose shape holds ``contacts`` (a tuple of :class:`Contact`)
     :raises ContactError: no complementary set of forces within the iteration limit (its
         ``free`` is the contact-free result)
     """
+    try:
+        return _solve_contacts(robot, obstacles, radius, solve, warm_start, scaled is not None)
+    except ContactError as error:
+        if scaled is None or getattr(error, 'pinned', False):
+            raise
+        failed = error
+    staged, done, step, tries = None, 0.0, 1.0 / STAGES, 0
+    while done < 1.0:
+        fraction = min(1.0, done + step)
+        tries += 1
+        try:
+            staged = _solve_contacts(robot, obstacles, radius, scaled(fraction), staged, False)
+        except ContactError:
+            if tries >= MAX_STAGES:
+                raise failed from None
+            step *= 0.25  # a contact slid off an edge or round a corner: smaller steps there
+            continue
+        done, step = fraction, min(2.0 * step, 1.0 / STAGES)
+    return staged
+
+
+def _solve_contacts(robot, obstacles, radius, solve, warm_start, refuse_deep):
+    """Newton's method of :func:`solve_in_contact` from ``warm_start`` (no staging)."""
     names = [obstacle.name for obstacle in obstacles]
     warm = getattr(shape_of(warm_start), 'contacts', ())
     active = [_Active(names.index(c.obstacle), c.s, c.force * np.asarray(c.normal))
@@ -111,20 +146,35 @@ def solve_in_contact(robot, obstacles, radius, solve, warm_start=None):
     # from the warm start's contacts straight away; the contact-free result only without
     free = None if active else solve(robot, warm_start)
     result = solve(_loaded(robot, active), warm_start) if active else free
+    if refuse_deep and free is not None and float(np.min(
+            gaps(obstacles, radius, shape_of(free).positions)[0])) < -radius:
+        error = ContactError('the contact-free shape lies deep inside an obstacle')
+        error.free = free
+        raise error
     scale = FORCE_STEP * robot.c[0] / robot.length ** 2
     last, taken = math.inf, None  # the gaps' size, the last (residual, step) for Broyden
     for _ in range(MAX_ITERATIONS):
         shape = shape_of(result)
-        moved = 0.0
+        moved = {}
         for contact in active:  # follow each contact's gap minimum as the shape moves
             applied = contact.s
             _measure(contact, obstacles, radius, shape, _refined_minimum(
                 obstacles[contact.obstacle], radius, shape, contact.s, 1e-3 * robot.length))
-            moved = max(moved, abs(contact.s - applied) / robot.length)
+            moved[id(contact)] = abs(contact.s - applied) / robot.length
         kept = [c for c in active if c.force > 0.0 or c.gap < -GAP_TOLERANCE]
+        released = len(kept) < len(active)
+        moved = max((moved[id(c)] for c in kept), default=0.0)
         fresh = _penetrations(obstacles, radius, shape, kept)
         if not fresh and moved <= MOVED and all(_settled(c, scale) for c in kept):
+            if released:  # the shape still carries the force of a contact that let go
+                active, jacobian = kept, None
+                result = solve(_loaded(robot, active), result)
+                continue
             return _with_contacts(result, obstacles, kept, jacobian)  # forces where reported
+        if not kept and not fresh:  # every contact let go: the shape without them
+            active, jacobian = [], None
+            result = solve(_loaded(robot, active), result)
+            continue
         if fresh or len(kept) != len(active):
             jacobian = taken = None  # another set of contacts
         active = kept + fresh[:max(0, MAX_CONTACTS - len(kept))]
@@ -153,6 +203,7 @@ def solve_in_contact(robot, obstacles, radius, solve, warm_start=None):
                 error = ContactError('no contact force moves the body at %s: the inputs fix '
                                      'the shape there (gap %.3g mm)' % (pinned, 1e3 * max(
                                          abs(c.gap) for c in active)))
+                error.pinned = True  # staging cannot change that
                 error.free = free if free is not None else solve(robot, warm_start)
                 raise error
         last = size
