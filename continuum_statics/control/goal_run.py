@@ -29,6 +29,7 @@ import threading
 
 import numpy as np
 
+from continuum_statics.core.statics import clearance as clear
 from continuum_statics.core.statics.tendon_commands import command_for
 
 #: Measured lengths further than this from the last command (m) are not where the controller put
@@ -163,8 +164,8 @@ class GoalRun:
         self._corrected_goal = None
         self._path = None  # (start, goal solution, tip load) of the ramp in progress
         self._legs = []  # solutions still to ramp to after the current one (waypoints)
-        #: obstacles the body keeps clear of (base frame; None: the robot file's)
-        self.obstacles = None
+        self._obstacles = None
+        self._recheck = False  # new obstacles: the running goal's way is checked again
         self._fraction = 0.0
         self._fraction_step = 0.05
         self._straight = False  # no equilibrium path found: straight in cable space
@@ -176,6 +177,16 @@ class GoalRun:
     def fraction(self) -> float:
         """How far the ramp in progress is (0..1)."""
         return self._fraction
+
+    @property
+    def obstacles(self):
+        """Obstacles the body keeps clear of (base frame; None: the robot file's)."""
+        return self._obstacles
+
+    @obstacles.setter
+    def obstacles(self, obstacles):
+        # a goal on its way checks the rest of it against them at the next tick
+        self._obstacles, self._recheck = obstacles, self.goal is not None
 
     @property
     def clearance(self):
@@ -362,6 +373,11 @@ class GoalRun:
         if stale:
             self.finish(goal, False, stale)
             return None
+        blocked = self._recheck and self._way_blocked()
+        self._recheck = False
+        if blocked:
+            self.finish(goal, False, blocked)
+            return None
         budget = self.settings.max_cable_speed * dt
         if self.phase is Phase.RECOVER:
             # Off the model (e.g. a restarted driver): straight onto the estimate's lengths,
@@ -443,6 +459,26 @@ class GoalRun:
         # the model's equilibrium): close that gap at max_cable_speed, then go on.
         self.commanded = towards(self.commanded, lengths, budget)
         self._fraction_step = max(step, 1e-3)
+
+    def _way_blocked(self):
+        """Return why the rest of the way now passes too close to an obstacle, or ''."""
+        obstacles = self.robot.obstacles_or_file(self._obstacles)
+        if not obstacles or self._path is None or self.phase is Phase.RECOVER:
+            return ''
+        clearance = self.robot.clearance if self.clearance is None else self.clearance
+        start, solution, load = self._path
+        begin = getattr(self.command_state or start, 'shape', self.command_state or start)
+        # the way may not come closer than the body already is
+        floor = min(clearance, clear.closest(self.robot, begin, obstacles).gap) - clear.SLACK
+        for leg in [solution] + [leg[0] if isinstance(leg, tuple) else leg
+                                 for leg in self._legs]:
+            worst = clear.along_path(self.robot, begin, leg.shape, obstacles, load[:3],
+                                     load[3:], floor, clearance)
+            if worst.gap < floor:
+                return 'stopped: obstacles changed and %s on the rest of the way' % (
+                    worst.says(clearance))
+            begin = leg.shape
+        return ''
 
     def _straight_towards(self, solution, budget):
         self.commanded = towards(self.commanded, self._target, budget)

@@ -13,6 +13,7 @@ import pytest
 from continuum_statics import Robot, load_robot
 from continuum_statics.control.goal_run import Goal, GoalRun, Phase, RunSettings
 from continuum_statics.control.records import Measurement, TipSample
+from continuum_statics.core.description.obstacles import parse_obstacles
 
 ROBOT = load_robot(REPO / 'config' / 'tendon_robot.yaml')
 DT = 0.02
@@ -208,3 +209,28 @@ def test_a_goal_under_a_shelf_goes_round_it_and_the_body_never_comes_closer_than
     assert goal.reached, goal.reason
     # nodes of the followed shapes; between checks the body moves 0.05 m/s x 20 ms at most
     assert min(gaps) - robot.body_radius >= robot.clearance - 1e-3
+
+
+def test_an_obstacle_arriving_on_the_way_stops_the_goal_naming_it():
+    """A ball published where the answer's body will be: the next tick stops the goal."""
+    run = GoalRun(ROBOT, RunSettings(max_cable_speed=0.01))
+    plant = Plant(ROBOT.straight_cable_lengths)
+    goal, plan, _ = start(run, plant, ROBOT.solve_ivp([2.0, -1.0, 0.0]).tip_position)
+    now, command = 0.0, None
+    for _ in range(3):  # on its way
+        now += DT
+        measurement, tip = plant.step(command, now)
+        command = run.tick(now, DT, measurement, tip, plant.tips[-200:], ZERO)
+    # somewhere the way has not been yet: the far side of the answer's bend
+    middle = plan.solution.shape.positions[len(ROBOT.s_grid) // 2]
+    run.obstacles = ()  # an empty set changes nothing
+    now += DT
+    measurement, tip = plant.step(command, now)
+    assert run.tick(now, DT, measurement, tip, plant.tips[-200:], ZERO) is not None
+    run.obstacles = parse_obstacles([{'name': 'ball', 'sphere': {'radius': 0.005},
+                                      'position': middle.tolist()}])
+    now += DT
+    measurement, tip = plant.step(command, now)
+    assert run.tick(now, DT, measurement, tip, plant.tips[-200:], ZERO) is None
+    assert goal.done.is_set() and not goal.reached
+    assert 'obstacles changed' in goal.reason and "'ball'" in goal.reason
