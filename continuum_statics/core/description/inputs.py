@@ -1,4 +1,4 @@
-"""Validation of numeric arguments at the boundary of the core."""
+"""Validation of arguments at the boundary of the core (numbers, and robot file mappings)."""
 import math
 
 import numpy as np
@@ -26,3 +26,14 @@ def as_vector(value, size, name, finite=True):
     if not math.isfinite(array.dot(array)):  # NaN and inf both propagate into the dot product
         raise ValueError('%s must be finite, got %s' % (name, array.tolist()))
     return array
+
+
+def mapping(value, field, allowed):
+    """Return ``value`` if it is a mapping with only ``allowed`` keys, else ``ValueError``."""
+    if not isinstance(value, dict):
+        raise ValueError('%s must be a mapping, got %r' % (field, value))
+    unknown = sorted(set(value) - set(allowed))
+    if unknown:
+        raise ValueError('%s has unknown keys %s (allowed: %s)'
+                         % (field, unknown, ', '.join(sorted(allowed))))
+    return value

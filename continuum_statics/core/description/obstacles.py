@@ -21,6 +21,8 @@ import math
 import numpy as np
 from scipy.spatial.transform import Rotation
 
+from continuum_statics.core.description.inputs import mapping
+
 KINDS = ('sphere', 'capsule', 'box', 'plane')
 _OBSTACLE_KEYS = {'name', 'frame_id', 'position', 'orientation', *KINDS}
 _SIZE_KEYS = {'sphere': ('radius',), 'capsule': ('radius', 'length'), 'box': ('size',),
@@ -115,12 +117,7 @@ def parse_obstacles(entries, field='obstacles'):
     obstacles, names = [], set()
     for i, entry in enumerate(entries):
         where = '%s[%d]' % (field, i)
-        if not isinstance(entry, dict):
-            raise ValueError('%s must be a mapping, got %r' % (where, entry))
-        unknown = sorted(set(entry) - _OBSTACLE_KEYS)
-        if unknown:
-            raise ValueError('%s has unknown keys %s (allowed: %s)'
-                             % (where, unknown, ', '.join(sorted(_OBSTACLE_KEYS))))
+        mapping(entry, where, _OBSTACLE_KEYS)
         name = entry.get('name')
         if not isinstance(name, str) or not name:
             raise ValueError('%s.name must be a non-empty string, got %r' % (where, name))

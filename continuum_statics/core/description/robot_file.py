@@ -9,6 +9,7 @@ import math
 import numpy as np
 import yaml
 
+from continuum_statics.core.description.inputs import mapping
 from continuum_statics.core.description.obstacles import parse_obstacles
 from continuum_statics.core.description.routing import GuideOffsets, Helix, Straight
 from continuum_statics.core.description.sensors import (
@@ -267,18 +268,8 @@ def _section(data, key, field):
     return data[key]
 
 
-def _mapping(value, field, allowed):
-    if not isinstance(value, dict):
-        raise ValueError('%s must be a mapping, got %r' % (field, value))
-    unknown = sorted(set(value) - allowed)
-    if unknown:
-        raise ValueError('%s has unknown keys %s (allowed: %s)'
-                         % (field, unknown, ', '.join(sorted(allowed))))
-    return value
-
-
 def _parse_rod(data):
-    rod = _mapping(_section(data, 'rod', 'rod'), 'rod', _ROD_KEYS)
+    rod = mapping(_section(data, 'rod', 'rod'), 'rod', _ROD_KEYS)
     length = _positive(_section(rod, 'length', 'rod.length'), 'rod.length')
     diameter = _positive(_section(rod, 'diameter', 'rod.diameter'), 'rod.diameter')
     youngs = _positive(_section(rod, 'youngs_modulus', 'rod.youngs_modulus'),
@@ -308,7 +299,7 @@ def _parse_rod(data):
         raise ValueError('missing key rod.poisson_ratio (or rod.shear_modulus)')
     rigidities = {key: _positive(rod[key], 'rod.' + key)
                   for key in ('axial_rigidity', 'shear_rigidity') if key in rod}
-    damping = _mapping(rod.get('damping') or {}, 'rod.damping', _DAMPING_KEYS)
+    damping = mapping(rod.get('damping') or {}, 'rod.damping', _DAMPING_KEYS)
     for key in sorted(damping):
         value = _number(damping[key], 'rod.damping.' + key)
         if value < 0.0:
@@ -318,7 +309,7 @@ def _parse_rod(data):
 
 
 def _parse_base(data):
-    base = _mapping(_section(data, 'base', 'base'), 'base', _BASE_KEYS)
+    base = mapping(_section(data, 'base', 'base'), 'base', _BASE_KEYS)
     frame_id = _section(base, 'frame_id', 'base.frame_id')
     if not isinstance(frame_id, str) or not frame_id:
         raise ValueError('base.frame_id must be a non-empty string, got %r' % (frame_id,))
@@ -396,7 +387,7 @@ def _parse_route(cable, field, path_guides):
         return None, _hole(cable['offset'], field + '.offset')
     end = float(path_guides[-1]) if len(path_guides) else 0.0
     if 'helix' in cable:
-        helix = _mapping(cable['helix'], field + '.helix', _HELIX_KEYS)
+        helix = mapping(cable['helix'], field + '.helix', _HELIX_KEYS)
         route = Helix(
             radius=_positive(_section(helix, 'radius', field + '.helix.radius'),
                              field + '.helix.radius'),
@@ -436,7 +427,7 @@ def _parse_cables(data, guides, prefix='', names=None, tendons=None, defaults=No
     offsets, limits = [], []
     for i, cable in enumerate(cables):
         field = '%scables[%d]' % (prefix, i)
-        cable = _mapping(cable, field, _CABLE_KEYS)
+        cable = mapping(cable, field, _CABLE_KEYS)
         name = _section(cable, 'name', field + '.name')
         if not isinstance(name, str) or not name:
             raise ValueError('%s.name must be a non-empty string, got %r' % (field, name))
@@ -482,7 +473,7 @@ def _parse_sections(data, length, tendons, defaults, routes):
     sections, names, offsets, limits, end = [], [], [], [], 0.0
     for k, item in enumerate(raw):
         prefix = 'sections[%d].' % k
-        item = _mapping(item, 'sections[%d]' % k, _SECTION_KEYS)
+        item = mapping(item, 'sections[%d]' % k, _SECTION_KEYS)
         name = item.get('name', 'section_%d' % k)
         if not isinstance(name, str) or not name:
             raise ValueError('%sname must be a non-empty string, got %r' % (prefix, name))
@@ -538,7 +529,7 @@ def _tendon_block(block, field):
     """Return the validated tendon defaults of a ``tendons:`` mapping (empty when absent)."""
     if block is None:
         return {}
-    block = _mapping(block, field, set(TENDON_KEYS))
+    block = mapping(block, field, set(TENDON_KEYS))
     return {key: _tendon_value(key, value, '%s.%s' % (field, key))
             for key, value in block.items()}
 
@@ -634,7 +625,7 @@ def _tendon_warnings(rows, names):
 def _parse_solver(data):
     solver = data.get('solver') or {}
     defaults = SolverSettings()
-    solver = _mapping(solver, 'solver', set(defaults.__dataclass_fields__))
+    solver = mapping(solver, 'solver', set(defaults.__dataclass_fields__))
     steps = solver.get('steps', defaults.steps)
     if isinstance(steps, bool) or not isinstance(steps, int) or not 1 <= steps <= MAX_STEPS:
         raise ValueError('solver.steps must be an integer in [1, %d] (the default 40 is within '
@@ -698,7 +689,7 @@ def _clearance(value, field):
 
 def _parse_dynamics(data):
     defaults = DynamicsSettings()
-    section = _mapping(data.get('dynamics') or {}, 'dynamics', {'dt', 'alpha'})
+    section = mapping(data.get('dynamics') or {}, 'dynamics', {'dt', 'alpha'})
     return DynamicsSettings(*check_dynamics(section.get('dt', defaults.dt),
                                             section.get('alpha', defaults.alpha)))
 

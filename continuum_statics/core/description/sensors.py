@@ -12,6 +12,8 @@ from typing import NamedTuple
 
 import numpy as np
 
+from continuum_statics.core.description.inputs import mapping
+
 #: What a sensor measures: its point (m), or its point and orientation.
 SENSOR_KINDS = ('position', 'pose')
 #: Default standard deviations of a sensor (an optical tracker's): m and rad.
@@ -157,12 +159,7 @@ def parse_sensors(data, length, guides, tip_marker):
     sensors, names = [], set()
     for i, entry in enumerate(data):
         field = 'sensors[%d]' % i
-        if not isinstance(entry, dict):
-            raise ValueError('%s must be a mapping, got %r' % (field, entry))
-        unknown = sorted(set(entry) - _SENSOR_KEYS)
-        if unknown:
-            raise ValueError('%s has unknown keys %s (allowed: %s)'
-                             % (field, unknown, ', '.join(sorted(_SENSOR_KEYS))))
+        mapping(entry, field, _SENSOR_KEYS)
         name = entry.get('name')
         if not isinstance(name, str) or not name or not name.replace('_', 'a').isalnum():
             raise ValueError('%s.name must be a topic name (letters, digits, _), got %r'
