@@ -50,25 +50,30 @@ class Obstacle:
     rotation: np.ndarray
     frame_id: str = None
 
-    def distance(self, points):
-        """Signed distances (n,) of points (n, 3) to the surface (m) and outward normals (n, 3)."""
+    def distance(self, points, normals=True):
+        """Signed distances (n,) of points (n, 3) to the surface (m) and outward normals (n, 3).
+
+        ``normals=False``: the distances only (normals None), for a scan of the whole body.
+        """
         p = np.atleast_2d(np.asarray(points, dtype=float)) - self.position
         if self.kind == 'plane':
             axis = self.rotation[:, 2]
-            return p @ axis, np.broadcast_to(axis, p.shape).copy()
+            return p @ axis, np.broadcast_to(axis, p.shape).copy() if normals else None
         if self.kind == 'sphere':
-            return _round(p, self.size[0])
+            return _round(p, self.size[0], normals)
         if self.kind == 'capsule':
             axis = self.rotation[:, 2]
             half = 0.5 * self.size[1]
             along = np.clip(p @ axis, -half, half)
-            return _round(p - along[:, None] * axis, self.size[0])
+            return _round(p - along[:, None] * axis, self.size[0], normals)
         local = p @ self.rotation  # box: in its own axes
         excess = np.abs(local) - 0.5 * np.asarray(self.size)
         outside = np.maximum(excess, 0.0)
         out_norm = np.linalg.norm(outside, axis=1)
         inside = np.max(excess, axis=1)
         distance = np.where(out_norm > 0.0, out_norm, inside)
+        if not normals:
+            return distance, None
         # outside: the gradient points from the nearest surface point; inside: the nearest face
         face = np.zeros_like(local)
         face[np.arange(len(local)), np.argmax(excess, axis=1)] = 1.0
@@ -85,9 +90,11 @@ class Obstacle:
                         rotation @ self.rotation, frame_id)
 
 
-def _round(offset, radius):
+def _round(offset, radius, normals=True):
     """Distances and normals of points at ``offset`` (n, 3) from a centre point, minus radius."""
     norm = np.linalg.norm(offset, axis=1)
+    if not normals:
+        return norm - radius, None
     safe = np.maximum(norm, 1e-300)
     normal = offset / safe[:, None]
     normal[norm == 0.0] = (1.0, 0.0, 0.0)  # at the very centre any direction is outward

@@ -71,7 +71,7 @@ def along_path(robot, start, goal, obstacles, tip_force, tip_moment, floor, clea
     resolution = max(0.25 * clearance, 5e-4)
 
     def gap(shape):
-        return float(np.min(contact.gaps(obstacles, radius, shape.positions)[0]))
+        return float(np.min(contact.gaps(obstacles, radius, shape.positions, False)[0]))
 
     ends = [(0.0, start, gap(start)), (1.0, goal, gap(goal))]
     worst = min(ends[1:], key=lambda end: end[2])
@@ -251,7 +251,7 @@ class _Program:
             rows.append(axis @ self.axes.T)
         equal = np.concatenate(rows, axis=1)
         positions = states[:, :, POSITION].reshape(-1, 3)
-        gaps, _ = contact.gaps(self.obstacles, robot.body_radius, positions)
+        gaps = contact.gaps(self.obstacles, robot.body_radius, positions, False)[0]
         gaps = gaps.reshape(len(self.obstacles), n + 1, -1)[:, :, 1:]  # the base node is fixed
         clear = (np.moveaxis(gaps, 1, 0).reshape(n + 1, -1) - self.clearance - self.margin
                  - SLACK)

@@ -146,11 +146,13 @@ def _solve_contacts(robot, obstacles, radius, solve, warm_start, refuse_deep):
     # from the warm start's contacts straight away; the contact-free result only without
     free = None if active else solve(robot, warm_start)
     result = solve(_loaded(robot, active), warm_start) if active else free
-    if refuse_deep and free is not None and float(np.min(
-            gaps(obstacles, radius, shape_of(free).positions)[0])) < -radius:
-        error = ContactError('the contact-free shape lies deep inside an obstacle')
-        error.free = free
-        raise error
+    table = None  # the free shape's gaps, scanned once
+    if free is not None:
+        table = gaps(obstacles, radius, shape_of(free).positions, False)[0]
+        if refuse_deep and float(np.min(table)) < -radius:
+            error = ContactError('the contact-free shape lies deep inside an obstacle')
+            error.free = free
+            raise error
     scale = FORCE_STEP * robot.c[0] / robot.length ** 2
     last, taken = math.inf, None  # the gaps' size, the last (residual, step) for Broyden
     for _ in range(MAX_ITERATIONS):
@@ -164,7 +166,8 @@ def _solve_contacts(robot, obstacles, radius, solve, warm_start, refuse_deep):
         kept = [c for c in active if c.force > 0.0 or c.gap < -GAP_TOLERANCE]
         released = len(kept) < len(active)
         moved = max((moved[id(c)] for c in kept), default=0.0)
-        fresh = _penetrations(obstacles, radius, shape, kept)
+        fresh = _penetrations(obstacles, radius, shape, kept,
+                              table if result is free else None)
         if not fresh and moved <= MOVED and all(_settled(c, scale) for c in kept):
             if released:  # the shape still carries the force of a contact that let go
                 active, jacobian = kept, None
@@ -270,10 +273,14 @@ def _settled(contact, scale):
                 float(np.linalg.norm(contact.vector)), scale))
 
 
-def gaps(obstacles, radius, positions):
-    """Gaps (n_obstacles, n) of points to each obstacle (m) and their normals (.., 3)."""
-    table = [obstacle.distance(positions) for obstacle in obstacles]
-    return (np.array([d for d, _ in table]) - radius, np.array([n for _, n in table]))
+def gaps(obstacles, radius, positions, normals=True):
+    """Gaps (n_obstacles, n) of points to each obstacle (m) and their normals (.., 3).
+
+    ``normals=False``: the gaps only (normals None).
+    """
+    table = [obstacle.distance(positions, normals) for obstacle in obstacles]
+    return (np.array([d for d, _ in table]) - radius,
+            np.array([n for _, n in table]) if normals else None)
 
 
 def nearest(obstacles, radius, shape):
@@ -281,7 +288,7 @@ def nearest(obstacles, radius, shape):
 
     Located between nodes on the Hermite curve, as contacts are.
     """
-    table, _ = gaps(obstacles, radius, shape.positions)
+    table = gaps(obstacles, radius, shape.positions, False)[0]
     k, node = np.unravel_index(np.argmin(table), table.shape)
     s = _refined_minimum(obstacles[k], radius, shape, shape.s[node])
     return _gap_at(obstacles[k], radius, shape, s)[0], int(k), s
@@ -305,9 +312,15 @@ def _measure(contact, obstacles, radius, shape, s):
                                                          shape, s)
 
 
-def _penetrations(obstacles, radius, shape, active):
-    """Return new contacts: gap minima below -tolerance away from the active contacts."""
-    table, _ = gaps(obstacles, radius, shape.positions)
+def _penetrations(obstacles, radius, shape, active, table=None):
+    """Return new contacts: gap minima below -tolerance away from the active contacts.
+
+    ``table``: the shape's node gaps when already known.
+    """
+    if table is None:
+        table = gaps(obstacles, radius, shape.positions, False)[0]
+    if not active and float(np.min(table)) >= -GAP_TOLERANCE:
+        return []  # nothing inside anything: the usual case, one comparison
     s_grid = shape.s
     fresh = []
     for k, row in enumerate(table):
