@@ -71,7 +71,9 @@ def clearance_goals(robot_file, count, seed=2):
             goals.append(shape.tip_position.copy())
     previous = None
     reached, refused, plain_hits, around, times, seen = 0, {}, 0, 0, [], []
-    for goal in goals:
+    for number, goal in enumerate(goals):
+        if number % 10 == 0:
+            print('    goal %d of %d' % (number, count), flush=True)
         # the plain solver's answer and the way a controller would ramp to it (64 steps)
         plain = robot.solve_tip_goal(goal, obstacles=(), warm_start=previous)
         begin = previous.shape if previous is not None else robot.solve_tensions(
@@ -108,13 +110,15 @@ def main(argv=None):
     """Print both tables."""
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument('--goals', type=int, default=100)
+    parser.add_argument('--robots', nargs='+', default=['config/two_section_robot.yaml',
+                                                        'config/three_section_robot.yaml'])
     args = parser.parse_args(argv)
     print('Contact solves, warm-started, tensions 0.1 % apart:')
     for robot_file in ('config/two_section_robot.yaml', 'config/three_section_robot.yaml'):
         print(' ', robot_file)
         contact_timing(robot_file)
     print('Clearance goals (shelf, post, wall; clearance %.1f mm):' % (CLEARANCE * 1e3))
-    for robot_file in ('config/two_section_robot.yaml', 'config/three_section_robot.yaml'):
+    for robot_file in args.robots:
         clearance_goals(robot_file, args.goals)
 
 

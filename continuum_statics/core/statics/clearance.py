@@ -26,6 +26,9 @@ from continuum_statics.core.statics import bvp, contact
 
 #: Nodes an RRT-connect search adds at most before the goal is refused.
 MAX_TREE_NODES = 60
+#: The finest step of a way's bisection (a fraction of the way): where the equilibria jump
+#: (the solve switches branch), no finer step makes the body's motion small.
+FINEST = 1.0 / 4096
 #: Legs a goal may be split into when the direct path passes too close.
 MAX_LEGS = (2, 4)
 #: Clearance slack (m) for round-off between nodes and the Hermite curve.
@@ -79,8 +82,8 @@ def along_path(robot, start, goal, obstacles, tip_force, tip_moment, floor, clea
     while stack and worst[2] >= floor:
         a, b = stack.pop()
         move = float(np.max(np.linalg.norm(b[1].positions - a[1].positions, axis=1)))
-        if min(a[2], b[2]) - move >= floor or move <= resolution:
-            continue
+        if min(a[2], b[2]) - move >= floor or move <= resolution or b[0] - a[0] < FINEST:
+            continue  # clear, fine enough, or a jump no finer step removes (a solve's branch)
         fraction = 0.5 * (a[0] + b[0])
         middle = robot.equilibrium_between(start, goal, fraction, tip_force, tip_moment,
                                            warm_start=a[1]).shape
