@@ -50,6 +50,7 @@ bench: venv
 	.venv/bin/python -m benchmarks.bench_noisy
 	.venv/bin/python -m benchmarks.bench_fusion
 	.venv/bin/python -m benchmarks.bench_dynamics
+	.venv/bin/python -m benchmarks.bench_obstacles
 
 bench-nodes: venv
 	scripts/ros_env.sh --private .venv/bin/python -m continuum_statics bench --nodes
