@@ -165,7 +165,7 @@ def _keep_clear(robot, solution, goal, direction, tip_force, tip_moment, toleran
             if path.gap < floor:
                 worst = path
                 break
-            legs.append(leg or _home_answer(robot, shape))
+            legs.append(leg or _waypoint(robot, shape))
             previous = shape
         if len(legs) == len(plan) and legs[-1].converged:
             final = legs[-1]
@@ -175,7 +175,7 @@ def _keep_clear(robot, solution, goal, direction, tip_force, tip_moment, toleran
         way = clear.connect(robot, begin, found.shape, obstacles, tip_force, tip_moment, floor,
                             clearance, seed=int(np.abs(goal * 1e6).sum()) % 2 ** 32)
         if way is not None:
-            return replace(found, waypoints=tuple(_home_answer(robot, shape)
+            return replace(found, waypoints=tuple(_waypoint(robot, shape)
                                                   for shape in way[1:-1]),
                            clearance=clear.closest(robot, found.shape, obstacles).gap)
     message = 'goal not reached with clearance: ' + worst.says(clearance)
@@ -227,11 +227,11 @@ def _staged(robot, start, goal_state, tip_force, tip_moment, order):
     return stages
 
 
-def _home_answer(robot, shape):
-    """Return a waypoint at ``shape`` (home, a stage): its lengths, nothing judged."""
+def _waypoint(robot, shape):
+    """Return a waypoint at ``shape`` (home, a stage, a search node): its lengths only."""
     return TipGoalSolution(shape=shape, u0=shape.u0, cable_lengths=robot.cable_lengths(shape),
                            converged=False, error=math.nan, iterations=0, limited_cables=(),
-                           message='home')
+                           message='waypoint')
 
 
 def _solve(robot, goal, direction, tip_force, tip_moment, tolerance, start):
