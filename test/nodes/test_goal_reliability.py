@@ -228,6 +228,25 @@ def action_client(node):
                         cancel_service_qos_profile=ACTION_SERVICE_QOS)
 
 
+def accepted_goals(action, position, timeout=60.0):
+    """Send goals to ``position`` every 5 s until one is accepted; return the accepted handles.
+
+    rmw_fastrtps drops a service response when the server has not yet matched the client's
+    response reader ("client will not receive response", after 100 ms), and
+    ``server_is_ready`` sees only the client's side of the match: on a loaded machine the first
+    goal after discovery can go unanswered. An answered goal shows the way back is matched.
+    """
+    deadline = time.monotonic() + timeout
+    sent = []
+    while not any(f.done() for f in sent):
+        assert time.monotonic() < deadline, 'no goal answered in %g s' % timeout
+        sent.append(send_goal(action, position))
+        resend = time.monotonic() + 5.0
+        while not sent[-1].done() and time.monotonic() < resend:
+            time.sleep(0.01)
+    return [f.result() for f in sent if f.done() and f.result().accepted]
+
+
 def send_goal(action, position, tolerance=1e-3):
     """Send a move_tip goal from ``action`` (an ActionClient); return its handle's future."""
     goal = MoveTip.Goal(tolerance=float(tolerance))

@@ -12,7 +12,7 @@ import time
 from conftest import REPO
 from nodes_helpers import wait_until
 import pytest
-from test_goal_reliability import ROBOT, Bringup, action_client, send_goal
+from test_goal_reliability import ROBOT, Bringup, accepted_goals, action_client, send_goal
 
 pytestmark = pytest.mark.ros  # starts DDS or a process
 
@@ -79,11 +79,9 @@ def test_a_goal_running_at_sigint_gets_a_result_saying_so(tmp_path):
         client = action_client(node)
         threading.Thread(target=executor.spin, daemon=True).start()
         wait_until(client.server_is_ready, 60.0, 'bringup up')
-        goal = send_goal(client, ROBOT.solve_ivp([2.5, 0.0, 0.0]).tip_position)
-        wait_until(goal.done, 20.0, 'the goal accepted')
-        handle = goal.result()
-        assert handle.accepted
-        result = handle.get_result_async()
+        accepted = accepted_goals(client, ROBOT.solve_ivp([2.5, 0.0, 0.0]).tip_position)
+        assert accepted
+        result = accepted[-1].get_result_async()
         time.sleep(0.5)  # the goal is running (a slow ramp: many seconds)
         ended_before = result.done()
         start = time.monotonic()
@@ -142,6 +140,9 @@ def test_a_burst_of_100_goals_is_all_answered_and_the_last_one_at_sigint_too(tmp
         client = action_client(node)
         threading.Thread(target=executor.spin, daemon=True).start()
         wait_until(client.server_is_ready, 60.0, 'bringup up')
+        # a goal answered first: the way back is matched (see accepted_goals)
+        first = [h.get_result_async() for h in accepted_goals(client, reachable(5, 1)[0])]
+        assert first
         results = []
 
         def ask_result(future):
@@ -153,8 +154,8 @@ def test_a_burst_of_100_goals_is_all_answered_and_the_last_one_at_sigint_too(tmp
             handle.add_done_callback(ask_result)
         wait_until(lambda: all(h.done() for h in handles), 60.0, 'the 100 goals accepted')
         assert len(results) == 100
-        wait_until(lambda: sum(r.done() for r in results) >= 99, 30.0,
-                   'the 99 pre-empted results: %d arrived' % sum(r.done() for r in results))
+        wait_until(lambda: sum(r.done() for r in results + first) >= 99 + len(first), 30.0,
+                   'the pre-empted results')
         running = [r for r in results if not r.done()]
         assert len(running) == 1  # the last of the burst runs (slow cables)
         assert all(r.result().status == 6 and 'pre-empted' in r.result().result.message
