@@ -9,12 +9,12 @@ demo: venv
 	scripts/ros_env.sh .venv/bin/python -m continuum_statics demo
 
 # The suite in two tiers: the fast one (no DDS, no process: physics, decisions, drivers against
-# emulators, tools in-process) on both cores, then the `ros` tier (nodes over DDS, subprocesses)
-# one test at a time; each prints its ten slowest tests.
+# emulators, tools in-process) on both cores, then the `ros` tier (nodes over DDS, subprocesses;
+# scripts/ros_tier.sh); each prints its ten slowest tests.
 test: venv
 	scripts/install_browser.sh
 	scripts/ros_env.sh --private .venv/bin/python -m pytest -q -n 2 -m "not ros" --durations=10 test
-	scripts/ros_env.sh --private .venv/bin/python -m pytest -q -m ros --durations=10 test
+	scripts/ros_tier.sh .venv/bin/python
 
 # The newcomer's first command: the fast tier alone (test/core, control, calibration, drivers,
 # tools, package without DDS or processes), in about two minutes on two cores.
@@ -40,7 +40,7 @@ venv-jazzy:
 test-jazzy: venv venv-jazzy
 	scripts/install_browser.sh
 	scripts/ros_env.sh --private .venv-jazzy/bin/python -m pytest -q -n 2 -m "not ros" --durations=10 $(JAZZY_FAST)
-	scripts/ros_env.sh --private .venv-jazzy/bin/python -m pytest -q -m ros --durations=10 test
+	scripts/ros_tier.sh .venv-jazzy/bin/python
 
 bench: venv
 	scripts/ros_env.sh .venv/bin/python -m continuum_statics bench

@@ -19,6 +19,11 @@ sys.path[:0] = [str(folder) for folder in sorted(Path(__file__).parent.iterdir()
 
 os.environ['ROS_AUTOMATIC_DISCOVERY_RANGE'] = 'LOCALHOST'
 os.environ.setdefault('ROS_DOMAIN_ID', str(random.randint(10, 99)))
+# pytest-xdist workers (gw0, gw1, ...) run side by side: each a domain of its own, 100 apart (the
+# doctor's test uses the next domain up as a foreign one).
+_worker = os.environ.get('PYTEST_XDIST_WORKER', 'gw0')
+_domain = int(os.environ['ROS_DOMAIN_ID']) + 100 * int(_worker[2:])
+os.environ['ROS_DOMAIN_ID'] = str(_domain % 233)
 os.environ.setdefault(
     'FASTDDS_DEFAULT_PROFILES_FILE', str(REPO / 'config' / 'fastdds_fast_discovery.xml'))
 

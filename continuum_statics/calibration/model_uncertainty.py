@@ -2,24 +2,30 @@
 
 A calibrated model still misses the tracker by what it does not model (friction history,
 drift, the tracker's own noise). :mod:`continuum_statics.core.estimation.state_estimation` carries
-that
-error as unmodelled loads d with prior N(0, P0), P0 = diag(sigma_group^2). This module measures
-sigma_group and the correlation time from the run's residuals:
+that error as unmodelled loads d with prior N(0, P0), P0 = diag(sigma_group^2). This module
+measures sigma_group and the correlation time from the run's residuals:
 
 each row's residual e_i = measured - model marker point is, to first order, H_i d + noise,
-with H_i the marker rows of the load columns at that row. The run is replayed through the same
-filter as the estimator's, with the tracker seen on some rows and occluded on others
-(:data:`OCCLUSION_PATTERNS`: what a lab's tracker does), and sigma per group and tau maximise
-the likelihood of what the filter predicts on the occluded rows (error and covariance both:
-too small a covariance is penalised as much as too large). sigma_y, the tracker's noise, is
-given (the robot file's tip sensor, else :data:`TRACKER_NOISE`). Only the calibration run is
-used: held-out runs judge the result.
+with H_i the marker rows of the load columns at that row. The residuals are cross-validated
+(:func:`fold_robots`): each row's comes from a robot fitted without its motion pattern, so
+their scale is a held-out run's, not the smaller one of the rows the robot was fitted to. Each
+fold is replayed through the same filter as the estimator's, with the tracker seen on some rows
+and occluded on others (:data:`OCCLUSION_PATTERNS`: what a lab's tracker does), and sigma per
+group and tau maximise the likelihood of what the filter predicts on the occluded rows (error
+and covariance both: too small a covariance is penalised as much as too large). The fit starts
+from the file's prior and from the offset alone (the last-residual baseline is that model with
+every other group at zero) and keeps the likelier. sigma_y, the tracker's noise, is given (the
+robot file's tip sensor, else :data:`TRACKER_NOISE`). Only the calibration run is used:
+held-out runs judge the result.
 """
 import math
 
 import numpy as np
 from scipy.optimize import minimize
 
+from continuum_statics.calibration.error_budget import folds, pattern_groups
+from continuum_statics.calibration.fit import fit as fit_run
+from continuum_statics.calibration.run_model import RunModel
 from continuum_statics.core.description.sensors import (
     DEFAULT_SENSOR_NOISE,
     ModelUncertainty,
@@ -31,6 +37,34 @@ from continuum_statics.core.estimation.state_estimation import GROUPS, decayed, 
 OCCLUSION_PATTERNS = ((1, 1), (5, 5), (20, 40))
 #: The tracker's noise (m) assumed when the robot file names no tip sensor: a sensor's default.
 TRACKER_NOISE = DEFAULT_SENSOR_NOISE['position']
+#: Folds of the cross-validation (whole motion patterns each, as :mod:`.selection`'s).
+FOLDS = 3
+#: Least-squares evaluations of a fold's fit (it starts at the whole run's fit).
+FOLD_EVALUATIONS = 8
+#: sigma (relative to the file's prior) of the groups other than the offset at the offset-only
+#: start: the last-residual baseline, up to the optimiser's log scale.
+SWITCHED_OFF = 1e-4
+
+
+def fold_robots(robot, run, fit_names, model, x, workers=None, shear_fixed=False,
+                count=FOLDS):
+    """Return [(a robot fitted without a fold's motion patterns, the fold's rows as a run)].
+
+    ``model`` and ``x``: the whole run's fit (:class:`RunModel` and its search vector), each
+    fold's fit starts there. The robots are in the tracker frame (their registration is the
+    fold's own).
+    """
+    fold = folds(pattern_groups(run.labels), count)
+    pairs = []
+    for f in range(count):
+        test = fold == f
+        if not np.any(test) or np.all(test):
+            continue
+        part = RunModel(robot, fit_names, run.subset(~test), shear_fixed)
+        result = fit_run(part, log=lambda line: None, workers=workers,
+                         max_evaluations=FOLD_EVALUATIONS, x0=part.start_from(model, x))
+        pairs.append((part.robot_for(result.x, frame='tracker'), run.subset(test)))
+    return pairs
 
 
 def residual_rows(robot, run):
@@ -60,35 +94,45 @@ def _skew(v):
     return np.array([[0.0, -v[2], v[1]], [v[2], 0.0, -v[0]], [-v[1], v[0], 0.0]])
 
 
-def fit(robot, run, residuals, columns, tracker_noise, patterns=None):
+def fit(robot, sequences, tracker_noise, patterns=None):
     """Return ({group: sigma}, tau) maximising the predictive likelihood of occluded rows.
 
-    The replay of :func:`replay_filter` under each occlusion pattern of ``patterns`` (default
-    :data:`OCCLUSION_PATTERNS`): the sum over the rows the tracker does not see of
+    ``sequences``: [(times (n,) s, residuals (n, 3) m, marker columns (n, 3, k))], each replayed
+    on its own. The replay of :func:`replay_filter` under each occlusion pattern of ``patterns``
+    (default :data:`OCCLUSION_PATTERNS`): the sum over the rows the tracker does not see of
     log N(e_i; H_i mean_i, H_i P_i H_i^T + sigma_y^2 I), maximised over log sigma per group and
-    log tau (Nelder-Mead). The rows it sees update the unmodelled loads, as on the robot.
+    log tau (Nelder-Mead) from two starts: the file's prior, and the offset alone (the others
+    at :data:`SWITCHED_OFF` of theirs). The rows it sees update the unmodelled loads, as on
+    the robot.
     """
     groups = _group_index(robot)
-    start = np.array([math.log(getattr(robot.model_uncertainty, name)) for name, _ in groups]
+    prior = np.array([math.log(getattr(robot.model_uncertainty, name)) for name, _ in groups]
                      + [math.log(robot.model_uncertainty.correlation_time)])
-    masks = [seen_mask(len(run), seen, hidden) for seen, hidden in patterns or OCCLUSION_PATTERNS]
+    offset_only = prior + np.array([0.0 if name == 'base_position' else math.log(SWITCHED_OFF)
+                                    for name, _ in groups] + [0.0])
+    replays = [(times, residuals, columns, [seen_mask(len(times), seen, hidden)
+                                            for seen, hidden in patterns or OCCLUSION_PATTERNS])
+               for times, residuals, columns in sequences]
 
     def negative_log_likelihood(x):
         sigma = _sigma_vector(groups, np.exp(x[:-1]))
         total = 0.0
-        for seen in masks:
-            innovations, spreads = replay_filter(run.times, residuals, columns, sigma,
-                                                 math.exp(x[-1]), tracker_noise, seen)
-            hidden = ~seen & np.all(np.isfinite(residuals), axis=1)
-            solved = np.linalg.solve(spreads[hidden], innovations[hidden][:, :, None])[:, :, 0]
-            total += 0.5 * float(np.sum(np.linalg.slogdet(spreads[hidden])[1])
-                                 + np.sum(innovations[hidden] * solved))
+        for times, residuals, columns, masks in replays:
+            for seen in masks:
+                innovations, spreads = replay_filter(times, residuals, columns, sigma,
+                                                     math.exp(x[-1]), tracker_noise, seen)
+                hidden = ~seen & np.all(np.isfinite(residuals), axis=1)
+                solved = np.linalg.solve(spreads[hidden], innovations[hidden][:, :, None])
+                total += 0.5 * float(np.sum(np.linalg.slogdet(spreads[hidden])[1])
+                                     + np.sum(innovations[hidden] * solved[:, :, 0]))
         return total
 
-    result = minimize(negative_log_likelihood, start, method='Nelder-Mead',
-                      options={'xatol': 1e-3, 'fatol': 1e-2, 'maxiter': 120 * len(start)})
-    return ({name: math.exp(value) for (name, _), value in zip(groups, result.x[:-1])},
-            math.exp(result.x[-1]))
+    results = [minimize(negative_log_likelihood, start, method='Nelder-Mead',
+                        options={'xatol': 1e-3, 'fatol': 1e-2, 'maxiter': 120 * len(start)})
+               for start in (prior, offset_only)]
+    best = min(results, key=lambda result: result.fun)
+    return ({name: math.exp(value) for (name, _), value in zip(groups, best.x[:-1])},
+            math.exp(best.x[-1]))
 
 
 def seen_mask(rows, seen, hidden):
@@ -140,13 +184,25 @@ def _group_index(robot):
     return groups
 
 
-def measure(robot, run, tracker_noise=None):
-    """Return (:class:`ModelUncertainty`, report dict) of a calibrated robot on a run."""
+def measure(robot, run, tracker_noise=None, folds=None):
+    """Return (:class:`ModelUncertainty`, report dict) of a calibrated robot on a run.
+
+    ``folds``: [(robot, rows)] of :func:`fold_robots`, each robot's residuals taken on rows it
+    was not fitted to; without them the residuals are ``robot``'s on the whole ``run`` (rows
+    it may have been fitted to: a smaller scale than a held-out run's).
+    """
     if tracker_noise is None:
         tips = [sensor for sensor in robot.sensors if sensor.at_tip]
         tracker_noise = tips[0].position_sigma if tips else TRACKER_NOISE
-    robot = robot.with_model_uncertainty(default_model_uncertainty(robot.c[0], robot.length))
-    residuals, columns = residual_rows(robot, run)
-    sigmas, tau = fit(robot, run, residuals, columns, tracker_noise)
+    prior = default_model_uncertainty(robot.c[0], robot.length)
+    sequences = []
+    for fold_robot, rows in folds or [(robot, run)]:
+        residuals, columns = residual_rows(fold_robot.with_model_uncertainty(prior), rows)
+        sequences.append((rows.times, residuals, columns))
+    robot = robot.with_model_uncertainty(prior)
+    sigmas, tau = fit(robot, sequences, tracker_noise)
     uncertainty = ModelUncertainty(correlation_time=tau, **sigmas)
-    return uncertainty, {'tracker_noise': tracker_noise, 'correlation_time': tau, **sigmas}
+    rms = math.sqrt(np.nanmean(np.concatenate([np.sum(r ** 2, axis=1)
+                                               for _, r, _ in sequences])))
+    return uncertainty, {'tracker_noise': tracker_noise, 'correlation_time': tau,
+                         'residual_rms': rms, 'cross_validated': folds is not None, **sigmas}

@@ -12,6 +12,7 @@ import numpy as np
 from continuum_statics.calibration import summary as summaries
 from continuum_statics.calibration.error_budget import error_budget
 from continuum_statics.calibration.fit import fit as fit_model
+from continuum_statics.calibration.model_uncertainty import fold_robots
 from continuum_statics.calibration.model_uncertainty import measure as measure_uncertainty
 from continuum_statics.calibration.parameters import DEFAULT_FIT, check_names, quaternion
 from continuum_statics.calibration.phases import Phases
@@ -41,8 +42,8 @@ def calibrate_run(robot_file, data_file, fit_names, column_map, output=None, val
     :param candidates: fit names to try on top of ``fit_names``: each is kept when it lowers the
         error cross-validated inside the run (:mod:`.selection`, summary ``selection``)
     :param jacobian: how the fit's Jacobian is made (:data:`fit.JACOBIANS`)
-    :param uncertainty: also measure the fitted model's own error on the run
-        (:mod:`.model_uncertainty`), summary ``model_uncertainty``, written to the file
+    :param uncertainty: also measure the fitted model's own error on the run, cross-validated
+        inside it (:mod:`.model_uncertainty`), summary ``model_uncertainty``, written to the file
 
     A fit of more names than the default ones starts where a fit of its default names ends.
     The summary's ``phases`` says where the time went (:mod:`.phases`: wall and CPU seconds of
@@ -116,9 +117,12 @@ def _calibrate_run(robot_file, data_file, fit_names, column_map, output, validat
     fitted_robot = model.robot_for(x, frame='tracker')
     measured = None
     if uncertainty:
-        log("calibrate: measuring the model's own error on the run (model_uncertainty)")
+        log("calibrate: measuring the model's own error on the run (model_uncertainty), "
+            'cross-validated: each motion pattern by a fit without it')
         with phases('uncertainty'):
-            measured, summary['model_uncertainty'] = measure_uncertainty(fitted_robot, run)
+            folds = fold_robots(robot, run, model.fit, model, x, workers, shear_fixed)
+            measured, summary['model_uncertainty'] = measure_uncertainty(fitted_robot, run,
+                                                                         folds=folds)
     if output is not None:
         with phases('write'):
             write_robot_file(output, robot_file, fitted_robot, model.fit,

@@ -243,6 +243,25 @@ def test_v6_held_out_rows_with_the_tracker_occluded():
     assert 0.85 <= every_other.coverage <= 0.99
 
 
+def test_the_last_residual_baseline_is_the_model_with_an_offset_alone():
+    """Issue 43 item 3: the last-residual baseline is a special case of the estimator.
+
+    The baseline (model + last tracker residual, decayed over 10 s) is an offset of the whole
+    backbone far wider than the tracker's noise, nothing else, correlation time 10 s: the
+    model uncertainty's fit can always fall back to it.
+    """
+    from continuum_statics.calibration.occlusion import BASELINE_DECAY
+
+    robot = load_robot(V6_FUSED).with_model_uncertainty(
+        ModelUncertainty(base_position=0.1, correlation_time=BASELINE_DECAY))
+    run = read_run(V6_VAL, robot, V6_COLUMNS)
+    run = run.subset(np.arange(60))
+    for seen, hidden in ((1, 1), (5, 5)):
+        replayed = occlusion_replay(robot, run, seen, hidden)
+        assert replayed.baseline < 0.9 * replayed.model  # the offset is not zero here
+        assert abs(replayed.fused - replayed.baseline) < 2e-3 * replayed.baseline, replayed
+
+
 def test_the_documented_call_on_a_recorded_run_is_the_exact_estimate():
     """Issue 43 item 2: warm-started plain calls on rows 0.59 s apart, the tracker every other row.
 

@@ -26,6 +26,8 @@ import pytest
 from continuum_statics import load_robot
 
 rclpy = pytest.importorskip('rclpy')
+# the load estimate's figures follow the friction state the timing leaves: on a quiet machine
+pytestmark = pytest.mark.alone
 from diagnostic_msgs.msg import DiagnosticArray  # noqa: E402
 from geometry_msgs.msg import PoseStamped, TwistStamped, WrenchStamped  # noqa: E402
 from nav_msgs.srv import GetPlan  # noqa: E402

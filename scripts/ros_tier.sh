@@ -1,0 +1,15 @@
+#!/usr/bin/env bash
+# The `ros` tier of `make test` / `make test-jazzy` with the given Python: the test files two at
+# a time on the two cores (pytest-xdist by file, so a module's shared fixtures stay in one
+# process; each worker in a ROS domain of its own, test/conftest.py), then the tests marked
+# `alone` (figures that depend on a quiet machine) one at a time. Both parts print their ten
+# slowest tests. Usage: scripts/ros_tier.sh PYTHON
+set -euo pipefail
+python=$1
+here=$(cd "$(dirname "$0")" && pwd)
+status=0
+"$here/ros_env.sh" --private "$python" -m pytest -q -n 2 --dist loadfile \
+  -m "ros and not alone" --durations=10 test || status=$?
+"$here/ros_env.sh" --private "$python" -m pytest -q -m "ros and alone" --durations=10 test \
+  || status=$?
+exit $status
