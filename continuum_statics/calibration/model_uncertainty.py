@@ -100,16 +100,21 @@ def fit(robot, sequences, tracker_noise, patterns=None):
     ``sequences``: [(times (n,) s, residuals (n, 3) m, marker columns (n, 3, k))], each replayed
     on its own. The replay of :func:`replay_filter` under each occlusion pattern of ``patterns``
     (default :data:`OCCLUSION_PATTERNS`): the sum over the rows the tracker does not see of
-    log N(e_i; H_i mean_i, H_i P_i H_i^T + sigma_y^2 I), maximised over log sigma per group and
-    log tau (Nelder-Mead) from two starts: the file's prior, and the offset alone (the others
-    at :data:`SWITCHED_OFF` of theirs). The rows it sees update the unmodelled loads, as on
-    the robot.
+    log N(e_i; H_i mean_i, H_i P_i H_i^T + sigma_y^2 I), maximised (Nelder-Mead) over log sigma
+    per group and log tau, and over the offset's sigma and tau alone (the other groups at
+    :data:`SWITCHED_OFF` of their prior: the last-residual baseline's model); the likelier is
+    kept. The rows it sees update the unmodelled loads, as on the robot.
     """
     groups = _group_index(robot)
     prior = np.array([math.log(getattr(robot.model_uncertainty, name)) for name, _ in groups]
                      + [math.log(robot.model_uncertainty.correlation_time)])
-    offset_only = prior + np.array([0.0 if name == 'base_position' else math.log(SWITCHED_OFF)
-                                    for name, _ in groups] + [0.0])
+    offset = np.array([name == 'base_position' for name, _ in groups] + [True])
+
+    def offset_only(y):  # log sigma of the offset and log tau; the other groups switched off
+        x = prior + math.log(SWITCHED_OFF)
+        x[offset] = y
+        return x
+
     replays = [(times, residuals, columns, [seen_mask(len(times), seen, hidden)
                                             for seen, hidden in patterns or OCCLUSION_PATTERNS])
                for times, residuals, columns in sequences]
@@ -127,12 +132,13 @@ def fit(robot, sequences, tracker_noise, patterns=None):
                                      + np.sum(innovations[hidden] * solved[:, :, 0]))
         return total
 
-    results = [minimize(negative_log_likelihood, start, method='Nelder-Mead',
-                        options={'xatol': 1e-3, 'fatol': 1e-2, 'maxiter': 120 * len(start)})
-               for start in (prior, offset_only)]
-    best = min(results, key=lambda result: result.fun)
-    return ({name: math.exp(value) for (name, _), value in zip(groups, best.x[:-1])},
-            math.exp(best.x[-1]))
+    options = {'xatol': 1e-3, 'fatol': 1e-2, 'maxiter': 120 * len(prior)}
+    every = minimize(negative_log_likelihood, prior, method='Nelder-Mead', options=options)
+    alone = minimize(lambda y: negative_log_likelihood(offset_only(y)), prior[offset],
+                     method='Nelder-Mead', options=options)
+    best = every.x if every.fun <= alone.fun else offset_only(alone.x)
+    return ({name: math.exp(value) for (name, _), value in zip(groups, best[:-1])},
+            math.exp(best[-1]))
 
 
 def seen_mask(rows, seen, hidden):

@@ -47,7 +47,8 @@ def calibrate_run(robot_file, data_file, fit_names, column_map, output=None, val
 
     A fit of more names than the default ones starts where a fit of its default names ends.
     The summary's ``phases`` says where the time went (:mod:`.phases`: wall and CPU seconds of
-    ``read``, ``select``, ``scan``, ``fit``, ``before``, ``validate``, ``report``, ``write``).
+    ``read``, ``select``, ``scan``, ``fit``, ``before``, ``validate``, ``report``, ``folds``,
+    ``uncertainty``, ``write``).
     :raises ValueError: unreadable files, unknown parameters, missing columns
     """
     check_names(list(fit_names) + list(candidates), 'run')
@@ -119,8 +120,9 @@ def _calibrate_run(robot_file, data_file, fit_names, column_map, output, validat
     if uncertainty:
         log("calibrate: measuring the model's own error on the run (model_uncertainty), "
             'cross-validated: each motion pattern by a fit without it')
-        with phases('uncertainty'):
+        with phases('folds'):
             folds = fold_robots(robot, run, model.fit, model, x, workers, shear_fixed)
+        with phases('uncertainty'):
             measured, summary['model_uncertainty'] = measure_uncertainty(fitted_robot, run,
                                                                          folds=folds)
     if output is not None:

@@ -119,6 +119,11 @@ def header(summary):
         lines.append('Held out %s (%d rows): RMS %.2f mm (%.2f mm aligned).' % (
             summary['validate'], summary['validate_rows'], summary['validate_rms'] * 1e3,
             summary['validate_rms_aligned'] * 1e3))
+    uncertainty = summary.get('model_uncertainty')
+    if uncertainty and uncertainty.get('cross_validated'):
+        lines.append('model_uncertainty from residuals cross-validated inside the run (each '
+                     'motion pattern by a fit without it): RMS %.2f mm.' % (
+                         uncertainty['residual_rms'] * 1e3))
     return lines
 
 
