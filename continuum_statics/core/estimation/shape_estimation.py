@@ -124,6 +124,9 @@ class ShapeEstimate:
     :ivar sensors: {name: :class:`sensors.SensorVerdict`} of the readings given
     :ivar sensitivity: the load columns (:class:`state_estimation.Sensitivity`), kept for the
         next call
+    :ivar history: the model's recent estimates ((stamp s, model shape, sensitivity), oldest
+        first, :data:`state_estimation.HISTORY_SECONDS`): a late reading is compared with the
+        model of its own stamp
     """
 
     shape: Shape
@@ -141,6 +144,7 @@ class ShapeEstimate:
     unmodelled: object = None
     sensors: dict = None
     sensitivity: object = None
+    history: tuple = ()
 
     @functools.cached_property
     def position_covariance(self):

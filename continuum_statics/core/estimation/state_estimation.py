@@ -35,7 +35,15 @@ Cost: the model's estimate plus, per call, at most one column of G (a warm-start
 once the tip moved :data:`COLUMN_DISTANCE` of the rod's length from where that column was
 made); every column when nothing is cached or, for an estimate solved to the end, once the tip
 moved more than :data:`REFRESH_DISTANCE`. The covariances are computed when read.
+
+A reading stamped before the estimate (an EM tracker's 30 ms latency, an optical tracker's
+frames arriving after the encoders') is compared with the model of its own stamp: the estimate
+keeps the model's shapes and load columns of the last :data:`HISTORY_SECONDS`, and the
+prediction and H of a late reading are interpolated between the two that bracket its stamp.
+The unmodelled loads themselves change slowly (their correlation time), so the update applies
+to them now.
 """
+import bisect
 import dataclasses
 from dataclasses import dataclass
 import functools
@@ -71,6 +79,10 @@ CORRECTION_SIGMAS = 3.0
 #: which a derivative at the estimate misses (simulated truth: 95 % ellipsoids held 98.8 % of
 #: the cases with derivatives, 94.8 % with these steps).
 COLUMN_STEP = 1e-3
+#: s of the model's estimates kept for late readings (an EM tracker's latency is 10-50 ms).
+HISTORY_SECONDS = 0.25
+#: ... and at most this many of them (a 1 kHz node: the last 0.25 s).
+HISTORY_LENGTH = 256
 #: Unmodelled-load groups, in the order of d: name, size (None: one per cable), unit.
 GROUPS = (('tip_force', 3, 'N'), ('section_moment', 3, 'N m'), ('cable_length', None, 'm'),
           ('base_position', 3, 'm'))
@@ -201,10 +213,49 @@ def estimate_state(robot, lengths, tip_force, tip_moment, tensions, sensors, sta
         return dataclasses.replace(model, unmodelled=prior, sensors=verdicts)
     sensitivity = _sensitivity(robot, model, lengths, tip_force, tip_moment, tensions,
                                getattr(previous, 'sensitivity', None), prior, tracking)
-    posterior, verdicts = _update(robot, model.shape, sensitivity, prior, readings, stamp)
+    history = _history(getattr(previous, 'history', ()), stamp, model.shape, sensitivity)
+    posterior, verdicts = _update(robot, model.shape, sensitivity, prior, readings, stamp,
+                                  history)
     shape = _corrected(model.shape, sensitivity, posterior.mean)
     return dataclasses.replace(model, shape=shape, unmodelled=posterior, sensors=verdicts,
-                               sensitivity=sensitivity)
+                               sensitivity=sensitivity, history=history)
+
+
+def _history(carried, stamp, shape, sensitivity):
+    """Return the model's estimates of the last HISTORY_SECONDS up to this one (oldest first).
+
+    Without a stamp there is no history; a stamp before the newest kept (a replay started
+    again, a clock reset) starts it again.
+    """
+    if stamp is None:
+        return ()
+    if carried and carried[-1][0] > stamp:
+        carried = ()
+    first = 0
+    while first < len(carried) and carried[first][0] < stamp - HISTORY_SECONDS:
+        first += 1  # usually one a call: the history moves on with the stamps
+    first = max(first, len(carried) - HISTORY_LENGTH + 1)
+    return carried[first:] + ((stamp, shape, sensitivity),)
+
+
+def _rows_at(history, stamp, sensor, shape, sensitivity):
+    """Return ``sensor``'s (prediction, H, rotation) of the model at ``stamp`` (d = 0).
+
+    Interpolated between the kept estimates that bracket ``stamp`` (the oldest kept for an
+    older one); the current estimate when ``stamp`` is None, not before it or nothing is kept.
+    """
+    if stamp is None or len(history) < 2 or stamp >= history[-1][0]:
+        return _sensor_rows(shape, sensitivity, sensor)
+    after = max(bisect.bisect_left(history, stamp, key=lambda moment: moment[0]), 1)
+    (t0, shape0, sens0), (t1, shape1, sens1) = history[after - 1], history[after]
+    k = sensitivity.positions.shape[2]
+    if sens0.positions.shape[2] != k or sens1.positions.shape[2] != k:
+        return _sensor_rows(shape, sensitivity, sensor)  # other unmodelled loads then
+    w = min(max((stamp - t0) / (t1 - t0), 0.0), 1.0) if t1 > t0 else 1.0
+    point0, jac0, rotation0 = _sensor_rows(shape0, sens0, sensor)
+    point1, jac1, rotation1 = _sensor_rows(shape1, sens1, sensor)
+    return ((1.0 - w) * point0 + w * point1, (1.0 - w) * jac0 + w * jac1,
+            rotation1 if w >= 0.5 else rotation0)
 
 
 def stale_columns(robot, estimate):
@@ -351,12 +402,15 @@ def _placement(s, sensor):
 _PLACEMENTS = {}
 
 
-def _update(robot, shape, sensitivity, prior, readings, stamp):
-    """Judge each reading against the prior, fuse those that pass; return (posterior, verdicts)."""
+def _update(robot, shape, sensitivity, prior, readings, stamp, history=()):
+    """Judge each reading against the prior, fuse those that pass; return (posterior, verdicts).
+
+    Each reading is predicted by the model of its own stamp (``history``, :func:`_rows_at`).
+    """
     mean, covariance = prior.mean, prior.covariance
     verdicts, rows, residuals, noises = {}, [], [], []
     for sensor, reading in readings.items():
-        predicted, jac, rotation = _sensor_rows(shape, sensitivity, sensor)
+        predicted, jac, rotation = _rows_at(history, reading.stamp, sensor, shape, sensitivity)
         innovation = reading.position - predicted - jac[:3] @ mean
         sigmas = [reading.sigma or sensor.position_sigma] * 3  # the device's own wins
         if sensor.kind == 'pose' and reading.rotation is not None:
