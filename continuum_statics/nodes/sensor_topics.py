@@ -47,14 +47,17 @@ class SensorTopics:
         self._accepted = {sensor.name: node.create_publisher(
             PoseStamped, 'sensors/%s/accepted' % sensor.name, LATEST_SENSOR_QOS)
             for sensor in robot.sensors}
+        self._topics = {}  # sensor name -> the topics its readings come in on
         for sensor in robot.sensors:
+            topics = self._topics[sensor.name] = ['sensors/%s' % sensor.name]
             node.create_subscription(
                 PoseWithCovarianceStamped if sensor.covariance else PoseStamped,
-                'sensors/%s' % sensor.name, self._reader(sensor), LATEST_SENSOR_QOS)
+                topics[0], self._reader(sensor), LATEST_SENSOR_QOS)
             if sensor.at_tip and not any(s.at_tip for s in robot.sensors[:robot.sensors.index(
                     sensor)]):
-                node.create_subscription(PoseStamped, 'tip_pose_measured',
-                                         self._reader(sensor), LATEST_SENSOR_QOS)
+                topics.append('tip_pose_measured')
+                node.create_subscription(PoseStamped, topics[1], self._reader(sensor),
+                                         LATEST_SENSOR_QOS)
         self._covariance_pub = self._backbone_pub = None
         if robot.model_uncertainty is not None:
             self._covariance_pub = node.create_publisher(PoseWithCovarianceStamped,
@@ -118,8 +121,26 @@ class SensorTopics:
         return {} if self.inbox is None else self.inbox.values(time.monotonic())
 
     def problems(self):
-        """WARN text of the sensors (set aside, silent), '' when all is well."""
-        return '' if self.inbox is None else self.inbox.problems(time.monotonic())
+        """WARN text of the sensors (set aside, silent, two streams), '' when all is well."""
+        notes = [self.streams(), '' if self.inbox is None else self.inbox.problems(
+            time.monotonic())]
+        return '; '.join(note for note in notes if note)
+
+    def streams(self):
+        """Name each sensor read from more than one publisher ('' when none is).
+
+        Its readings would be fused one after the other as one sensor's: two trackers on one
+        topic, or one on ``sensors/<name>`` and another on ``tip_pose_measured``.
+        """
+        notes = []
+        for name, topics in self._topics.items():
+            counts = [(topic, self._node.count_publishers(topic)) for topic in topics]
+            if sum(count for _, count in counts) > 1:
+                notes.append('sensor %r has %d publishers (%s): two streams of one sensor '
+                             'are fused as one; publish one, or name the second sensor in the '
+                             'robot file' % (name, sum(count for _, count in counts), ', '.join(
+                                 '%s: %d' % pair for pair in counts if pair[1])))
+        return '; '.join(notes)
 
     def diagnose(self, level, message, values, tip_sigma):
         """Add every sensor's values and ``tip_sigma`` (mm) to ``values``; return the status.

@@ -180,3 +180,24 @@ def test_a_tracker_that_reports_its_covariance_is_weighed_by_it(harness, tmp_pat
     assert 1e-4 < after[0] - tip[0] < 0.03
     wait_until(lambda: len(accepted) >= 1, 5.0, 'the accepted reading, as a PoseStamped')
     assert abs(accepted.last.pose.position.x - (rig.model_marker[0] + 0.03)) < 1e-9
+
+
+def test_a_second_stream_of_one_sensor_is_named(harness, tmp_path):
+    """Issue 43 item 5: two publishers of one sensor were merged reading by reading, unnamed."""
+    rig = Rig(harness, robot_file(tmp_path, 10.0))
+    rig.feed()
+    rig.see([0.0, 0.0, 0.0])
+    wait_until(lambda: rig.sensor_value()[1] is not None, 5.0, 'statics diagnostics')
+    assert 'publishers' not in rig.sensor_value()[1].message  # one stream: nothing said
+    second = harness.client().create_publisher(PoseStamped, 'tip_pose_measured',
+                                               qos_profile_sensor_data)
+
+    def named():
+        status = rig.sensor_value()[1]
+        return status is not None and "sensor 'tip_tracker' has 2 publishers" in status.message
+
+    wait_until(named, 10.0, 'the second stream named on /diagnostics')
+    status = rig.sensor_value()[1]
+    assert status.level == b'\x01'
+    assert 'sensors/tip_tracker: 1, tip_pose_measured: 1' in status.message, status.message
+    second.destroy()
