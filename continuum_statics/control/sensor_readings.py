@@ -83,9 +83,14 @@ class SensorInbox:
         with self._lock:
             self._unread[name] = (SensorReading(position, rotation, stamp, sigma), now, source)
 
-    def reject(self, name, reason):
-        """Count a reading that could not be used at all (its reason goes on diagnostics)."""
+    def reject(self, name, reason, now=None):
+        """Count a reading that could not be used at all (its reason goes on diagnostics).
+
+        ``now``: its arrival (monotonic s): a sensor whose readings are refused is not silent.
+        """
         record = self.records[name]
+        if now is not None:
+            record.last_arrival = now
         record.rejected += 1
         record.last_used = False
         record.last_reason = reason

@@ -5,12 +5,15 @@ with ``covariance: true``, whose position covariance is then the reading's noise
 sensor of the robot file, and ``tip_pose_measured`` (PoseStamped) for the one at the tip. A
 position sensor reads the pose's position (its orientation is ignored); a pose sensor uses the
 orientation when its quaternion is a unit one. Readings must be in the robot's base frame (an
-empty frame id is taken as it): register a tracker's frame before publishing
-(doc/state_estimation.md). Readings go to the shape tracker's
-:class:`~continuum_statics.control.sensor_readings.SensorInbox`.
+empty frame id is taken as the sensor's ``frame_id``, else the base frame). A sensor whose robot
+file entry names another ``frame_id`` (a motion-capture frame) is read in that frame and mapped
+into the base frame through the newest transforms of /tf and /tf_static (subscribed only then);
+a reading whose frame has no chain to the base frame yet, or in a frame neither the sensor's
+nor the base frame, is refused and its reason named on /diagnostics. Readings go to the shape
+tracker's :class:`~continuum_statics.control.sensor_readings.SensorInbox`.
 
-Out: ``sensors/<name>/accepted`` (PoseStamped), each reading the estimator used, as it came
-(its header and pose): statics judges every sensor once, and tip_controller and
+Out: ``sensors/<name>/accepted`` (PoseStamped), each reading the estimator used, with its
+header and pose (in the base frame): statics judges every sensor once, and tip_controller and
 tip_load_estimator read the tip tracker from there (:func:`tracker_topic`), so a reading statics
 set aside reaches no node.
 With ``model_uncertainty``: ``tip_pose_covariance``
@@ -21,13 +24,17 @@ point's position covariance, 9 values per pose, row-major). Both latched like ``
 most ``covariance_rate`` Hz.
 """
 import math
+import threading
 import time
 
 from geometry_msgs.msg import Pose, PoseStamped, PoseWithCovarianceStamped
 import numpy as np
 
 from continuum_statics.control.health import OK, WARN
-from continuum_statics.nodes.qos import LATCHED_QOS, LATEST_SENSOR_QOS
+from continuum_statics.core.rod.rotations import quaternion_to_rotation, rotation_to_quaternion
+from continuum_statics.nodes.obstacle_messages import transforms_of
+from continuum_statics.nodes.obstacle_set import FrameTree, frame_name
+from continuum_statics.nodes.qos import LATCHED_QOS, LATEST_SENSOR_QOS, TF_QOS, TF_STATIC_QOS
 from continuum_statics.nodes.ros_conversions import tracked_pose
 
 
@@ -48,6 +55,16 @@ class SensorTopics:
             PoseStamped, 'sensors/%s/accepted' % sensor.name, LATEST_SENSOR_QOS)
             for sensor in robot.sensors}
         self._topics = {}  # sensor name -> the topics its readings come in on
+        base = frame_name(self._base)
+        self._frames = {sensor.name: frame_name(sensor.frame_id) or base
+                        for sensor in robot.sensors}
+        # the transforms of /tf and /tf_static arrive on their subscriptions' thread, readings
+        # on theirs: the tree is read and written under this lock
+        self._tree, self._tree_lock = FrameTree(), threading.Lock()
+        if any(frame != base for frame in self._frames.values()):
+            from tf2_msgs.msg import TFMessage
+            node.create_subscription(TFMessage, '/tf', self._on_tf, TF_QOS)
+            node.create_subscription(TFMessage, '/tf_static', self._on_tf, TF_STATIC_QOS)
         for sensor in robot.sensors:
             topics = self._topics[sensor.name] = ['sensors/%s' % sensor.name]
             node.create_subscription(
@@ -67,20 +84,55 @@ class SensorTopics:
                 self._backbone_pub = node.create_publisher(message, 'backbone_estimate',
                                                            LATCHED_QOS)
 
+    def _on_tf(self, msg):
+        with self._tree_lock:
+            for parent, child, rotation, translation in transforms_of(msg):
+                self._tree.set(parent, child, rotation, translation)
+
+    def _in_base_frame(self, sensor, msg):
+        """Return (position, rotation, stamp ns, sigma, turn) of a reading, in the base frame.
+
+        ``turn``: the rotation (3, 3) from the reading's frame into the base frame, None when
+        it is the base frame.
+
+        :raises ValueError: a frame neither the sensor's nor the base frame, one without a
+            transform chain to the base frame yet, a non-finite position
+        """
+        base, own = frame_name(self._base), self._frames[sensor.name]
+        frame = frame_name(msg.header.frame_id) or own
+        if frame not in (base, own):
+            raise ValueError("frame %r is neither the base frame %r nor the sensor's frame_id "
+                             '%r (name it in the robot file)' % (frame, base, own))
+        position, rotation, stamp, sigma = tracked_pose(msg, msg.header.frame_id,
+                                                        sensor.kind == 'pose')
+        if frame == base:
+            return position, rotation, stamp, sigma, None
+        with self._tree_lock:
+            transform = self._tree.lookup(frame, base)
+        if transform is None:
+            raise ValueError('frame %r has no transform chain to the base frame %r on /tf or '
+                             '/tf_static' % (frame, base))
+        turn, shift = transform
+        return (turn @ position + shift, None if rotation is None else turn @ rotation, stamp,
+                sigma, turn)
+
     def _reader(self, sensor):
         def on_reading(msg):
             now = time.monotonic()
             try:
-                position, rotation, stamp, sigma = tracked_pose(
-                    msg, self._base, sensor.kind == 'pose', ' (register the sensor first)')
+                position, rotation, stamp, sigma, turn = self._in_base_frame(sensor, msg)
             except ValueError as error:
-                self.inbox.reject(sensor.name, str(error))
+                self.inbox.reject(sensor.name, str(error), now)
                 return
             # the node's max_stamp_offset (read each time: a parameter change holds at once);
             # a reading beyond it is set aside, not re-stamped as cable_states are
             self.inbox.max_offset = self._node.get_parameter('max_stamp_offset').value
             if isinstance(msg, PoseWithCovarianceStamped):  # accepted readings: PoseStamped
                 msg = PoseStamped(header=msg.header, pose=msg.pose.pose)
+            if turn is not None:  # passed on in the base frame
+                msg = PoseStamped(header=msg.header, pose=_pose(position, _turned(
+                    msg.pose.orientation, turn)))
+                msg.header.frame_id = self._base
             self.inbox.put(sensor.name, position, rotation, stamp * 1e-9 or None, now, sigma,
                            msg, self._clock.now().nanoseconds * 1e-9)
         return on_reading
@@ -177,6 +229,14 @@ def tip_sigma_mm(estimate):
     if tip is None:
         return math.nan
     return 1e3 * math.sqrt(max(float(np.max(np.linalg.eigvalsh(tip[:3, :3]))), 0.0))
+
+
+def _turned(orientation, turn):
+    """Return [x, y, z, w] of ``orientation`` turned by ``turn`` (identity: not a unit one)."""
+    quaternion = np.array([orientation.x, orientation.y, orientation.z, orientation.w])
+    if not (np.all(np.isfinite(quaternion)) and abs(np.linalg.norm(quaternion) - 1.0) < 1e-3):
+        return np.array([0.0, 0.0, 0.0, 1.0])
+    return rotation_to_quaternion(turn @ quaternion_to_rotation(quaternion))
 
 
 def _pose(point, quaternion):

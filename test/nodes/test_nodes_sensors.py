@@ -22,16 +22,20 @@ pytestmark = pytest.mark.ros
 SENSOR_ROBOT = REPO / 'config' / 'tendon_robot_sensors.yaml'
 
 
-def robot_file(tmp_path, correlation_time, covariance=False):
+def robot_file(tmp_path, correlation_time, covariance=False, frame_id=None):
     """Write the sensor robot with another correlation time (s); return its path.
 
-    ``covariance``: its tip tracker publishes PoseWithCovarianceStamped.
+    ``covariance``: its tip tracker publishes PoseWithCovarianceStamped; ``frame_id``: in that
+    frame.
     """
     with open(SENSOR_ROBOT, encoding='utf-8') as stream:
         document = yaml.safe_load(stream)
     document['model_uncertainty']['correlation_time'] = correlation_time
+    tracker = next(s for s in document['sensors'] if s['name'] == 'tip_tracker')
     if covariance:
-        next(s for s in document['sensors'] if s['name'] == 'tip_tracker')['covariance'] = True
+        tracker['covariance'] = True
+    if frame_id:
+        tracker['frame_id'] = frame_id
     path = FilePath(tmp_path) / 'robot.yaml'
     path.write_text(yaml.safe_dump(document))
     return path
@@ -201,3 +205,63 @@ def test_a_second_stream_of_one_sensor_is_named(harness, tmp_path):
     assert status.level == b'\x01'
     assert 'sensors/tip_tracker: 1, tip_pose_measured: 1' in status.message, status.message
     second.destroy()
+
+
+def test_a_tracker_in_its_own_frame_is_read_through_tf(harness, tmp_path):
+    """Issue 43 item 5: a sensor's frame_id is resolved through /tf.
+
+    Before: a sensor with ``frame_id: mocap`` was refused reading by reading and called silent.
+    Now: refused by name until /tf_static connects mocap, then mapped into the base frame,
+    fused, and passed on in the base frame.
+    """
+    from geometry_msgs.msg import TransformStamped
+    from tf2_msgs.msg import TFMessage
+
+    from continuum_statics.nodes.qos import TF_STATIC_QOS
+
+    rig = Rig(harness, robot_file(tmp_path, 10.0, frame_id='mocap'))
+    client = harness.client('mocap')
+    accepted = Collector(client, PoseStamped, 'sensors/tip_tracker/accepted',
+                         qos_profile_sensor_data)
+    tip, _ = rig.feed()
+    turn = np.array([[0.0, -1.0, 0.0], [1.0, 0.0, 0.0], [0.0, 0.0, 1.0]])  # 90 deg about z
+    shift = np.array([0.1, -0.2, 0.05])  # mocap's origin in the base frame, m
+    seen = rig.model_marker + np.array([0.002, 0.0, 0.0])  # base frame
+    reading = PoseStamped()
+    reading.header.frame_id = 'mocap'
+    p = reading.pose.position
+    p.x, p.y, p.z = (float(v) for v in turn.T @ (seen - shift))
+    reading.pose.orientation.w = 1.0
+    record = rig.node._sensors.inbox.records['tip_tracker']
+
+    def send(until, what):
+        reading.header.stamp = Time(sec=rig.stamp + 1)
+        publish_until(rig.tracker, reading, until, 10.0, what)
+
+    refused = record.rejected
+    send(lambda: record.rejected > refused, 'the reading refused')
+
+    def status():
+        found = rig.sensor_value()[1]
+        return '' if found is None else found.message
+
+    wait_until(lambda: 'no transform chain' in status(), 5.0, 'the refusal on /diagnostics')
+    assert 'silent' not in status()
+    static = client.create_publisher(TFMessage, '/tf_static', TF_STATIC_QOS)
+    transform = TransformStamped()
+    transform.header.frame_id = rig.robot.base_frame_id
+    transform.child_frame_id = 'mocap'
+    transform.transform.translation.x, transform.transform.translation.y, \
+        transform.transform.translation.z = (float(v) for v in shift)
+    transform.transform.rotation.z = transform.transform.rotation.w = float(np.sqrt(0.5))
+    static.publish(TFMessage(transforms=[transform]))
+    received = record.received
+    send(lambda: record.received > received, 'the reading taken')
+    fused, _ = rig.feed()
+    assert fused[0] - tip[0] > 1e-3  # moved most of the 2 mm towards the tracker, along base x
+    assert abs(fused[1] - tip[1]) < 2e-4
+    wait_until(lambda: len(accepted) >= 1, 5.0, 'the accepted reading')
+    passed = accepted.last
+    assert passed.header.frame_id == rig.robot.base_frame_id
+    position = passed.pose.position
+    np.testing.assert_allclose([position.x, position.y, position.z], seen, atol=1e-9)
