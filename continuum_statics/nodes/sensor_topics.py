@@ -69,11 +69,11 @@ class SensorTopics:
             topics = self._topics[sensor.name] = ['sensors/%s' % sensor.name]
             node.create_subscription(
                 PoseWithCovarianceStamped if sensor.covariance else PoseStamped,
-                topics[0], self._reader(sensor), LATEST_SENSOR_QOS)
+                'sensors/%s' % sensor.name, self._reader(sensor), LATEST_SENSOR_QOS)
             if sensor.at_tip and not any(s.at_tip for s in robot.sensors[:robot.sensors.index(
                     sensor)]):
                 topics.append('tip_pose_measured')
-                node.create_subscription(PoseStamped, topics[1], self._reader(sensor),
+                node.create_subscription(PoseStamped, 'tip_pose_measured', self._reader(sensor),
                                          LATEST_SENSOR_QOS)
         self._covariance_pub = self._backbone_pub = None
         if robot.model_uncertainty is not None:
