@@ -24,7 +24,8 @@ from geometry_msgs.msg import PoseStamped  # noqa: E402
 from continuum_statics import load_robot  # noqa: E402
 from continuum_statics.nodes.qos import COMMAND_QOS  # noqa: E402
 
-pytestmark = pytest.mark.ros
+# a browser's software renderer beside a bringup: the most CPU a test takes, on a quiet machine
+pytestmark = [pytest.mark.ros, pytest.mark.alone]
 BROWSER = shutil.which('chromium-headless-shell') or shutil.which('chromium')
 FLAGS = ['--no-sandbox', '--disable-gpu', '--use-angle=swiftshader', '--enable-unsafe-swiftshader',
          '--disable-background-networking', '--disable-component-update', '--no-first-run',
@@ -84,7 +85,7 @@ def test_the_page_shows_the_live_robot_and_sends_a_goal_the_controller_reaches(t
             page.goto('http://127.0.0.1:%d' % port, timeout=60000)
             page.get_by_text('statics: OK').wait_for(timeout=60000)
             page.wait_for_timeout(1500)  # a few frames of the software renderer
-            page.screenshot(path=str(tmp_path / 'view.png'))
+            page.screenshot(path=str(tmp_path / 'view.png'), timeout=90000)
             pixels = orange_pixels(tmp_path / 'view.png')
             assert pixels > 500, 'the robot is not on the page (%d backbone pixels)' % pixels
             goal = np.round(ROBOT.solve_ivp([2.0, 1.0, 0.0]).tip_position, 3)  # 1 mm steps
