@@ -80,9 +80,9 @@ CORRECTION_SIGMAS = 3.0
 #: the cases with derivatives, 94.8 % with these steps).
 COLUMN_STEP = 1e-3
 #: s of the model's estimates kept for late readings (an EM tracker's latency is 10-50 ms).
-HISTORY_SECONDS = 0.25
-#: ... and at most this many of them (a 1 kHz node: the last 0.25 s).
-HISTORY_LENGTH = 256
+HISTORY_SECONDS = 0.1
+#: ... and at most this many of them (a 1 kHz node: the last 0.1 s).
+HISTORY_LENGTH = 128
 #: Unmodelled-load groups, in the order of d: name, size (None: one per cable), unit.
 GROUPS = (('tip_force', 3, 'N'), ('section_moment', 3, 'N m'), ('cable_length', None, 'm'),
           ('base_position', 3, 'm'))
