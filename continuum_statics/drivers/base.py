@@ -174,12 +174,17 @@ class CableBackend(abc.ABC):
         """Put a hidden tip load (6,) N, N m on a simulated robot (:attr:`takes_tip_wrench`)."""
         raise ValueError('backend %r has no simulated tip load' % self.name)
 
+    @classmethod
+    def knows_truth(cls, robot, options) -> bool:
+        """Whether :attr:`true_tip_pose` can be known for ``robot`` with ``options`` (dict)."""
+        return False
+
     @property
     def true_tip_pose(self):
         """The robot's true tip (position (3,) m, rotation (3, 3)) where the backend knows it.
 
-        None for real actuators (only a simulated robot in motion knows its truth); the driver
-        publishes it on ``sim/tip_pose_true`` when it is not None.
+        None for real actuators (only a simulated robot knows its truth); the driver publishes
+        it on ``sim/tip_pose_true`` when it is not None (:meth:`knows_truth`).
         """
         return None
 

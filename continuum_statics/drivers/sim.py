@@ -6,7 +6,10 @@ direction of motion) at the motors' lengths and reports the motor-side tensions,
 with current sensing or load cells would. Robots with ideal cables (no tendons block) report
 no tensions, as before. A hidden tip load (:meth:`SimulatedCableBackend.set_tip_wrench`, the
 node's ``sim_tip_wrench``) acts on that simulated robot: the motors hold their lengths and the
-tensions change, which is what a tip-load estimator has to find without being told.
+tensions change, which is what a tip-load estimator has to find without being told. The
+robot file's obstacles act on it too (:meth:`Robot.solve_lengths` rests the rod on them), and the
+equilibrium's tip is :attr:`~SimulatedCableBackend.true_tip_pose`: give the driver a robot file
+with an obstacle and statics one without to see what a model that does not know it misses.
 """
 import math
 
@@ -157,10 +160,24 @@ class SimulatedCableBackend(CableBackend):
         return CableReading(lengths=lengths.copy(), velocities=self._velocities.copy(),
                             tensions=tensions)
 
+    @classmethod
+    def knows_truth(cls, robot, options):
+        """Say whether a true tip exists: the rod in motion or the real tendons' equilibrium."""
+        return bool(options.get('dynamics')) or not robot.tendons.is_ideal
+
     @property
     def true_tip_pose(self):
-        """With ``dynamics``: the rod's true tip (position (3,) m, rotation (3, 3)), else None."""
-        return None if self._rod is None else self._rod.tip_pose()
+        """The true tip (position (3,) m, rotation (3, 3)), or None (ideal cables, no solve yet).
+
+        With ``dynamics`` the rod in motion's; else the equilibrium of the motors' lengths under
+        the hidden load and the robot file's obstacles (the last reading's solve).
+        """
+        if self._rod is not None:
+            return self._rod.tip_pose()
+        statics = self._statics  # read once: the reading thread replaces it
+        if statics is None:
+            return None
+        return statics.shape.tip_position.copy(), statics.shape.tip_rotation.copy()
 
     def _tensions(self, lengths):
         """Motor-side tensions (N) of the tendon model at the true lengths, or None."""

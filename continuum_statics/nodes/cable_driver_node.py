@@ -25,10 +25,9 @@ parameters ``<backend>.<option>``.
 - Simulated backend only: ``sim_tip_wrench`` (parameter [fx, fy, fz, mx, my, mz] and a
   geometry_msgs/WrenchStamped topic of that name, base frame) is a tip load on the simulated
   robot that no other node is told about (tensions change under it; the motors hold).
-- Simulated backend with ``sim.dynamics``: the rod moves behind the motors in real time
-  (:mod:`~continuum_statics.drivers.sim_dynamics`); its true tip is published on
-  ``sim/tip_pose_true`` (geometry_msgs/PoseStamped, base frame) with every reading, and the real-
-  time factor and step time are on /diagnostics.
+- Simulated backend: ``sim/tip_pose_true`` (geometry_msgs/PoseStamped, base frame) with every
+  reading: with ``sim.dynamics`` the rod moving behind the motors in real time (real-time factor
+  on /diagnostics), else the real tendons' equilibrium at the motors' lengths (file's obstacles).
 """
 import sys
 from types import SimpleNamespace
@@ -119,8 +118,8 @@ class CableDriverNode(RunnerHooks, TransitionFailures, LifecycleNode):
 
         self._publisher = self.create_publisher(JointState, 'cable_states',
                                                 qos_profile_sensor_data)
-        self._true_tip = None  # sim.dynamics: the simulated rod's true tip
-        if options.get('dynamics'):
+        self._true_tip = None  # a simulated robot's true tip
+        if self._backend_cls.knows_truth(self.robot, options):
             self._true_tip = self.create_publisher(PoseStamped, 'sim/tip_pose_true',
                                                    qos_profile_sensor_data)
             self._true_tip_msg = PoseStamped()

@@ -1,9 +1,12 @@
 """Simulated cable backend and the backend registry: pure logic, no ROS."""
 import math
 
+from conftest import REPO
 import numpy as np
 import pytest
+import yaml
 
+from continuum_statics import load_robot
 from continuum_statics.drivers import CableBackend, backend_class
 from continuum_statics.drivers.sim import SimulatedCableBackend
 
@@ -147,3 +150,34 @@ def test_a_hidden_load_beyond_the_rod_is_refused_and_the_last_one_kept():
         backend.set_tip_wrench([100.0, 0.0, 0.0, 0.0, 0.0, 0.0])
     np.testing.assert_array_equal(backend.tip_wrench, [0.12, -0.08, 0.0, 0.0, 0.0, 0.0])
     assert backend.read(0.1).tensions is not None
+
+
+def test_real_tendons_rest_on_the_files_obstacle_and_report_that_true_tip(tmp_path):
+    """The tendon statics at the motors' lengths with the file's ball: what statics must find."""
+    data = yaml.safe_load((REPO / 'config' / 'tendon_robot_real_tendons.yaml').read_text())
+    data['obstacles'] = [{'name': 'ball', 'sphere': {'radius': 0.02},
+                          'position': [-0.03937, 0.0, 0.1994]}]
+    (tmp_path / 'ball.yaml').write_text(yaml.safe_dump(data))
+    robot, free_robot = load_robot(tmp_path / 'ball.yaml'), load_robot(
+        REPO / 'config' / 'tendon_robot_real_tendons.yaml')
+    # cable_2 (at -x) at its length under 3 N without the ball: the rod's s = 0.2 m is in it
+    lengths = free_robot.cable_lengths(free_robot.solve_tensions([0.0, 0.0, 3.0, 0.0]))
+    tips = {}
+    for name, model in (('ball', robot), ('free', free_robot)):
+        sim = SimulatedCableBackend(model.cable_names, model.cable_length_limits,
+                                    model.straight_cable_lengths, robot=model,
+                                    time_constant=0.0, max_speed=1.0)
+        assert sim.knows_truth(model, sim.options) and sim.true_tip_pose is None  # no solve yet
+        sim.start(0.0)
+        sim.command(lengths, 0.0)
+        tensions = sim.read(1.0).tensions
+        tips[name], rotation = sim.true_tip_pose
+        np.testing.assert_allclose(rotation @ rotation.T, np.eye(3), atol=1e-9)
+        truth = model.solve_lengths(lengths)
+        np.testing.assert_allclose(tips[name], truth.shape.tip_position, atol=1e-9)
+        np.testing.assert_allclose(tensions, np.maximum(truth.tensions, 0.0), atol=1e-9)
+    assert [c.obstacle for c in robot.solve_lengths(lengths).shape.contacts] == ['ball']
+    # the ball holds the rod back towards the axis (+x) by millimetres
+    assert tips['ball'][0] - tips['free'][0] > 2e-3, tips
+    ideal = load_robot(REPO / 'config' / 'tendon_robot.yaml')
+    assert not SimulatedCableBackend.knows_truth(ideal, {})  # ideal cables: no tendon statics
