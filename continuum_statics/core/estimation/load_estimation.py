@@ -35,7 +35,14 @@ large variance instead of a made-up value; those directions are named in the mes
 is a seen direction whose standard deviation exceeds :data:`POORLY_SEEN` of the estimate. J_p
 (one forward solve per column of B) and J_u are forward differences of the solvers, each
 warm-started from the nominal solve.
+
+Friction acts against each cable's last direction of motion, which the estimate carries; a
+cable that came back from the furthest point of its motion by less than the encoders' noise
+deadband may or may not have turned its friction (:func:`_possible_turns`). Both are fitted,
+and the estimate is the mixture of the two by likelihood (moments matched): one of them when
+the tensions tell them apart, a wide covariance when they do not.
 """
+import copy
 import dataclasses
 from dataclasses import dataclass, field
 import math
@@ -46,7 +53,12 @@ from continuum_statics.core.description.inputs import as_vector
 from continuum_statics.core.estimation import gates
 from continuum_statics.core.rod.shape import Shape
 from continuum_statics.core.statics.bvp import ConvergenceError
+from continuum_statics.core.statics.length_statics import MOTION_THRESHOLD
 
+#: A friction turn whose best explanation is this much less likely (-2 log of the likelihood
+#: ratio: 1e-6) than keeping the friction is left out; this much likelier, it is fitted to the
+#: end and carried on (:func:`_turned_step`).
+TURN_MARGIN = 2.0 * math.log(1e6)
 #: Default measurement standard deviations (``noise`` keys): length m (encoder and spool),
 #: tension N (a load cell or motor current; a string 'P%' is P percent of each reading), tip
 #: position m (an optical tracker), tip angle rad.
@@ -217,6 +229,8 @@ class WrenchEstimate:
     weights: object = None  # the residual's whitener, reused by the next warm estimate
     measurements: int = 0  # how many scalar measurements chi2 is the mean over
     friction_reference: object = None  # free lengths (m) where each cable last moved
+    friction_peak: object = None  # free lengths (m) furthest along each cable's motion since
+    fitted: object = None  # the p that ``solution`` and ``weights`` belong to (a warm start's)
     load: object = None
     parameters: object = None
     parameter_covariance: object = None
@@ -292,9 +306,10 @@ class _Model:
     """The forward model f(u, w) for one estimate: which solver, which predictions."""
 
     def __init__(self, robot, lengths, tensions, tip_position, tip_rotation, levels, warm,
-                 reference=None):
+                 reference=None, peak=None):
         self.robot = robot
         self.reference = None  # free lengths where each cable last moved beyond the noise
+        self.peak = None  # ... and furthest along that motion since
         n = len(robot.cable_names)
         self.tip_position, self.tip_rotation = tip_position, tip_rotation
         self.warm = warm
@@ -322,9 +337,12 @@ class _Model:
         else:
             self.kind, self.inputs, self.input_sigma = 'rod', np.zeros(0), np.zeros(0)
             self.input_step = 0.0
+        self.turns = ()  # (cable, friction state) a reversal under the noise may have made
         if self.kind == 'lengths':
             self.warm, self.reference = _noise_deadband(robot, warm, reference, lengths,
                                                         levels['length'])
+            self.turns, self.peak = _possible_turns(robot, self.warm, self.reference, peak,
+                                                    lengths)
         self.predicts_cables = bool(outputs)
         if tip_position is not None:
             outputs.append(tip_position)
@@ -334,6 +352,19 @@ class _Model:
             sigmas.append(np.full(3, levels['tip_angle']))
         self.measured = np.concatenate(outputs) if outputs else np.zeros(0)
         self.sigma = np.concatenate(sigmas) if sigmas else np.zeros(0)
+
+    def turned(self):
+        """Return this model with the friction of every cable in ``turns`` turned."""
+        other = copy.copy(self)
+        motion = np.array(self.warm.motion, dtype=float)
+        cables = [k for k, _ in self.turns]
+        motion[cables] = [state for _, state in self.turns]
+        other.warm = dataclasses.replace(self.warm, motion=motion)
+        free = self.robot.tendons.free_lengths(self.inputs, self.robot.straight_cable_lengths)
+        other.reference, other.peak = self.reference.copy(), self.peak.copy()
+        other.reference[cables] = other.peak[cables] = free[cables]  # they moved: from here
+        other.turns = ()
+        return other
 
     def solve(self, load, inputs=None, warm=None):
         """Forward solve at a wrench (6,) (and perturbed inputs); returns (result, shape)."""
@@ -433,6 +464,38 @@ def _noise_deadband(robot, warm, reference, lengths, sigma):
             np.where(still, reference, free))
 
 
+def _possible_turns(robot, warm, reference, peak, lengths):
+    """Return (((cable, friction state), ...), peaks (n,) m): friction that may have turned unseen.
+
+    A cable that came back from the furthest point of its motion (``peak``, free length) by
+    less than the noise deadband (:func:`_noise_deadband`) keeps its friction direction in the
+    model, but the real one may have turned: at once in the sliding model, by 2 x travel /
+    ``stick_length`` in a stick zone
+    (:func:`~continuum_statics.core.statics.length_statics.motion_since`). In a tensioned cable
+    that moves the motor-side tension by newtons, which a tip force was made up to explain
+    (false contacts of 8-12 N at rest after a brisk joystick reversal, issue 43). Returns the
+    state each such cable would have turned to, and the peaks carried to the next estimate.
+    """
+    motion = getattr(warm, 'motion', None)
+    free = robot.tendons.free_lengths(lengths, robot.straight_cable_lengths)
+    if reference is None or motion is None or len(motion) != len(lengths):
+        return (), free
+    motion = np.asarray(motion, dtype=float)
+    if peak is None or len(peak) != len(free):
+        peak = reference
+    # a cable that moved (its reference is here) starts its peak here; a still one's peak
+    # follows it along its motion: a pulled cable's (+1) free length shrinks
+    peak = np.where(reference == free, free, np.where(motion > 0.0, np.minimum(peak, free),
+                                                      np.where(motion < 0.0,
+                                                               np.maximum(peak, free), free)))
+    back = free - peak
+    stick = robot.tendons.stick_length
+    turned = np.where(stick > 0.0, np.clip(motion - 2.0 * back / np.where(
+        stick > 0.0, stick, 1.0), -1.0, 1.0), -np.sign(back))
+    against = (np.abs(back) > MOTION_THRESHOLD) & (motion * np.sign(back) > 0.0)
+    return tuple((int(k), float(turned[k]) + 0.0) for k in np.flatnonzero(against)), peak
+
+
 def _angle(rotation):
     """Rotation vector (rad) of a rotation matrix (log map)."""
     cos = np.clip((np.trace(rotation) - 1.0) / 2.0, -1.0, 1.0)
@@ -501,7 +564,9 @@ def _start(previous, load):
     if previous is None or not np.all(np.isfinite(previous.wrench)):
         return np.zeros(len(load.prior))
     if load.same(previous.load) and previous.parameters is not None:
-        return np.array(previous.parameters, dtype=float)
+        # the fit's own p (a mixture's mean lies between its fits: its weights are not there)
+        return np.array(previous.parameters if previous.fitted is None else previous.fitted,
+                        dtype=float)
     # another model's estimate: the p whose wrench is nearest it (least squares)
     return np.linalg.lstsq(load.basis, previous.wrench, rcond=None)[0]
 
@@ -554,14 +619,92 @@ def _estimate(robot, lengths, tensions, tip_position, tip_rotation, levels, load
     """
     model = _Model(robot, lengths, tensions, tip_position, tip_rotation, levels,
                    None if previous is None else previous.solution,
-                   None if previous is None else previous.friction_reference)
+                   None if previous is None else previous.friction_reference,
+                   None if previous is None else previous.friction_peak)
+    fit = _fitted(model, load, previous)
+    if not model.turns:
+        return _answer(fit)
+    # a reversal under the noise deadband: the friction kept, or turned. The estimate is the
+    # mixture of the two by likelihood; the turn's fit is a first-order step from the kept
+    # one (one forward solve), fitted to the end only when the turn is the likelier by far
+    turned_model = model.turned()
+    step = _turned_step(fit, turned_model)
+    if step is None:
+        return _answer(fit)
+    kept = _answer(fit)
+    cables = [name for k, name in enumerate(model.robot.cable_names) if k in dict(model.turns)]
+    turned_p, gain = step  # gain: how much less -2 log likelihood the turn leaves
+    weight = 1.0 / (1.0 + math.exp(-0.5 * abs(gain)))  # of the likelier of the two
+    if gain > TURN_MARGIN:  # the turn it is: fitted, and its friction carried on
+        return _mixed(_answer(_fitted(turned_model, load, kept)), kept, weight, cables, True)
+    turned = dataclasses.replace(kept, parameters=turned_p)  # the kept one's covariance
+    return (_mixed(turned, kept, weight, cables, True) if gain > 0.0
+            else _mixed(kept, turned, weight, cables, False))
+
+
+def _fitted(model, load, previous):
+    """Return the finished :class:`_Fit` of ``model`` (Levenberg-Marquardt to the end)."""
     fit = _started(model, load, previous)
     for fit.iterations in range(1, MAX_ITERATIONS + 1):
         if _iteration(fit):
             break
     else:
         fit.notes.append('not converged in %d iterations' % MAX_ITERATIONS)
-    return _answer(fit)
+    return fit
+
+
+def _turned_step(fit, turned_model):
+    """Return (p, gain) of the friction turn of ``turned_model``, or None where it is moot.
+
+    One forward solve at the fit's load with the friction turned, and the load step that best
+    explains its residual to first order (the fit's whitener and Jacobian: a turn moves the
+    tensions, barely their slopes); ``gain`` is the objective that step leaves below the kept
+    fit's. None when the turn moves the predictions by less than their noise (a slack or barely
+    loaded cable), or the tensions rule it out by more than :data:`TURN_MARGIN` (encoder noise
+    flags a still cable about every other reading).
+    """
+    try:
+        predicted, _, _ = turned_model.evaluate(fit.load.basis @ fit.p)
+    except _ForwardFailed:
+        return None  # no equilibrium near with the friction turned
+    if float(np.sum((fit.weights.whiten @ (predicted - fit.predicted)) ** 2)) < 1.0:
+        return None
+    prior = fit.load.prior
+    residual = fit.weights.whiten @ (predicted - turned_model.measured)
+    scaled = fit.jacobian * prior
+    z = fit.p / prior
+    step = -np.linalg.solve(scaled.T @ scaled + np.eye(len(z)), scaled.T @ residual + z)
+    objective = float(np.sum((residual + scaled @ step) ** 2) + np.sum((z + step) ** 2))
+    gain = fit.objective(fit.p, fit.residual(fit.predicted)) - objective
+    return None if gain < -TURN_MARGIN else (fit.p + prior * step, gain)
+
+
+def _mixed(best, second, weight, cables, turned):
+    """Return ``best`` with the mean and covariance of the mixture (``weight`` on ``best``).
+
+    ``cables`` whose friction may have turned unseen; ``turned``: ``best`` turned them. The
+    friction state, shape and warm start are ``best``'s.
+    """
+    note = ('friction of %s %s after a reversal under the noise (%.3g likely)'
+            % (', '.join(cables), 'turned' if turned else 'kept', weight))
+    if weight > 1.0 - 1e-9:
+        return dataclasses.replace(best, message='; '.join(filter(None, (best.message, note))))
+    mean = weight * best.parameters + (1.0 - weight) * second.parameters
+    spread = [estimate.parameters - mean for estimate in (best, second)]
+    covariance = (weight * (best.parameter_covariance + np.outer(spread[0], spread[0]))
+                  + (1.0 - weight) * (second.parameter_covariance
+                                      + np.outer(spread[1], spread[1])))
+    load = best.load
+    rows = load.basis[:load.size]
+    wrench = load.basis @ mean
+    mass = mass_sigma = None
+    if load.name == 'weight':
+        mass, mass_sigma = float(mean[0]), float(np.sqrt(covariance[0, 0]))
+    return dataclasses.replace(
+        best, force=wrench[:3].copy(), moment=wrench[3:].copy() if load.size == 6
+        else np.zeros(3), covariance=rows @ covariance @ rows.T, parameters=mean,
+        parameter_covariance=covariance, mass=mass, mass_sigma=mass_sigma,
+        message='; '.join(filter(None, (best.message, note))))
 
 
 def _started(model, load, previous):
@@ -696,7 +839,8 @@ def _answer(fit):
                           message='; '.join(notes), unseen=unseen, iterations=fit.iterations,
                           chi2=chi2, solution=fit.result, weights=weights,
                           measurements=len(residual), friction_reference=fit.model.reference,
-                          load=load, parameters=p.copy(),
+                          friction_peak=fit.model.peak,
+                          load=load, parameters=p.copy(), fitted=p.copy(),
                           parameter_covariance=parameter_covariance, mass=mass,
                           mass_sigma=mass_sigma)
 
