@@ -219,8 +219,8 @@ def test_the_demo_goals_with_the_estimated_load_land_where_they_say(harness):
             # share seen in 26 runs on 2026-11-26/27)
             assert error <= 1e-3 + shift + 1e-3, outcome
         else:  # no tracker runs: never blamed on one. A goal aborted because the load
-            # estimate changed under it says so (seen in 4 of 10 runs on 2026-11-27: the
-            # estimate at rest after a sub-noise friction reversal, the gap named below); every
+            # estimate changed under it says so (seen in 4 of 10 runs on 2026-11-27, before
+            # friction turns under the encoders' noise were weighed: none in 5 after); every
             # goal is reachable under the true load, so an unreachable one is no further away
             # than the load's error moves the tip
             assert 'disagree' not in outcome or 'no tracker is used' in outcome, outcome
@@ -230,18 +230,16 @@ def test_the_demo_goals_with_the_estimated_load_land_where_they_say(harness):
     # most goals land (a goal under friction may run out of corrections: said so)
     assert sum(reached for reached, _, _ in errors) >= 7, outcomes
     # the lateral load within the estimate's own uncertainty (the push along the rod is not seen:
-    # held at 0). A known gap, reported as an expected failure, not a pass: the estimator cannot
-    # see a cable's friction direction after a move under its noise, and its covariance leaves
-    # that out; at rest it was 0-0.064 N off with sigma 0.005-2.4 N, and in 2 of 8 runs on
-    # 2026-11-26 outside its 99.9 % ellipse (once -0.33, -0.51 N)
+    # held at 0). Before the friction turns under the noise were weighed, 2 of 8 runs (2026-11-26)
+    # left it outside its 99.9 % ellipse (once -0.33, -0.51 N); after, 5 of 5 on 2026-11-27 gave
+    # (0.120, -0.080) N with sigma (0.111, 0.074) N at every goal, the true tips 0.33-0.87 mm
+    # from the goals
     outside = []
     for force, covariance in loads:
         error = force[:2] - LOAD[:2]
         if error @ np.linalg.solve(covariance, error) > CHI2_2DOF_999:
             outside.append(np.round(force, 3).tolist())
-    if outside:
-        pytest.xfail('tip-load estimate at rest outside its own 99.9 %% ellipse (friction '
-                     'direction unseen): %s' % outside)
+    assert not outside, outside
 
 
 @pytest.mark.ros
