@@ -1,8 +1,9 @@
 """The move_tip action (continuum_statics_interfaces/action/MoveTip) over DDS.
 
 Reached with feedback; cancelled mid-ramp (the cables stop where they are); pre-empted by a newer
-goal; a goal out of reach answered with the reason. The interfaces package is built into the
-venv by scripts/build_interfaces.sh (Kilted and Jazzy alike).
+goal; a goal out of reach answered with the reason; stopped by an obstacle published in its
+way. The interfaces package is built into the venv by scripts/build_interfaces.sh (Kilted and
+Jazzy alike).
 """
 import time
 
@@ -17,11 +18,14 @@ from rclpy.action import ActionClient  # noqa: E402
 from sensor_msgs.msg import JointState  # noqa: E402
 
 from continuum_statics import load_robot  # noqa: E402
+from continuum_statics.core.description.obstacles import Obstacle  # noqa: E402
 from continuum_statics.nodes.cable_driver_node import CableDriverNode  # noqa: E402
+from continuum_statics.nodes.obstacle_messages import obstacles_msg  # noqa: E402
 from continuum_statics.nodes.statics_node import StaticsNode  # noqa: E402
 from continuum_statics.nodes.tip_controller_node import TipControllerNode  # noqa: E402
 
 MoveTip = pytest.importorskip('continuum_statics_interfaces.action').MoveTip
+interfaces = pytest.importorskip('continuum_statics_interfaces.msg')
 pytestmark = pytest.mark.ros
 ROBOT = load_robot(REPO / 'config' / 'tendon_robot.yaml')
 
@@ -99,3 +103,23 @@ def test_a_newer_goal_preempts_and_an_unreachable_one_says_why(harness):
     assert Client.result(second).result.reached
     far = Client.result(client.send([2.0, 0.0, 0.3]))
     assert far.status == 6 and 'unreachable' in far.result.message, far
+
+
+def test_an_obstacle_published_on_the_way_stops_the_goal_naming_it(harness):
+    """A ball arrives on ``obstacles`` where the bent body will pass, while the goal ramps."""
+    client = Client(harness, max_cable_speed=0.005)  # about 3 s to the goal
+    shape = ROBOT.solve_ivp([2.0, -1.0, 0.0])
+    ball = Obstacle('ball', 'sphere', (0.005,), shape.positions[len(shape.s) // 2], np.eye(3))
+    obstacles = client.node.create_publisher(interfaces.Obstacles, 'obstacles', LATCHED)
+    handle = client.send(shape.tip_position)
+    wait_until(lambda: len(client.commands) >= 10, 10.0, 'the ramp under way')
+    obstacles.publish(obstacles_msg([ball], 'base_link'))
+    answer = Client.result(handle)
+    assert answer.status == 6, answer  # ABORTED
+    message = answer.result.message
+    assert not answer.result.reached and 'obstacles changed' in message, message
+    assert "obstacle 'ball'" in message, message
+    count = len(client.commands)
+    time.sleep(0.3)  # nothing more is commanded after the stop
+    assert len(client.commands) <= count + 1
+    assert np.linalg.norm(pose_xyz(client.tip.last.pose) - shape.tip_position) > 0.005
