@@ -69,6 +69,7 @@ class SimulatedCableBackend(CableBackend):
         # the tendon model, when the robot file has one (ideal cables report no tension)
         self._robot = robot if robot is not None and not robot.tendons.is_ideal else None
         self._statics = None  # the last solve_lengths result: friction history, warm start
+        self._true_tip = None  # its tip while the last reading's solve converged, else None
         self._tip_wrench = np.zeros(6)  # hidden tip load (N, N m), base frame
         merged = self.options
         # the payload acts only on the rod in motion; there, it is held to the hidden load's bound
@@ -170,14 +171,12 @@ class SimulatedCableBackend(CableBackend):
         """The true tip (position (3,) m, rotation (3, 3)), or None (ideal cables, no solve yet).
 
         With ``dynamics`` the rod in motion's; else the equilibrium of the motors' lengths under
-        the hidden load and the robot file's obstacles (the last reading's solve).
+        the hidden load and the robot file's obstacles (the last reading's solve; None when it
+        did not converge: no stale truth).
         """
         if self._rod is not None:
             return self._rod.tip_pose()
-        statics = self._statics  # read once: the reading thread replaces it
-        if statics is None:
-            return None
-        return statics.shape.tip_position.copy(), statics.shape.tip_rotation.copy()
+        return self._true_tip  # one tuple, replaced whole by the reading thread
 
     def _tensions(self, lengths):
         """Motor-side tensions (N) of the tendon model at the true lengths, or None."""
@@ -188,8 +187,10 @@ class SimulatedCableBackend(CableBackend):
         solution = self._robot.solve_lengths(lengths, self._tip_wrench[:3], self._tip_wrench[3:],
                                              warm_start=self._statics)
         if not solution.converged:  # keep the last good history; report nothing made up
+            self._true_tip = None
             return None
         self._statics = solution
+        self._true_tip = solution.shape.tip_position.copy(), solution.shape.tip_rotation.copy()
         return np.maximum(solution.tensions, 0.0)
 
     def status(self):

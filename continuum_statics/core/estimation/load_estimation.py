@@ -38,9 +38,10 @@ warm-started from the nominal solve.
 
 Friction acts against each cable's last direction of motion, which the estimate carries; a
 cable that came back from the furthest point of its motion by less than the encoders' noise
-deadband may or may not have turned its friction (:func:`_possible_turns`). Both are fitted,
-and the estimate is the mixture of the two by likelihood (moments matched): one of them when
-the tensions tell them apart, a wide covariance when they do not.
+deadband may or may not have turned its friction (:func:`_possible_turns`). The hypotheses
+(none turned, all of them, each one alone) are weighed by likelihood and the estimate is their
+mixture (moments matched): one of them when the tensions tell them apart, a wide covariance
+when they do not.
 """
 import copy
 import dataclasses
@@ -339,10 +340,10 @@ class _Model:
             self.input_step = 0.0
         self.turns = ()  # (cable, friction state) a reversal under the noise may have made
         if self.kind == 'lengths':
-            self.warm, self.reference = _noise_deadband(robot, warm, reference, lengths,
-                                                        levels['length'])
-            self.turns, self.peak = _possible_turns(robot, self.warm, self.reference, peak,
-                                                    lengths)
+            self.warm, self.reference, moved = _noise_deadband(robot, warm, reference,
+                                                               lengths, levels['length'])
+            self.turns, self.peak = _possible_turns(robot, self.warm, self.reference, moved,
+                                                    peak, lengths)
         self.predicts_cables = bool(outputs)
         if tip_position is not None:
             outputs.append(tip_position)
@@ -353,17 +354,17 @@ class _Model:
         self.measured = np.concatenate(outputs) if outputs else np.zeros(0)
         self.sigma = np.concatenate(sigmas) if sigmas else np.zeros(0)
 
-    def turned(self):
-        """Return this model with the friction of every cable in ``turns`` turned."""
+    def turned(self, turns):
+        """Return this model with the friction of ``turns`` ((cable, state), ...) turned."""
         other = copy.copy(self)
         motion = np.array(self.warm.motion, dtype=float)
-        cables = [k for k, _ in self.turns]
-        motion[cables] = [state for _, state in self.turns]
+        cables = [k for k, _ in turns]
+        motion[cables] = [state for _, state in turns]
         other.warm = dataclasses.replace(self.warm, motion=motion)
         free = self.robot.tendons.free_lengths(self.inputs, self.robot.straight_cable_lengths)
         other.reference, other.peak = self.reference.copy(), self.peak.copy()
         other.reference[cables] = other.peak[cables] = free[cables]  # they moved: from here
-        other.turns = ()
+        other.turns = tuple(turn for turn in self.turns if turn[0] not in cables)
         return other
 
     def solve(self, load, inputs=None, warm=None):
@@ -445,7 +446,7 @@ class _Model:
 
 
 def _noise_deadband(robot, warm, reference, lengths, sigma):
-    """Return (warm start, motion reference): cables that moved under 3 sigma have not moved.
+    """Return (warm start, motion reference, moved (n,) bool): motion under 3 sigma is none.
 
     Friction acts against each cable's last direction of motion (``solve_lengths`` reads it
     from the warm start's free lengths); encoder noise is not motion, so it must not flip it.
@@ -454,17 +455,17 @@ def _noise_deadband(robot, warm, reference, lengths, sigma):
     """
     previous = getattr(warm, 'free_lengths', None)
     if previous is None or len(previous) != len(lengths):
-        return warm, None
+        return warm, None, None
     if reference is None or len(reference) != len(lengths):
         reference = previous
     free = robot.tendons.free_lengths(lengths, robot.straight_cable_lengths)
     still = np.abs(free - reference) < 3.0 * sigma
     return (dataclasses.replace(warm, free_lengths=np.where(still, free, reference),
                                 motion_reference=None),
-            np.where(still, reference, free))
+            np.where(still, reference, free), ~still)
 
 
-def _possible_turns(robot, warm, reference, peak, lengths):
+def _possible_turns(robot, warm, reference, moved, peak, lengths):
     """Return (((cable, friction state), ...), peaks (n,) m): friction that may have turned unseen.
 
     A cable that came back from the furthest point of its motion (``peak``, free length) by
@@ -473,21 +474,21 @@ def _possible_turns(robot, warm, reference, peak, lengths):
     ``stick_length`` in a stick zone
     (:func:`~continuum_statics.core.statics.length_statics.motion_since`). In a tensioned cable
     that moves the motor-side tension by newtons, which a tip force was made up to explain
-    (false contacts of 8-12 N at rest after a brisk joystick reversal, issue 43). Returns the
-    state each such cable would have turned to, and the peaks carried to the next estimate.
+    (false contacts of 8-12 N at rest after a brisk joystick reversal, issue 43). ``moved``: the
+    cables that moved beyond the deadband now (their peak starts here). Returns the state each
+    such cable would have turned to, and the peaks carried to the next estimate.
     """
     motion = getattr(warm, 'motion', None)
     free = robot.tendons.free_lengths(lengths, robot.straight_cable_lengths)
-    if reference is None or motion is None or len(motion) != len(lengths):
+    if moved is None or motion is None or len(motion) != len(lengths):
         return (), free
     motion = np.asarray(motion, dtype=float)
     if peak is None or len(peak) != len(free):
         peak = reference
-    # a cable that moved (its reference is here) starts its peak here; a still one's peak
-    # follows it along its motion: a pulled cable's (+1) free length shrinks
-    peak = np.where(reference == free, free, np.where(motion > 0.0, np.minimum(peak, free),
-                                                      np.where(motion < 0.0,
-                                                               np.maximum(peak, free), free)))
+    # a cable that moved starts its peak here; a still one's peak follows it along its
+    # motion: a pulled cable's (+1) free length shrinks
+    peak = np.where(moved, free, np.where(motion > 0.0, np.minimum(peak, free),
+                                          np.where(motion < 0.0, np.maximum(peak, free), free)))
     back = free - peak
     stick = robot.tendons.stick_length
     turned = np.where(stick > 0.0, np.clip(motion - 2.0 * back / np.where(
@@ -624,22 +625,27 @@ def _estimate(robot, lengths, tensions, tip_position, tip_rotation, levels, load
     fit = _fitted(model, load, previous)
     if not model.turns:
         return _answer(fit)
-    # a reversal under the noise deadband: the friction kept, or turned. The estimate is the
-    # mixture of the two by likelihood; the turn's fit is a first-order step from the kept
-    # one (one forward solve), fitted to the end only when the turn is the likelier by far
-    turned_model = model.turned()
-    step = _turned_step(fit, turned_model)
-    if step is None:
-        return _answer(fit)
+    # reversals under the noise deadband: the flagged cables' friction kept, all turned (a
+    # joystick or goal reversal turns several at once), or one of them turned (one real turn
+    # among cables the noise flagged), weighed by likelihood, each by one forward solve and a
+    # first-order load step; a turn that wins by far (or that a refuted fit needs) is fitted to
+    # the end and its friction carried on
     kept = _answer(fit)
-    cables = [name for k, name in enumerate(model.robot.cable_names) if k in dict(model.turns)]
-    turned_p, gain = step  # gain: how much less -2 log likelihood the turn leaves
-    weight = 1.0 / (1.0 + math.exp(-0.5 * abs(gain)))  # of the likelier of the two
-    if gain > TURN_MARGIN:  # the turn it is: fitted, and its friction carried on
-        return _mixed(_answer(_fitted(turned_model, load, kept)), kept, weight, cables, True)
-    turned = dataclasses.replace(kept, parameters=turned_p)  # the kept one's covariance
-    return (_mixed(turned, kept, weight, cables, True) if gain > 0.0
-            else _mixed(kept, turned, weight, cables, False))
+    candidates = [model.turns] + ([(turn,) for turn in model.turns]
+                                  if len(model.turns) > 1 else [])
+    steps = [(turns,) + step for turns, step in (
+        (turns, _turned_step(fit, model.turned(turns))) for turns in candidates)
+        if step is not None]
+    best = max(steps, key=lambda step: step[2], default=None)
+    if best is not None and (best[2] > TURN_MARGIN or (best[2] > 0.0 and not kept.explains())):
+        try:
+            return _mixed(_answer(_fitted(model.turned(best[0]), load, kept)), [], model,
+                          best[0])
+        except _ForwardFailed as error:  # the kept estimate stands
+            return dataclasses.replace(kept, message='; '.join(filter(None, (
+                kept.message, 'friction turn of %s not fitted: %s' % (
+                    _names(model, best[0]), error)))))
+    return _mixed(kept, [(turns, gain, p - fit.p) for turns, p, gain in steps], model, ())
 
 
 def _fitted(model, load, previous):
@@ -671,40 +677,55 @@ def _turned_step(fit, turned_model):
         return None
     prior = fit.load.prior
     residual = fit.weights.whiten @ (predicted - turned_model.measured)
-    scaled = fit.jacobian * prior
-    z = fit.p / prior
+    scaled = fit.jacobian * prior @ fit.seen  # in the seen directions, as the fit steps
+    z = fit.seen.T @ (fit.p / prior)
     step = -np.linalg.solve(scaled.T @ scaled + np.eye(len(z)), scaled.T @ residual + z)
     objective = float(np.sum((residual + scaled @ step) ** 2) + np.sum((z + step) ** 2))
     gain = fit.objective(fit.p, fit.residual(fit.predicted)) - objective
-    return None if gain < -TURN_MARGIN else (fit.p + prior * step, gain)
+    return None if gain < -TURN_MARGIN else (fit.p + prior * (fit.seen @ step), gain)
 
 
-def _mixed(best, second, weight, cables, turned):
-    """Return ``best`` with the mean and covariance of the mixture (``weight`` on ``best``).
+def _mixed(kept, shifts, model, sure):
+    """Return ``kept`` with the mean and covariance of the friction turns' mixture.
 
-    ``cables`` whose friction may have turned unseen; ``turned``: ``best`` turned them. The
-    friction state, shape and warm start are ``best``'s.
+    ``shifts``: (turns, gain, dp) of each turn hypothesis weighed against keeping the friction:
+    the load moves by dp if it holds, and it is exp(gain / 2) times as likely as none (the
+    hypotheses exclusive, the covariance of each ``kept``'s). ``sure``: the turns carried on.
     """
-    note = ('friction of %s %s after a reversal under the noise (%.3g likely)'
-            % (', '.join(cables), 'turned' if turned else 'kept', weight))
-    if weight > 1.0 - 1e-9:
-        return dataclasses.replace(best, message='; '.join(filter(None, (best.message, note))))
-    mean = weight * best.parameters + (1.0 - weight) * second.parameters
-    spread = [estimate.parameters - mean for estimate in (best, second)]
-    covariance = (weight * (best.parameter_covariance + np.outer(spread[0], spread[0]))
-                  + (1.0 - weight) * (second.parameter_covariance
-                                      + np.outer(spread[1], spread[1])))
-    load = best.load
+    notes = ['friction of %s turned after a reversal under the noise' % _names(model, sure)
+             ] if sure else []
+    mean, covariance = np.array(kept.parameters, dtype=float), np.array(
+        kept.parameter_covariance, dtype=float)
+    if shifts:
+        gains = np.array([0.0] + [0.5 * gain for _, gain, _ in shifts])
+        weights = np.exp(gains - gains.max())
+        weights /= weights.sum()
+        moves = np.array([np.zeros_like(mean)] + [shift for _, _, shift in shifts])
+        middle = weights @ moves
+        mean = mean + middle
+        covariance = covariance + (moves.T * weights) @ moves - np.outer(middle, middle)
+        notes.append('friction kept after a reversal under the noise %.3g likely; turned: %s'
+                     % (weights[0], ', '.join('%s %.3g' % (_names(model, turns), weight)
+                                              for (turns, _, _), weight in zip(
+                                                  shifts, weights[1:]))))
+    if not notes:
+        return kept
+    load = kept.load
     rows = load.basis[:load.size]
     wrench = load.basis @ mean
     mass = mass_sigma = None
     if load.name == 'weight':
         mass, mass_sigma = float(mean[0]), float(np.sqrt(covariance[0, 0]))
     return dataclasses.replace(
-        best, force=wrench[:3].copy(), moment=wrench[3:].copy() if load.size == 6
+        kept, force=wrench[:3].copy(), moment=wrench[3:].copy() if load.size == 6
         else np.zeros(3), covariance=rows @ covariance @ rows.T, parameters=mean,
         parameter_covariance=covariance, mass=mass, mass_sigma=mass_sigma,
-        message='; '.join(filter(None, (best.message, note))))
+        message='; '.join(filter(None, [kept.message] + notes)))
+
+
+def _names(model, turns):
+    """Return the cable names of ``turns`` ((cable, state), ...), comma-separated."""
+    return ', '.join(model.robot.cable_names[k] for k, _ in turns)
 
 
 def _started(model, load, previous):
