@@ -628,23 +628,30 @@ def _estimate(robot, lengths, tensions, tip_position, tip_rotation, levels, load
     # reversals under the noise deadband: the flagged cables' friction kept, all turned (a
     # joystick or goal reversal turns several at once), or one of them turned (one real turn
     # among cables the noise flagged), weighed by likelihood, each by one forward solve and a
-    # first-order load step; a turn that wins by far (or that a refuted fit needs) is fitted to
-    # the end and its friction carried on
+    # first-order load step; the likeliest, when likelier than none, is fitted to the end, and
+    # carried on when it wins by far (or a refuted kept fit needs it)
     kept = _answer(fit)
     candidates = [model.turns] + ([(turn,) for turn in model.turns]
                                   if len(model.turns) > 1 else [])
     steps = [(turns,) + step for turns, step in (
         (turns, _turned_step(fit, model.turned(turns))) for turns in candidates)
         if step is not None]
-    best = max(steps, key=lambda step: step[2], default=None)
-    if best is not None and (best[2] > TURN_MARGIN or (best[2] > 0.0 and not kept.explains())):
+    best = max(range(len(steps)), key=lambda k: steps[k][2], default=None)
+    if best is not None and steps[best][2] > 0.0:
+        # likelier than keeping the friction to first order: its own fit says by how much (a
+        # first-order step from a kept estimate far off underrates it)
+        turns = steps[best][0]
         try:
-            return _mixed(_answer(_fitted(model.turned(best[0]), load, kept)), [], model,
-                          best[0])
+            turned = _fitted(model.turned(turns), load, kept)
         except _ForwardFailed as error:  # the kept estimate stands
             return dataclasses.replace(kept, message='; '.join(filter(None, (
                 kept.message, 'friction turn of %s not fitted: %s' % (
-                    _names(model, best[0]), error)))))
+                    _names(model, turns), error)))))
+        gain = fit.objective(fit.p, fit.residual(fit.predicted)) - turned.objective(
+            turned.p, turned.residual(turned.predicted))
+        if gain > TURN_MARGIN or (gain > 0.0 and not kept.explains()):
+            return _mixed(_answer(turned), [], model, turns)  # carried on
+        steps[best] = (turns, turned.p, gain)
     return _mixed(kept, [(turns, gain, p - fit.p) for turns, p, gain in steps], model, ())
 
 
