@@ -54,7 +54,7 @@ from continuum_statics.core.description.inputs import as_vector
 from continuum_statics.core.estimation import gates
 from continuum_statics.core.rod.shape import Shape
 from continuum_statics.core.statics.bvp import ConvergenceError
-from continuum_statics.core.statics.length_statics import MOTION_THRESHOLD
+from continuum_statics.core.statics.length_statics import MOTION_THRESHOLD, turned_state
 
 #: A friction turn whose best explanation is this much less likely (-2 log of the likelihood
 #: ratio: 1e-6) than keeping the friction is left out; this much likelier, it is fitted to the
@@ -490,9 +490,7 @@ def _possible_turns(robot, warm, reference, moved, peak, lengths):
     peak = np.where(moved, free, np.where(motion > 0.0, np.minimum(peak, free),
                                           np.where(motion < 0.0, np.maximum(peak, free), free)))
     back = free - peak
-    stick = robot.tendons.stick_length
-    turned = np.where(stick > 0.0, np.clip(motion - 2.0 * back / np.where(
-        stick > 0.0, stick, 1.0), -1.0, 1.0), -np.sign(back))
+    turned = turned_state(robot, motion, back)
     against = (np.abs(back) > MOTION_THRESHOLD) & (motion * np.sign(back) > 0.0)
     return tuple((int(k), float(turned[k]) + 0.0) for k in np.flatnonzero(against)), peak
 

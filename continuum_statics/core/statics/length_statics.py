@@ -254,12 +254,20 @@ def motion_since(robot, free_lengths, warm_start, threshold=MOTION_THRESHOLD):
     moved = np.abs(change) > threshold
     if not moved.any():  # the common case at rest: nothing turns (half the cost)
         return motion, np.array(previous, dtype=float)
-    stick = robot.tendons.stick_length
-    # a full turn, +1 to -1, over the stick length
-    turned = np.where(stick > 0.0, np.clip(
-        motion - 2.0 * change / np.where(stick > 0.0, stick, 1.0), -1.0, 1.0), -np.sign(change))
+    turned = turned_state(robot, motion, change)
     motion[moved] = turned[moved] + 0.0  # no -0.0: ModelAt compares the bytes
     return motion, np.where(moved, free_lengths, previous)
+
+
+def turned_state(robot, motion, change):
+    """Return each cable's friction state (n,) after its free length changed by ``change`` (m).
+
+    At once to the sign of the motion, or for ``tendons.stick_length`` s > 0 a full turn, +1 to
+    -1, over s of travel (:func:`motion_since`).
+    """
+    stick = robot.tendons.stick_length
+    return np.where(stick > 0.0, np.clip(
+        motion - 2.0 * change / np.where(stick > 0.0, stick, 1.0), -1.0, 1.0), -np.sign(change))
 
 
 def solve_lengths(robot, lengths, tip_force=(0.0, 0.0, 0.0), tip_moment=(0.0, 0.0, 0.0),
