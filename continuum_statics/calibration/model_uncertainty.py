@@ -17,6 +17,10 @@ from the file's prior and from the offset alone (the last-residual baseline is t
 every other group at zero) and keeps the likelier. sigma_y, the tracker's noise, is given (the
 robot file's tip sensor, else :data:`TRACKER_NOISE`). Only the calibration run is used:
 held-out runs judge the result.
+
+A second stage adds the drift (a smooth offset, :mod:`.state_estimation`'s Matern 3/2 process)
+to the kept model and fits its sigma and time with the offset's sigma and tau (the two compete
+for the same error), the loads held: a joint fit of all seven costs several times as long.
 """
 import math
 
@@ -44,6 +48,8 @@ FOLD_EVALUATIONS = 8
 #: sigma (relative to the file's prior) of the groups other than the offset at the offset-only
 #: start: the last-residual baseline, up to the optimiser's log scale.
 SWITCHED_OFF = 1e-4
+#: Where the drift's fit starts: sigma (m) as a fraction of the rod's length, and its time (s).
+DRIFT_START = (0.01, 5.0)
 
 
 def fold_robots(robot, run, fit_names, model, x, workers=None, shear_fixed=False,
@@ -119,13 +125,14 @@ def fit(robot, sequences, tracker_noise, patterns=None):
                                             for seen, hidden in patterns or OCCLUSION_PATTERNS])
                for times, residuals, columns in sequences]
 
-    def negative_log_likelihood(x):
+    def negative_log_likelihood(x, drift=None):
         sigma = _sigma_vector(groups, np.exp(x[:-1]))
         total = 0.0
         for times, residuals, columns, masks in replays:
             for seen in masks:
                 innovations, spreads = replay_filter(times, residuals, columns, sigma,
-                                                     math.exp(x[-1]), tracker_noise, seen)
+                                                     math.exp(x[-1]), tracker_noise, seen,
+                                                     drift)
                 hidden = ~seen & np.all(np.isfinite(residuals), axis=1)
                 solved = np.linalg.solve(spreads[hidden], innovations[hidden][:, :, None])
                 total += 0.5 * float(np.sum(np.linalg.slogdet(spreads[hidden])[1])
@@ -137,8 +144,23 @@ def fit(robot, sequences, tracker_noise, patterns=None):
     alone = minimize(lambda y: negative_log_likelihood(offset_only(y)), prior[offset],
                      method='Nelder-Mead', options=options)
     best = every.x if every.fun <= alone.fun else offset_only(alone.x)
-    return ({name: math.exp(value) for (name, _), value in zip(groups, best[:-1])},
-            math.exp(best[-1]))
+    found = min(every.fun, alone.fun)
+
+    def with_drift(y):  # the offset's sigma and tau refitted beside the drift: they compete
+        x = best.copy()
+        x[offset] = y[:2]
+        return x, np.exp(y[2:])
+
+    drift = minimize(lambda y: negative_log_likelihood(*with_drift(y)),
+                     np.concatenate([best[offset], np.log([DRIFT_START[0] * robot.length,
+                                                           DRIFT_START[1]])]),
+                     method='Nelder-Mead', options=options)
+    if drift.fun < found:
+        best, (sigma, time) = with_drift(drift.x)
+    sigmas = {name: math.exp(value) for (name, _), value in zip(groups, best[:-1])}
+    if drift.fun < found:
+        sigmas.update(drift=float(sigma), drift_time=float(time))
+    return sigmas, math.exp(best[-1])
 
 
 def seen_mask(rows, seen, hidden):
@@ -146,15 +168,24 @@ def seen_mask(rows, seen, hidden):
     return (np.arange(rows) % (seen + hidden)) < seen
 
 
-def replay_filter(times, residuals, columns, sigma, tau, tracker_noise, seen):
+def replay_filter(times, residuals, columns, sigma, tau, tracker_noise, seen, drift=None):
     """Replay the unmodelled loads' filter in the tracker's coordinates (no solves).
 
     ``residuals`` (n, 3): measured minus the model's marker point; ``columns`` (n, 3, k): the
     marker rows of the load columns; ``sigma`` (k,) the prior; ``seen`` (n,) rows the tracker
-    is used on. Returns each row's innovation (n, 3) before its update and its covariance
-    (n, 3, 3) (the prediction error of an occluded row and what the estimate says of it). The
-    same :func:`state_estimation.decayed` / :func:`state_estimation.fused` as the estimator.
+    is used on; ``drift``: (sigma m, time s) of the drift, or None. Returns each row's
+    innovation (n, 3) before its update and its covariance (n, 3, 3) (the prediction error of
+    an occluded row and what the estimate says of it). The same
+    :func:`state_estimation.decayed` / :func:`state_estimation.fused` as the estimator.
     """
+    drift_time = None
+    if drift is not None:
+        drift_time = drift[1]
+        rate = math.sqrt(3.0) / drift_time * drift[0]
+        sigma = np.concatenate([sigma, [drift[0]] * 3, [rate] * 3])
+        # the drift moves the marker as an offset; its rate moves nothing now
+        columns = np.concatenate([columns, np.broadcast_to(np.eye(3), (len(columns), 3, 3)),
+                                  np.zeros((len(columns), 3, 3))], axis=2)
     prior = np.diag(sigma ** 2)
     noise = tracker_noise ** 2 * np.eye(3)
     mean, covariance = np.zeros(len(sigma)), prior
@@ -163,7 +194,8 @@ def replay_filter(times, residuals, columns, sigma, tau, tracker_noise, seen):
     last = None
     for i, (residual, jac) in enumerate(zip(residuals, columns)):
         if last is not None:
-            mean, covariance = decayed(mean, covariance, prior, max(times[i] - last, 0.0), tau)
+            mean, covariance = decayed(mean, covariance, prior, max(times[i] - last, 0.0), tau,
+                                       drift_time)
         last = times[i]
         if not np.all(np.isfinite(residual)):
             continue
@@ -182,7 +214,7 @@ def _sigma_vector(groups, sigmas):
 def _group_index(robot):
     """Return [(group, column indices)] of the robot's unmodelled loads with a prior."""
     groups, at = [], 0
-    for name, size, _ in GROUPS:
+    for name, size, _ in GROUPS[:4]:  # the drift is fitted on its own (:func:`fit`)
         size = len(robot.cable_names) if size is None else size
         if getattr(robot.model_uncertainty, name) > 0.0:
             groups.append((name, np.arange(at, at + size)))

@@ -219,6 +219,8 @@ def _run_report(summary):
                          u['tracker_noise'], u.get('tip_force', 0.0),
                          u.get('section_moment', 0.0), 1e3 * u.get('cable_length', 0.0),
                          1e3 * u.get('base_position', 0.0), u['correlation_time']))
+        if u.get('drift'):
+            lines[-1] += ', drift %.3g mm over %.3g s' % (1e3 * u['drift'], u['drift_time'])
     if summary['output']:
         lines.append('wrote %s' % summary['output'])
     return '\n'.join(lines)

@@ -5,8 +5,8 @@ with loads the estimator does not know and sensors with noise (errors along the 
 normalised estimation error squared of the 95 % ellipsoid over 500 seeded cases), truth with
 physics the robot file leaves out (guide-disk masses), the Ornstein-Uhlenbeck decay in closed
 form, a recorded real run (ftdcr_v6, calibrated on train.csv, replayed on held-out val.csv),
-and a synthetic run with a known hidden offset process that ``calibrate --model-uncertainty``
-must recover.
+and synthetic runs with a known hidden offset process and a known smooth drift that
+``calibrate --model-uncertainty`` must recover; the drift's transition against its SDE.
 """
 import dataclasses
 import math
@@ -233,14 +233,59 @@ def test_a_correction_fades_with_the_correlation_time():
 
 
 def test_v6_held_out_rows_with_the_tracker_occluded():
-    """The real robot: calibrated on train.csv (with model_uncertainty), replayed on val.csv."""
+    """The real robot: calibrated on train.csv (with model_uncertainty), replayed on val.csv.
+
+    Before the drift (a smooth offset) was in the model: blocks of 5 held 73.3 % in their 95 %
+    ellipsoids, every other row 3.23 mm against the last-residual baseline's 3.02.
+    """
     robot = load_robot(V6_FUSED)
     run = read_run(V6_VAL, robot, V6_COLUMNS)
     every_other = occlusion_replay(robot, run, 1, 1)
     blocks = occlusion_replay(robot, run, 5, 5)
     assert every_other.fused < 0.35 * every_other.model
     assert blocks.fused < 0.6 * blocks.model
-    assert 0.85 <= every_other.coverage <= 0.99
+    assert every_other.fused < 1.01 * every_other.baseline
+    assert blocks.fused < 0.9 * blocks.baseline
+    for replayed in (every_other, blocks):
+        assert 0.85 <= replayed.coverage <= 0.99, replayed
+
+
+def test_the_drift_moves_as_its_stochastic_differential_equation():
+    """The Matern 3/2 drift's transition against the SDE solved another way.
+
+    Truths: the mean and covariance from the SDE dx = F x dt + L dW by the matrix exponential
+    and Van Loan's integral (C. F. Van Loan, IEEE TAC 1978), and the offset's autocovariance
+    sigma^2 (1 + lambda t) exp(-lambda t) (Rasmussen & Williams 2006, eq. 4.17).
+    """
+    from scipy.linalg import expm
+
+    from continuum_statics.core.estimation.state_estimation import decayed
+
+    sigma, length, tau, dt = 2e-3, 3.0, 40.0, 0.7
+    lam = math.sqrt(3.0) / length
+    # one OU entry, then the drift's offsets (x, y, z) and their rates
+    stationary = np.diag([0.01 ** 2] + [sigma ** 2] * 3 + [(lam * sigma) ** 2] * 3)
+    drift = np.array([[0.0, 1.0], [-lam ** 2, -2.0 * lam]])
+    spectral = 4.0 * lam ** 3 * sigma ** 2  # white-noise density that makes it stationary
+    f, diffusion = np.zeros((7, 7)), np.zeros((7, 7))
+    f[0, 0], diffusion[0, 0] = -1.0 / tau, 2.0 * 0.01 ** 2 / tau
+    for axis in range(3):
+        pair = np.ix_([1 + axis, 4 + axis], [1 + axis, 4 + axis])
+        f[pair] = drift
+        diffusion[1 + axis + 3, 1 + axis + 3] = spectral
+    van_loan = expm(np.block([[-f, diffusion], [np.zeros((7, 7)), f.T]]) * dt)
+    transition = van_loan[7:, 7:].T
+    added = transition @ van_loan[:7, 7:]
+    mean = np.array([0.02, 1e-3, -2e-3, 0.5e-3, 1e-4, 3e-4, -2e-4])
+    moved, spread = decayed(mean, np.zeros((7, 7)), stationary, dt, tau, length)
+    np.testing.assert_allclose(moved, transition @ mean, rtol=1e-12, atol=1e-18)
+    np.testing.assert_allclose(spread, added, rtol=1e-9, atol=1e-16)
+    # stationary stays stationary; the offset's lag covariance is the Matern kernel
+    np.testing.assert_allclose(decayed(np.zeros(7), stationary, stationary, dt, tau,
+                                       length)[1], stationary, atol=1e-18)
+    lagged = transition @ stationary
+    assert lagged[1, 1] == pytest.approx(sigma ** 2 * (1 + lam * dt) * math.exp(-lam * dt),
+                                         rel=1e-12)
 
 
 def test_the_last_residual_baseline_is_the_model_with_an_offset_alone():
@@ -426,6 +471,35 @@ def test_calibrate_recovers_a_known_hidden_offset():
     # what the run does not show stays small: the loads explain nothing here
     assert measured.tip_force < 0.3 * robot.c[0] / robot.length ** 2 * 0.1
     assert dataclasses.asdict(measured).keys() >= {'tip_force', 'cable_length'}
+
+
+def test_calibrate_recovers_a_known_hidden_drift():
+    """A synthetic run: the tracker sees the model plus a smooth drift of known sigma and time.
+
+    The drift is drawn from its covariance, sigma^2 (1 + lambda t) exp(-lambda t) (Rasmussen &
+    Williams eq. 4.17), not by the estimator's transition. Before the drift was fitted beside
+    the offset, the offset took it (2.1 mm over 7.8 s) and the drift got 0.83 mm.
+    """
+    robot = load_robot(REPO / 'config' / 'tendon_robot_real_tendons.yaml')
+    rng = np.random.default_rng(7)
+    sigma, length, noise, rows = 2e-3, 3.0, 3e-4, 400
+    times = np.cumsum(rng.uniform(0.3, 0.7, rows))
+    lag = np.abs(times[:, None] - times[None, :]) * math.sqrt(3.0) / length
+    kernel = sigma ** 2 * (1.0 + lag) * np.exp(-lag)
+    drift = np.linalg.cholesky(kernel + 1e-14 * np.eye(rows)) @ rng.normal(size=(rows, 3))
+    lengths = robot.straight_cable_lengths - rng.uniform(0.0, 0.006, (rows, 4))
+    tips, previous = np.empty((rows, 3)), None
+    for i in range(rows):
+        previous = robot.solve_lengths(lengths[i], warm_start=previous)
+        shape = previous.shape
+        tips[i] = (shape.tip_position + shape.tip_rotation @ robot.tip_marker + drift[i]
+                   + rng.normal(0.0, noise, 3))
+    run = RecordedRun(times=times, labels=('',) * rows, lengths=lengths, tips=tips,
+                      source='synthetic')
+    measured, report = model_uncertainty.measure(robot, run, tracker_noise=noise)
+    assert 0.7 * sigma < measured.drift < 1.3 * sigma, report
+    assert 0.5 * length < measured.drift_time < 2.0 * length, report
+    assert measured.base_position < 0.6 * sigma, report
 
 
 def test_an_older_reading_counts_for_less():

@@ -20,7 +20,7 @@ SENSOR_KINDS = ('position', 'pose')
 DEFAULT_SENSOR_NOISE = {'position': 5.0e-4, 'angle': 0.01}
 _SENSOR_KEYS = {'name', 'at', 'offset', 'kind', 'noise', 'frame_id', 'covariance'}
 _UNCERTAINTY_KEYS = ('tip_force', 'section_moment', 'cable_length', 'base_position',
-                     'correlation_time')
+                     'correlation_time', 'drift', 'drift_time')
 
 
 @dataclass(frozen=True, eq=False)
@@ -65,6 +65,10 @@ class ModelUncertainty:
     :ivar cable_length: m, of an unmodelled motor-to-path length error per cable
     :ivar base_position: m, of an offset of the whole backbone (each base-frame axis)
     :ivar correlation_time: s, how long an unmodelled error persists
+    :ivar drift: m, of a smoothly varying offset of the whole backbone (each base-frame axis):
+        the error that follows the robot's motion from one measurement to the next (friction
+        history, hysteresis), which the slowly varying loads above cannot
+    :ivar drift_time: s, the time over which that offset changes (its Matern 3/2 length scale)
     """
 
     tip_force: float = 0.0
@@ -72,12 +76,14 @@ class ModelUncertainty:
     cable_length: float = 0.0
     base_position: float = 0.0
     correlation_time: float = 10.0
+    drift: float = 0.0
+    drift_time: float = 5.0
 
     @property
     def any(self):
         """Whether any unmodelled load has a nonzero standard deviation."""
         return max(self.tip_force, self.section_moment, self.cable_length,
-                   self.base_position) > 0.0
+                   self.base_position, self.drift) > 0.0
 
 
 class SensorReading(NamedTuple):
@@ -210,7 +216,7 @@ def parse_model_uncertainty(data):
         raise ValueError('model_uncertainty has unknown keys %s (allowed: %s)'
                          % (unknown, ', '.join(_UNCERTAINTY_KEYS)))
     values = {key: _number(value, 'model_uncertainty.%s' % key, positive=True,
-                           allow_zero=key != 'correlation_time')
+                           allow_zero=key not in ('correlation_time', 'drift_time'))
               for key, value in data.items()}
     return ModelUncertainty(**values)
 

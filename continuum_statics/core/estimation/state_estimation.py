@@ -9,9 +9,23 @@ they follow an Ornstein-Uhlenbeck process with the calibrated correlation time t
     mean <- a mean,  P <- a^2 P + (1 - a^2) P0,  a = exp(-dt / tau)
 
 so a correction a sensor made fades, and its variance grows back to P0, while the sensor is
-gone. A fourth group, ``base_position``, is an offset of the
-whole backbone (the base's registration drifting, and what the loads leave unexplained that is
-the same everywhere). The shape under d is, to first order about the model's estimate (d = 0),
+gone. A fourth group, ``base_position``, is an offset of the whole backbone (the base's
+registration drifting, and what the loads leave unexplained that is the same everywhere). A
+fifth, ``drift``, is an offset of the whole backbone that changes smoothly from one measurement
+to the next as the robot moves (friction history, hysteresis: on the real v6 robot the error's
+structure function grows with the square of the lag over the first rows, a smooth process, not
+an OU's linear growth): a Matern 3/2 process of standard deviation sigma_w and length scale l
+(Rasmussen & Williams 2006, eq. 4.17), carried as the offset and its rate (``drift_rate``) with
+the exact transition of its state-space form
+(Hartikainen & Saerkkae 2010), lambda = sqrt(3) / l:
+
+    T(dt) = exp(-lambda dt) [[1 + lambda dt, dt], [-lambda^2 dt, 1 - lambda dt]],
+    P_inf = diag(sigma_w^2, lambda^2 sigma_w^2),  P <- T P T^T + P_inf - T P_inf T^T
+
+A tracker's last residual is then carried at first (the last-residual baseline's strength
+between nearby rows) and handed over to the slowly varying loads as it fades.
+
+The shape under d is, to first order about the model's estimate (d = 0),
 
     r(s; d) = r(s) + G_r(s) d,  theta(s; d) = G_theta(s) d   (a small rotation of R(s))
 
@@ -85,9 +99,11 @@ HISTORY_SECONDS = 0.1
 HISTORY_LENGTH = 128
 #: Unmodelled-load groups, in the order of d: name, size (None: one per cable), unit.
 GROUPS = (('tip_force', 3, 'N'), ('section_moment', 3, 'N m'), ('cable_length', None, 'm'),
-          ('base_position', 3, 'm'))
-#: Groups whose columns are known without a solve: an offset of the whole backbone.
-_RIGID = ('base_position',)
+          ('base_position', 3, 'm'), ('drift', 3, 'm'), ('drift_rate', 3, 'm/s'))
+#: Groups whose columns are known without a solve: an offset of the whole backbone ...
+_RIGID = ('base_position', 'drift')
+#: ... and the drift's rate, which moves no point now.
+_IDLE = ('drift_rate',)
 
 
 @dataclass(frozen=True, eq=False)
@@ -132,13 +148,20 @@ class Sensitivity:
     rest: int = 0
 
 
+def group_sigma(uncertainty, group):
+    """Return one group's stationary standard deviation (the drift's rate: lambda sigma_w)."""
+    if group == 'drift_rate':
+        return math.sqrt(3.0) / uncertainty.drift_time * uncertainty.drift
+    return getattr(uncertainty, group)
+
+
 @functools.lru_cache(maxsize=64)
 def prior_scales(robot):
     """Return (names, sigma (k,)) of the unmodelled loads with a nonzero prior."""
     uncertainty = robot.model_uncertainty
     names, sigmas = [], []
     for group, size, _ in GROUPS:
-        sigma = getattr(uncertainty, group)
+        sigma = group_sigma(uncertainty, group)
         if sigma <= 0.0:
             continue
         labels = robot.cable_names if size is None else ('x', 'y', 'z')
@@ -160,8 +183,14 @@ def propagate(robot, carried, stamp):
     # an older stamp is not a step back in time
     mean, covariance = decayed(carried.mean, carried.covariance, prior,
                                max(stamp - carried.stamp, 0.0),
-                               robot.model_uncertainty.correlation_time)
+                               robot.model_uncertainty.correlation_time, _drift_time(robot))
     return Unmodelled(names, mean, covariance, stamp)
+
+
+def _drift_time(robot):
+    """Return the drift's length scale (s), or None when the robot has no drift."""
+    uncertainty = robot.model_uncertainty
+    return uncertainty.drift_time if uncertainty.drift > 0.0 else None
 
 
 @functools.lru_cache(maxsize=64)
@@ -173,10 +202,33 @@ def _prior(robot):
     return names, prior
 
 
-def decayed(mean, covariance, prior, elapsed, correlation_time):
-    """Return (mean, covariance) ``elapsed`` s later (Ornstein-Uhlenbeck towards N(0, prior))."""
-    a = math.exp(-elapsed / correlation_time)
-    return a * mean, a * a * covariance + (1.0 - a * a) * prior
+def decayed(mean, covariance, prior, elapsed, correlation_time, drift_time=None):
+    """Return (mean, covariance) ``elapsed`` s later, towards their stationary N(0, prior).
+
+    Ornstein-Uhlenbeck with ``correlation_time``; with ``drift_time`` the last six entries are
+    the drift and its rate (x, y, z each), moved by the Matern 3/2 transition (module doc).
+    """
+    if drift_time is None:
+        a = math.exp(-elapsed / correlation_time)
+        return a * mean, a * a * covariance + (1.0 - a * a) * prior
+    transition = _transition(len(mean), float(elapsed), correlation_time, drift_time)
+    return (transition @ mean, transition @ (covariance - prior) @ transition.T + prior)
+
+
+@functools.lru_cache(maxsize=256)
+def _transition(size, elapsed, correlation_time, drift_time):
+    """Return the (size, size) transition of :func:`decayed` (a node's steps repeat: cached)."""
+    transition = np.eye(size) * math.exp(-elapsed / correlation_time)
+    lam = math.sqrt(3.0) / drift_time
+    e = math.exp(-lam * elapsed)
+    block = e * np.array([[1.0 + lam * elapsed, elapsed],
+                          [-lam * lam * elapsed, 1.0 - lam * elapsed]])
+    at = size - 6
+    for axis in range(3):
+        pair = [at + axis, at + 3 + axis]
+        transition[np.ix_(pair, pair)] = block
+    transition.setflags(write=False)
+    return transition
 
 
 def _solve(spread, vector):
@@ -316,9 +368,11 @@ def _sensitivity(robot, model, lengths, tip_force, tip_moment, tensions, carried
     names, sigma = prior_scales(robot)
     for j in columns:
         tips[j] = tip
-        if names[j].split('.')[0] in _RIGID:
+        group = names[j].split('.')[0]
+        if group in _RIGID or group in _IDLE:
             positions[:, :, j] = 0.0
-            positions[:, 'xyz'.index(names[j][-1]), j] = 1.0
+            if group in _RIGID:
+                positions[:, 'xyz'.index(names[j][-1]), j] = 1.0
             continue
         step = np.zeros(size)
         small = names[j].startswith('cable_length') and robot.tendons.is_ideal
