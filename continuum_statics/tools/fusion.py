@@ -52,8 +52,11 @@ def simulated_truth(robot, cases, seed=0):
             rng.uniform(size=n) < 0.5)
         hidden = rng.normal(0.0, sigma)
         force, moment, cable = split_loads(robot, hidden)
-        offset = np.array([value for name, value in zip(names, hidden)
-                           if name.startswith('base_position')] or [0.0, 0.0, 0.0])
+        # the offset and the drift (its rate moves nothing at one instant) shift the backbone
+        offset = np.zeros(3)
+        for name, value in zip(names, hidden):
+            if name.split('.')[0] in ('base_position', 'drift'):
+                offset['xyz'.index(name[-1])] += value
         truth = _truth(robot, lengths - cable, force, moment, offset)
         readings = {}
         for sensor in robot.sensors:
