@@ -49,6 +49,7 @@ bench: venv
 	.venv/bin/python -m benchmarks.bench_load
 	.venv/bin/python -m benchmarks.bench_noisy
 	.venv/bin/python -m benchmarks.bench_fusion
+	.venv/bin/python -m benchmarks.bench_mismatch
 	.venv/bin/python -m benchmarks.bench_dynamics
 	.venv/bin/python -m benchmarks.bench_obstacles
 
