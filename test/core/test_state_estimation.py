@@ -452,27 +452,32 @@ def test_late_and_out_of_order_readings_are_fused_at_their_own_stamp(rate, laten
     assert errors.max() < 1.0e-3
 
 
+def _synthetic_run(robot, rng, times, hidden, noise):
+    """Return a run: random pulls, the tracker at the model's marker + ``hidden`` + noise."""
+    rows = len(times)
+    lengths = robot.straight_cable_lengths - rng.uniform(0.0, 0.006, (rows, 4))
+    tips, previous = np.empty((rows, 3)), None
+    for i in range(rows):
+        previous = robot.solve_lengths(lengths[i], warm_start=previous)
+        shape = previous.shape
+        tips[i] = (shape.tip_position + shape.tip_rotation @ robot.tip_marker + hidden[i]
+                   + rng.normal(0.0, noise, 3))
+    return RecordedRun(times=times, labels=('',) * rows, lengths=lengths, tips=tips,
+                       source='synthetic')
+
+
 def test_calibrate_recovers_a_known_hidden_offset():
     """A synthetic run: the tracker sees the model plus an offset process of known sigma, tau."""
     robot = load_robot(REPO / 'config' / 'tendon_robot_real_tendons.yaml')
     rng = np.random.default_rng(7)
     sigma, tau, noise, rows = 2e-3, 8.0, 3e-4, 400
     times = np.cumsum(rng.uniform(0.3, 0.7, rows))
-    lengths = np.empty((rows, 4))
-    tips = np.empty((rows, 3))
-    offset = rng.normal(0.0, sigma, 3)
-    previous = None
-    for i in range(rows):
-        if i:
-            a = math.exp(-(times[i] - times[i - 1]) / tau)
-            offset = a * offset + math.sqrt(1 - a * a) * rng.normal(0.0, sigma, 3)
-        lengths[i] = robot.straight_cable_lengths - rng.uniform(0.0, 0.006, 4)
-        previous = robot.solve_lengths(lengths[i], warm_start=previous)
-        shape = previous.shape
-        tips[i] = (shape.tip_position + shape.tip_rotation @ robot.tip_marker + offset
-                   + rng.normal(0.0, noise, 3))
-    run = RecordedRun(times=times, labels=('',) * rows, lengths=lengths, tips=tips,
-                      source='synthetic')
+    offset = np.empty((rows, 3))
+    offset[0] = rng.normal(0.0, sigma, 3)
+    for i in range(1, rows):
+        a = math.exp(-(times[i] - times[i - 1]) / tau)
+        offset[i] = a * offset[i - 1] + math.sqrt(1 - a * a) * rng.normal(0.0, sigma, 3)
+    run = _synthetic_run(robot, rng, times, offset, noise)
     measured, report = model_uncertainty.measure(robot, run, tracker_noise=noise)
     assert 0.7 * sigma < measured.base_position < 1.4 * sigma, report
     assert 0.5 * tau < measured.correlation_time < 2.0 * tau, report
@@ -495,15 +500,7 @@ def test_calibrate_recovers_a_known_hidden_drift():
     lag = np.abs(times[:, None] - times[None, :]) * math.sqrt(3.0) / length
     kernel = sigma ** 2 * (1.0 + lag) * np.exp(-lag)
     drift = np.linalg.cholesky(kernel + 1e-14 * np.eye(rows)) @ rng.normal(size=(rows, 3))
-    lengths = robot.straight_cable_lengths - rng.uniform(0.0, 0.006, (rows, 4))
-    tips, previous = np.empty((rows, 3)), None
-    for i in range(rows):
-        previous = robot.solve_lengths(lengths[i], warm_start=previous)
-        shape = previous.shape
-        tips[i] = (shape.tip_position + shape.tip_rotation @ robot.tip_marker + drift[i]
-                   + rng.normal(0.0, noise, 3))
-    run = RecordedRun(times=times, labels=('',) * rows, lengths=lengths, tips=tips,
-                      source='synthetic')
+    run = _synthetic_run(robot, rng, times, drift, noise)
     measured, report = model_uncertainty.measure(robot, run, tracker_noise=noise)
     assert 0.7 * sigma < measured.drift < 1.3 * sigma, report
     assert 0.5 * length < measured.drift_time < 2.0 * length, report
