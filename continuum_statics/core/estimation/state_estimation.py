@@ -211,22 +211,22 @@ def decayed(mean, covariance, prior, elapsed, correlation_time, drift_time=None)
     if drift_time is None:
         a = math.exp(-elapsed / correlation_time)
         return a * mean, a * a * covariance + (1.0 - a * a) * prior
-    transition = _transition(len(mean), float(elapsed), correlation_time, drift_time)
+    # a node's steps repeat (1 ms at 1 kHz) up to the clock's rounding: one cached transition
+    transition = _transition(len(mean), round(float(elapsed), 9), correlation_time, drift_time)
     return (transition @ mean, transition @ (covariance - prior) @ transition.T + prior)
 
 
 @functools.lru_cache(maxsize=256)
 def _transition(size, elapsed, correlation_time, drift_time):
-    """Return the (size, size) transition of :func:`decayed` (a node's steps repeat: cached)."""
+    """Return the (size, size) transition of :func:`decayed`."""
     transition = np.eye(size) * math.exp(-elapsed / correlation_time)
     lam = math.sqrt(3.0) / drift_time
     e = math.exp(-lam * elapsed)
-    block = e * np.array([[1.0 + lam * elapsed, elapsed],
-                          [-lam * lam * elapsed, 1.0 - lam * elapsed]])
-    at = size - 6
-    for axis in range(3):
-        pair = [at + axis, at + 3 + axis]
-        transition[np.ix_(pair, pair)] = block
+    offset = np.arange(size - 6, size - 3)  # each axis's offset; its rate three further on
+    transition[offset, offset] = e * (1.0 + lam * elapsed)
+    transition[offset, offset + 3] = e * elapsed
+    transition[offset + 3, offset] = -e * lam * lam * elapsed
+    transition[offset + 3, offset + 3] = e * (1.0 - lam * elapsed)
     transition.setflags(write=False)
     return transition
 
