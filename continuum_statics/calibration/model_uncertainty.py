@@ -20,7 +20,9 @@ held-out runs judge the result.
 
 A second stage adds the drift (a smooth offset, :mod:`.state_estimation`'s Matern 3/2 process)
 to the kept model and fits its sigma and time with the offset's sigma and tau (the two compete
-for the same error), the loads held: a joint fit of all seven costs several times as long.
+for the same error), the other sigmas held: a joint fit of all seven costs several times as
+long. The drift is kept when the likelihood ratio says its two parameters are needed
+(:data:`DRIFT_GATE`).
 """
 import math
 
@@ -35,6 +37,7 @@ from continuum_statics.core.description.sensors import (
     ModelUncertainty,
     default_model_uncertainty,
 )
+from continuum_statics.core.estimation.gates import chi2_quantile
 from continuum_statics.core.estimation.state_estimation import GROUPS, decayed, fused
 
 #: Occlusion patterns of the fit: (rows seen, rows occluded), repeated over the run.
@@ -50,6 +53,9 @@ FOLD_EVALUATIONS = 8
 SWITCHED_OFF = 1e-4
 #: Where the drift's fit starts: sigma (m) as a fraction of the rod's length, and its time (s).
 DRIFT_START = (0.01, 5.0)
+#: The drift is kept when twice the log-likelihood it adds exceeds this: chi-square, 2 degrees
+#: of freedom (its sigma and time), 95 % (Wilks' likelihood-ratio test).
+DRIFT_GATE = chi2_quantile(0.95, 2)
 
 
 def fold_robots(robot, run, fit_names, model, x, workers=None, shear_fixed=False,
@@ -112,6 +118,8 @@ def fit(robot, sequences, tracker_noise, patterns=None):
     kept. The rows it sees update the unmodelled loads, as on the robot.
     """
     groups = _group_index(robot)
+    if robot.model_uncertainty.drift > 0.0:
+        raise ValueError('fit starts from a model uncertainty without a drift: it adds its own')
     prior = np.array([math.log(getattr(robot.model_uncertainty, name)) for name, _ in groups]
                      + [math.log(robot.model_uncertainty.correlation_time)])
     offset = np.array([name == 'base_position' for name, _ in groups] + [True])
@@ -151,14 +159,17 @@ def fit(robot, sequences, tracker_noise, patterns=None):
         x[offset] = y[:2]
         return x, np.exp(y[2:])
 
-    drift = minimize(lambda y: negative_log_likelihood(*with_drift(y)),
-                     np.concatenate([best[offset], np.log([DRIFT_START[0] * robot.length,
-                                                           DRIFT_START[1]])]),
-                     method='Nelder-Mead', options=options)
-    if drift.fun < found:
-        best, (sigma, time) = with_drift(drift.x)
+    kept = False
+    if np.any(offset[:-1]):  # the drift is fitted beside an offset
+        drift = minimize(lambda y: negative_log_likelihood(*with_drift(y)),
+                         np.concatenate([best[offset], np.log([DRIFT_START[0] * robot.length,
+                                                               DRIFT_START[1]])]),
+                         method='Nelder-Mead', options=options)
+        kept = 2.0 * (found - drift.fun) > DRIFT_GATE
+        if kept:
+            best, (sigma, time) = with_drift(drift.x)
     sigmas = {name: math.exp(value) for (name, _), value in zip(groups, best[:-1])}
-    if drift.fun < found:
+    if kept:
         sigmas.update(drift=float(sigma), drift_time=float(time))
     return sigmas, math.exp(best[-1])
 

@@ -151,7 +151,8 @@ class Sensitivity:
 def group_sigma(uncertainty, group):
     """Return one group's stationary standard deviation (the drift's rate: lambda sigma_w)."""
     if group == 'drift_rate':
-        return math.sqrt(3.0) / uncertainty.drift_time * uncertainty.drift
+        return (math.sqrt(3.0) / uncertainty.drift_time * uncertainty.drift
+                if uncertainty.drift > 0.0 else 0.0)
     return getattr(uncertainty, group)
 
 
@@ -173,7 +174,7 @@ def prior_scales(robot):
 
 
 def propagate(robot, carried, stamp):
-    """Return the unmodelled loads at ``stamp`` from the last estimate's (Ornstein-Uhlenbeck)."""
+    """Return the unmodelled loads at ``stamp`` from the last estimate's (:func:`decayed`)."""
     names, prior = _prior(robot)
     if carried is None or carried.names != names:
         return Unmodelled(names, np.zeros(len(names)), prior, stamp)
@@ -185,6 +186,14 @@ def propagate(robot, carried, stamp):
                                max(stamp - carried.stamp, 0.0),
                                robot.model_uncertainty.correlation_time, _drift_time(robot))
     return Unmodelled(names, mean, covariance, stamp)
+
+
+def _moved_variance(robot, elapsed):
+    """Return (k, k) the variance the unmodelled loads add over ``elapsed`` s (from exact)."""
+    names, prior = _prior(robot)
+    zero = np.zeros(len(names))
+    return decayed(zero, np.zeros_like(prior), prior, elapsed,
+                   robot.model_uncertainty.correlation_time, _drift_time(robot))[1]
 
 
 def _drift_time(robot):
@@ -321,8 +330,25 @@ def stale_columns(robot, estimate):
     if sensitivity is None or not len(sensitivity.tips):
         return False
     tip = estimate.shape.tip_position - sensitivity.positions[-1] @ estimate.unmodelled.mean
-    moved = np.linalg.norm(sensitivity.tips - tip, axis=1)
+    moved = _moved_since(robot, sensitivity.tips, tip)
     return bool(np.max(moved) > REFRESH_DISTANCE * robot.length)
+
+
+def _moved_since(robot, tips, tip):
+    """Return (k,) how far the tip moved since each column was made, m.
+
+    0 for the columns known without a solve (the offset's, the drift's): no motion changes them.
+    """
+    return np.linalg.norm(tips - tip, axis=1) * _solved_columns(robot)
+
+
+@functools.lru_cache(maxsize=64)
+def _solved_columns(robot):
+    """Return (k,) 1.0 for the columns made by solves, 0.0 for the offset's and the drift's."""
+    names, _ = prior_scales(robot)
+    solved = np.array([name.split('.')[0] not in _RIGID + _IDLE for name in names], float)
+    solved.setflags(write=False)
+    return solved
 
 
 def _readings(robot, sensors):
@@ -349,10 +375,10 @@ def _sensitivity(robot, model, lengths, tip_force, tip_moment, tensions, carried
         0] != len(model.shape.s)
     bounded = tracking is not None and bool(tracking.max_model_runs)
     if not fresh and not bounded:
-        moved = np.linalg.norm(carried.tips - tip, axis=1)
+        moved = _moved_since(robot, carried.tips, tip)
         fresh = np.max(moved) > REFRESH_DISTANCE * robot.length
     elif not fresh and carried.rest >= COLUMN_EVERY:
-        moved = np.linalg.norm(carried.tips - tip, axis=1)
+        moved = _moved_since(robot, carried.tips, tip)
     if fresh:
         n = len(model.shape.s)
         carried = Sensitivity(np.zeros((n, 3, size)), np.zeros((n, 3, size)),
@@ -370,7 +396,7 @@ def _sensitivity(robot, model, lengths, tip_force, tip_moment, tensions, carried
         tips[j] = tip
         group = names[j].split('.')[0]
         if group in _RIGID or group in _IDLE:
-            positions[:, :, j] = 0.0
+            positions[:, :, j] = angles[:, :, j] = 0.0
             if group in _RIGID:
                 positions[:, 'xyz'.index(names[j][-1]), j] = 1.0
             continue
@@ -476,8 +502,7 @@ def _update(robot, shape, sensitivity, prior, readings, stamp, history=()):
         noise = np.diag(np.square(sigmas))
         if reading.stamp is not None and stamp is not None and stamp > reading.stamp:
             # an older reading: the unmodelled loads may have moved since it was taken
-            a = math.exp(-(stamp - reading.stamp) / robot.model_uncertainty.correlation_time)
-            noise = noise + (1.0 - a * a) * jac @ np.diag(np.diag(covariance)) @ jac.T
+            noise = noise + jac @ _moved_variance(robot, stamp - reading.stamp) @ jac.T
         spread = jac @ covariance @ jac.T + noise
         chi2 = float(innovation @ _solve(spread, innovation))
         gate = gates.gate(len(innovation), gates.SENSOR_GATE_PROBABILITY)
