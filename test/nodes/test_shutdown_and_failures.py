@@ -79,10 +79,17 @@ def test_a_goal_running_at_sigint_gets_a_result_saying_so(tmp_path):
         client = action_client(node)
         threading.Thread(target=executor.spin, daemon=True).start()
         wait_until(client.server_is_ready, 60.0, 'bringup up')
-        accepted = accepted_goals(client, ROBOT.solve_ivp([2.5, 0.0, 0.0]).tip_position)
-        assert accepted
-        result = accepted[-1].get_result_async()
-        time.sleep(0.5)  # the goal is running (a slow ramp: many seconds)
+        # a goal answered first, to where the robot already is: the way back is matched (see
+        # accepted_goals; sent to the far tip, an unanswered first goal ran there for the 5 s
+        # before the next, which then ended at once: CI, Jazzy)
+        first = [h.get_result_async() for h in accepted_goals(
+            client, ROBOT.solve_ivp([0.0, 0.0, 0.0]).tip_position)]
+        wait_until(lambda: all(f.done() for f in first), 30.0, 'the first goal answered')
+        handle = send_goal(client, ROBOT.solve_ivp([2.5, 0.0, 0.0]).tip_position)
+        wait_until(handle.done, 30.0, 'the slow goal accepted')
+        assert handle.result().accepted
+        result = handle.result().get_result_async()
+        time.sleep(0.5)  # the goal is running (a slow ramp: about 4.4 s)
         ended_before = result.done()
         start = time.monotonic()
         bringup.process.send_signal(2)
@@ -90,7 +97,7 @@ def test_a_goal_running_at_sigint_gets_a_result_saying_so(tmp_path):
                    % bringup.output())
         latency = time.monotonic() - start
         answer = result.result()
-        assert not ended_before, 'the goal ended before SIGINT'
+        assert not ended_before, 'the goal ended before SIGINT: %s' % answer.result.message
         assert answer.status == 6 and 'shutting down' in answer.result.message, answer
         assert not answer.result.reached
         print('result %.2f s after SIGINT' % latency)
