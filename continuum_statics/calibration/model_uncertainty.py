@@ -38,7 +38,12 @@ from continuum_statics.core.description.sensors import (
     default_model_uncertainty,
 )
 from continuum_statics.core.estimation.gates import chi2_quantile
-from continuum_statics.core.estimation.state_estimation import GROUPS, decayed, fused
+from continuum_statics.core.estimation.state_estimation import (
+    GROUPS,
+    decayed,
+    fused,
+    group_sigma,
+)
 
 #: Occlusion patterns of the fit: (rows seen, rows occluded), repeated over the run.
 OCCLUSION_PATTERNS = ((1, 1), (5, 5), (20, 40))
@@ -192,7 +197,7 @@ def replay_filter(times, residuals, columns, sigma, tau, tracker_noise, seen, dr
     drift_time = None
     if drift is not None:
         drift_time = drift[1]
-        rate = math.sqrt(3.0) / drift_time * drift[0]
+        rate = group_sigma(ModelUncertainty(drift=drift[0], drift_time=drift_time), 'drift_rate')
         sigma = np.concatenate([sigma, [drift[0]] * 3, [rate] * 3])
         # the drift moves the marker as an offset; its rate moves nothing now
         columns = np.concatenate([columns, np.broadcast_to(np.eye(3), (len(columns), 3, 3)),

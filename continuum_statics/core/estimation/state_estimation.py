@@ -189,7 +189,7 @@ def propagate(robot, carried, stamp):
 
 
 def _moved_variance(robot, elapsed):
-    """Return (k, k) the variance the unmodelled loads add over ``elapsed`` s (from exact)."""
+    """Return (k, k) the variance the unmodelled loads' process adds over ``elapsed`` s."""
     names, prior = _prior(robot)
     zero = np.zeros(len(names))
     return decayed(zero, np.zeros_like(prior), prior, elapsed,
