@@ -90,6 +90,7 @@ def residual_rows(robot, run):
     Each row is estimated to the end, warm-started from the previous (friction follows each
     cable's motion); its load columns are the estimator's (refreshed as the tip moves).
     """
+    robot = robot.without_load_model()  # the model's own error: a load held is not one
     residuals = np.full((len(run), 3), np.nan)
     columns = None
     previous = None

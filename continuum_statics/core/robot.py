@@ -171,6 +171,16 @@ class Robot:
         scale = (np.ones(len(self.s_grid) - 1) if self.interval_scale is None
                  else self.interval_scale)
         self.node_c = self.c * np.concatenate([scale[:1], scale])[:, None]
+        # the tip load carried in the fused state (the file's load_model; checked here: a
+        # 'weight' needs gravity), and with it the fused estimator's unmodelled loads
+        self.load_model = None
+        if description.load is not None:
+            name, direction, prior = description.load
+            self.load_model = load_estimation.load_model(
+                self, ('direction', direction) if name == 'direction' else name, prior=prior)
+            if self.model_uncertainty is None:
+                self.model_uncertainty = default_model_uncertainty(rod.bending_stiffness[0],
+                                                                   rod.length)
         self._layout()
         self.straight_cable_lengths = self.cable_lengths(self._straight_shape())
         limits = np.asarray(self.cable_length_limits, dtype=float).reshape(-1, 2)
@@ -290,6 +300,12 @@ class Robot:
     def with_model_uncertainty(self, uncertainty) -> 'Robot':
         """Copy of this robot with another :class:`sensors.ModelUncertainty` (None: none)."""
         return Robot(dataclasses.replace(self.description, model_uncertainty=uncertainty))
+
+    def without_load_model(self) -> 'Robot':
+        """Copy of this robot without the file's ``load_model`` (the model's error alone)."""
+        if self.load_model is None:
+            return self
+        return Robot(dataclasses.replace(self.description, load=None))
 
     # -- state and loads ---------------------------------------------------------------------
     def passive_state(self, u0=(0.0, 0.0, 0.0)) -> np.ndarray:

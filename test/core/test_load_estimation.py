@@ -7,6 +7,7 @@ inside its own 3-sigma box in >= 95 % of the cases, and its reported standard de
 match the scatter of its errors within a factor 2 in the directions the measurements see.
 """
 import dataclasses
+import math
 
 from conftest import REPO
 import numpy as np
@@ -234,6 +235,52 @@ def test_a_hanging_mass_is_weighed_from_the_tip_position_alone():
     # ...but as a mass it is far worse than the weight model's
     as_mass = np.linalg.norm(force_error, axis=1) / np.linalg.norm(gravity)
     assert np.sqrt(np.mean(as_mass ** 2)) > 5.0 * np.sqrt(np.mean(mass_error ** 2))
+
+
+def test_the_robot_files_load_model_weighs_a_payload_with_the_shape():
+    # one estimator (issue 43 item 1): the file's load_model puts the payload's mass in the
+    # fused state. Table II's truth as above (a rod 5 % softer, 1 mm tracker), the payload
+    # growing by 2.5 g every 20 readings (10 Hz): each step is a new load (the gate's reading
+    # restarts it), then held while the readings average
+    import yaml
+
+    from continuum_statics.core.description.robot_file import parse_robot_description
+    from continuum_statics.core.description.sensors import SensorReading
+    data = yaml.safe_load(JONES.read_text())
+    data.update(load_model='weight', model_uncertainty={'correlation_time': 10.0},
+                sensors=[{'name': 'tracker', 'at': 'tip', 'noise': {'position': 1e-3}}])
+    rod = Robot(parse_robot_description(data))
+    truth = with_modulus(rod.without_load_model(), 0.95)
+    gravity = np.asarray(rod.gravity)
+    # the softer rod also sags more under its own weight: 3/8 of it acts like a tip mass
+    own = 3.0 / 8.0 * rod.description.rod.density * math.pi / 4.0 * 1.56e-3 ** 2 * 0.39
+    rng = np.random.default_rng(43)
+    previous, stamp, errors, sigmas = None, 0.0, [], []
+    for mass in np.linspace(0.0, 0.05, 21):
+        tip = truth.solve_bvp(mass * gravity).tip_position
+        seen = []
+        for _ in range(20):
+            stamp += 0.1
+            seen.append(tip + rng.normal(0.0, 1e-3, 3))
+            previous = rod.estimate_shape([], sensors={'tracker': SensorReading(seen[-1])},
+                                          stamp=stamp, warm_start=previous)
+            assert previous.sensors['tracker'].used, previous.sensors['tracker'].reason
+        estimate, sigma = previous.unmodelled.mean[0], math.sqrt(
+            previous.unmodelled.covariance[0, 0])
+        np.testing.assert_allclose(previous.tip_wrench, estimate * np.r_[gravity, 0, 0, 0])
+        # 20 readings held: the one-shot estimate's sigma (Gauss-Newton, one reading) / sqrt 20
+        once = rod.estimate_tip_wrench(tip_position=np.mean(seen, axis=0), load='weight',
+                                       noise={'tip_position': 1e-3 / math.sqrt(20)})
+        assert 0.7 < sigma / once.mass_sigma < 1.5, (sigma, once.mass_sigma)
+        assert abs(estimate - once.mass) < 3.0 * once.mass_sigma + 0.01 * mass
+        assert abs(estimate - mass) <= 3.0 * sigma + (1.0 / 0.95 - 1.0) * (mass + own), \
+            (mass, estimate, sigma)
+        errors.append(estimate - mass)
+        sigmas.append(sigma)
+    # the stiffness share and 3 sigma (the one-shot test's bound): 1.6 g RMS over 0-50 g
+    masses = np.linspace(0.0, 0.05, 21)
+    assert np.sqrt(np.mean(np.square(errors))) < (1.0 / 0.95 - 1.0) * np.sqrt(
+        np.mean((masses + own) ** 2)) + 3.0 * np.sqrt(np.mean(np.square(sigmas)))
 
 
 def test_weight_on_the_bundled_tip_load_rows():

@@ -148,3 +148,28 @@ def test_solve_prints_the_plausibility_warnings(tmp_path, capsys):
     path.write_text(yaml.safe_dump(description(**with_rod(diameter=0.05))))
     assert solve_main(['--robot', str(path)]) == 0
     assert 'warning: rod.diameter' in capsys.readouterr().err
+
+
+@pytest.mark.parametrize('changes, words', [
+    ({'load_model': 'mass'}, 'load_model must be one of'),
+    ({'load_direction': [0, 0, -1]}, 'without load_model'),
+    ({'load_model': 'direction'}, "load_direction goes with load_model 'direction'"),
+    ({'load_model': 'force', 'load_direction': [0, 0, -1]}, 'load_direction goes with'),
+    ({'load_model': 'force', 'load_prior': [0.1, 0.2]}, 'load_prior for load'),
+    ({'load_model': 'weight', 'gravity': [0, 0, 0]}, "load='weight' needs gravity"),
+])
+def test_a_bad_load_model_is_refused_at_load_naming_the_key(changes, words):
+    with pytest.raises(ValueError, match=words):
+        make_robot(**changes)
+
+
+def test_the_load_model_of_the_file_is_in_the_fused_state():
+    robot = make_robot(load_model='direction', load_direction=[0, 0, -2], load_prior=0.3)
+    assert robot.load_model.name == 'direction' and robot.load_model.prior.tolist() == [0.3]
+    np.testing.assert_allclose(robot.load_model.basis[:, 0], [0, 0, -1, 0, 0, 0])
+    assert robot.model_uncertainty is not None  # the fused estimator carries the load
+    estimate = robot.estimate_shape([], stamp=0.0)
+    assert estimate.unmodelled.names[0] == 'tip_load.force'
+    np.testing.assert_allclose(estimate.tip_wrench, 0.0)
+    assert estimate.tip_wrench_covariance[2, 2] == pytest.approx(0.3 ** 2)
+    assert robot.without_load_model().load_model is None

@@ -204,6 +204,7 @@ class RobotDescription:
     obstacles: tuple = ()
     clearance: float = 0.0
     body_radius: float = None
+    load: tuple = None
 
     def routes(self):
         """One route per cable (:mod:`~continuum_statics.core.description.routing`), straight."""
@@ -226,7 +227,10 @@ MAX_DISK_MASS = 1.0
 BENDING_SCALE_RANGE = (0.1, 100.0)
 _TOP_KEYS = {'name', 'description', 'rod', 'base', 'gravity', 'cables', 'guides', 'solver',
              'sections', 'cable_model', 'tendons', 'tip_marker', 'sensors', 'model_uncertainty',
-             'dynamics', 'obstacles', 'clearance', 'body_radius'}
+             'dynamics', 'obstacles', 'clearance', 'body_radius', 'load_model', 'load_direction',
+             'load_prior'}
+#: The load models a robot file may name (``load_model``): the tip load in the fused state.
+LOAD_MODELS = ('weight', 'direction', 'force', 'wrench')
 
 
 def _frozen(array):
@@ -676,7 +680,34 @@ def parse_robot_description(data, source='robot file'):
         dynamics=_parse_dynamics(data), obstacles=parse_obstacles(data.get('obstacles')),
         clearance=_clearance(data.get('clearance', 0.0), 'clearance'),
         body_radius=(None if data.get('body_radius') is None
-                     else _positive(data['body_radius'], 'body_radius')))
+                     else _positive(data['body_radius'], 'body_radius')),
+        load=_parse_load(data))
+
+
+def _parse_load(data):
+    """Return (model, direction or None, prior or None) of ``load_model``, or None without it.
+
+    The model's own checks (gravity for 'weight', a prior's size) run when the robot is built.
+    """
+    name = data.get('load_model')
+    if name is None:
+        extra = [key for key in ('load_direction', 'load_prior') if key in data]
+        if extra:
+            raise ValueError('%s given without load_model (%s)'
+                             % (' and '.join(extra), ' | '.join(LOAD_MODELS)))
+        return None
+    if name not in LOAD_MODELS:
+        raise ValueError('load_model must be one of %s, got %r' % (' | '.join(LOAD_MODELS), name))
+    direction = data.get('load_direction')
+    if (direction is None) != (name != 'direction'):
+        raise ValueError("load_direction goes with load_model 'direction' (and only with it)")
+    if direction is not None:
+        direction = tuple(_vector(direction, 3, 'load_direction'))
+    prior = data.get('load_prior')
+    if prior is not None:
+        values = prior if isinstance(prior, (list, tuple)) else [prior]
+        prior = tuple(_positive(value, 'load_prior[%d]' % i) for i, value in enumerate(values))
+    return name, direction, prior
 
 
 def _clearance(value, field):

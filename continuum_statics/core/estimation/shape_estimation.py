@@ -120,7 +120,8 @@ class ShapeEstimate:
     :ivar position_covariance: (N, 3, 3) m^2 of each backbone point at ``shape.s``, or None
         (the robot file has no ``model_uncertainty``): :mod:`state_estimation`
     :ivar tip_covariance: (6, 6) of the tip's position (m) and rotation (rad), base frame, or None
-    :ivar unmodelled: the unmodelled loads explained so far (:class:`state_estimation.Unmodelled`)
+    :ivar unmodelled: the unmodelled loads explained so far, and the tip load of the file's
+        ``load_model`` (:class:`state_estimation.Unmodelled`; :attr:`tip_wrench`)
     :ivar sensors: {name: :class:`sensors.SensorVerdict`} of the readings given
     :ivar sensitivity: the load columns (:class:`state_estimation.Sensitivity`), kept for the
         next call
@@ -161,6 +162,16 @@ class ShapeEstimate:
             return None
         tip = np.concatenate([self.sensitivity.positions[-1], self.sensitivity.angles[-1]])
         return tip @ self.unmodelled.covariance @ tip.T
+
+    @property
+    def tip_wrench(self):
+        """(6,) the file's ``load_model`` tip load [force N; moment N m], base frame; or None."""
+        return None if self.unmodelled is None else self.unmodelled.tip_wrench
+
+    @property
+    def tip_wrench_covariance(self):
+        """(6, 6) of :attr:`tip_wrench`; None without a load model."""
+        return None if self.unmodelled is None else self.unmodelled.tip_wrench_covariance
 
     @property
     def tensions(self):

@@ -25,6 +25,22 @@ the exact transition of its state-space form
 A tracker's last residual is then carried at first (the last-residual baseline's strength
 between nearby rows) and handed over to the slowly varying loads as it fades.
 
+With the robot file's ``load_model`` the tip load is part of the state too, ahead of the
+unmodelled loads: the parameters p of its :class:`~continuum_statics.core.estimation.
+load_estimation.LoadModel` (a payload's mass, a force along a direction, a force, a wrench; w =
+B p), with the model's prior N(0, diag(load_prior^2)). A load does not fade like the model's
+error: it is held, mean and variance, while the readings agree with it (a payload or a contact
+stays while the model's error follows the motion, and only that persistence tells the two apart
+to a tip tracker: both move its point the same way; a load that changes as fast as the model's
+error left a 20 g payload's sigma at 46 of its 50 g prior after 60 s of readings). A reading
+the gate sets aside that a new load explains (the load's variance back at its prior: a payload
+taken, a contact made) starts the load again from there, and is used. The model is solved at
+the load estimated so far (the tip load the caller gives plus B p), and the load's columns are
+derivatives there (:data:`LOAD_COLUMN_STEP`): the first-order correction below is about that
+point, ``Unmodelled.origin``, so a load far from zero is not a linearisation far from the
+estimate. Each reading is judged once and counted once, for the shape, the model's error and
+the load together.
+
 The shape under d is, to first order about the model's estimate (d = 0),
 
     r(s; d) = r(s) + G_r(s) d,  theta(s; d) = G_theta(s) d   (a small rotation of R(s))
@@ -93,11 +109,15 @@ CORRECTION_SIGMAS = 3.0
 #: which a derivative at the estimate misses (simulated truth: 95 % ellipsoids held 98.8 % of
 #: the cases with derivatives, 94.8 % with these steps).
 COLUMN_STEP = 1e-3
+#: Central-difference step of a tip-load column, as a fraction of the load's prior sigma: a
+#: derivative at the load estimated so far (the model is solved there).
+LOAD_COLUMN_STEP = 1e-3
 #: s of the model's estimates kept for late readings (an EM tracker's latency is 10-50 ms).
 HISTORY_SECONDS = 0.1
 #: ... and at most this many of them (a 1 kHz node: the last 0.1 s).
 HISTORY_LENGTH = 128
 #: Unmodelled-load groups, in the order of d: name, size (None: one per cable), unit.
+#: The tip load's parameters (the file's load_model) come first, before these.
 GROUPS = (('tip_force', 3, 'N'), ('section_moment', 3, 'N m'), ('cable_length', None, 'm'),
           ('base_position', 3, 'm'), ('drift', 3, 'm'), ('drift_rate', 3, 'm/s'))
 #: Groups whose columns are known without a solve: an offset of the whole backbone ...
@@ -114,12 +134,38 @@ class Unmodelled:
     :ivar mean: (k,) N, N m or m
     :ivar covariance: (k, k)
     :ivar stamp: s, or None
+    :ivar origin: (k,) the state the model was solved at (the tip load estimated before this
+        update; zero elsewhere), or None: zero
+    :ivar load_basis: (6, j) B of the file's load model (its parameters are the first j
+        entries), or None
     """
 
     names: tuple
     mean: np.ndarray
     covariance: np.ndarray
     stamp: float = None
+    origin: np.ndarray = None
+    load_basis: np.ndarray = None
+
+    @property
+    def correction(self):
+        """(k,) the state less the point the model was solved at: what moves the shape."""
+        return self.mean if self.origin is None else self.mean - self.origin
+
+    @property
+    def tip_wrench(self):
+        """(6,) [force N; moment N m] of the tip load, base frame; None without a load model."""
+        if self.load_basis is None:
+            return None
+        return self.load_basis @ self.mean[:self.load_basis.shape[1]]
+
+    @property
+    def tip_wrench_covariance(self):
+        """(6, 6) of :attr:`tip_wrench`; None without a load model."""
+        if self.load_basis is None:
+            return None
+        j = self.load_basis.shape[1]
+        return self.load_basis @ self.covariance[:j, :j] @ self.load_basis.T
 
     @property
     def sigma(self):
@@ -158,9 +204,12 @@ def group_sigma(uncertainty, group):
 
 @functools.lru_cache(maxsize=64)
 def prior_scales(robot):
-    """Return (names, sigma (k,)) of the unmodelled loads with a nonzero prior."""
+    """Return (names, sigma (k,)) of the state: the tip load's, then unmodelled loads'.
+
+    The unmodelled loads with a nonzero prior only.
+    """
     uncertainty = robot.model_uncertainty
-    names, sigmas = [], []
+    names, sigmas = list(_load_names(robot.load_model)), list(_load_prior(robot))
     for group, size, _ in GROUPS:
         sigma = group_sigma(uncertainty, group)
         if sigma <= 0.0:
@@ -173,27 +222,51 @@ def prior_scales(robot):
     return tuple(names), sigmas
 
 
+def _load_names(model):
+    """Return the names of a load model's parameters in the state ('tip_load.mass', ...)."""
+    if model is None:
+        return ()
+    if model.name in ('weight', 'direction'):
+        return ('tip_load.mass' if model.name == 'weight' else 'tip_load.force',)
+    axes = [('force', axis) for axis in 'xyz'] + (
+        [('moment', axis) for axis in 'xyz'] if model.name == 'wrench' else [])
+    return tuple('tip_load.%s_%s' % pair for pair in axes)
+
+
+def _load_prior(robot):
+    """Return (j,) the load model's prior standard deviations (none without one)."""
+    return () if robot.load_model is None else tuple(robot.load_model.prior)
+
+
+def load_size(robot):
+    """Return how many of the state's first entries are the tip load's parameters."""
+    return 0 if robot.load_model is None else robot.load_model.basis.shape[1]
+
+
 def propagate(robot, carried, stamp):
-    """Return the unmodelled loads at ``stamp`` from the last estimate's (:func:`decayed`)."""
+    """Return the state at ``stamp`` from the last estimate's (:func:`decayed`)."""
     names, prior = _prior(robot)
+    basis = None if robot.load_model is None else robot.load_model.basis
     if carried is None or carried.names != names:
-        return Unmodelled(names, np.zeros(len(names)), prior, stamp)
+        return Unmodelled(names, np.zeros(len(names)), prior, stamp, load_basis=basis)
     if stamp is None or carried.stamp is None:
         return Unmodelled(names, carried.mean, carried.covariance,
-                          carried.stamp if stamp is None else stamp)
+                          carried.stamp if stamp is None else stamp, load_basis=basis)
     # an older stamp is not a step back in time
     mean, covariance = decayed(carried.mean, carried.covariance, prior,
                                max(stamp - carried.stamp, 0.0),
-                               robot.model_uncertainty.correlation_time, _drift_time(robot))
-    return Unmodelled(names, mean, covariance, stamp)
+                               robot.model_uncertainty.correlation_time, _drift_time(robot),
+                               load_size(robot))
+    return Unmodelled(names, mean, covariance, stamp, load_basis=basis)
 
 
 def _moved_variance(robot, elapsed):
-    """Return (k, k) the variance the unmodelled loads' process adds over ``elapsed`` s."""
+    """Return (k, k) the variance the state's process adds over ``elapsed`` s."""
     names, prior = _prior(robot)
     zero = np.zeros(len(names))
     return decayed(zero, np.zeros_like(prior), prior, elapsed,
-                   robot.model_uncertainty.correlation_time, _drift_time(robot))[1]
+                   robot.model_uncertainty.correlation_time, _drift_time(robot),
+                   load_size(robot))[1]
 
 
 def _drift_time(robot):
@@ -211,24 +284,31 @@ def _prior(robot):
     return names, prior
 
 
-def decayed(mean, covariance, prior, elapsed, correlation_time, drift_time=None):
+def decayed(mean, covariance, prior, elapsed, correlation_time, drift_time=None, held=0):
     """Return (mean, covariance) ``elapsed`` s later, towards their stationary N(0, prior).
 
     Ornstein-Uhlenbeck with ``correlation_time``; with ``drift_time`` the last six entries are
     the drift and its rate (x, y, z each), moved by the Matern 3/2 transition (module doc).
+    The first ``held`` entries (the tip load) are held: mean and variance.
     """
-    if drift_time is None:
+    if drift_time is None and not held:
         a = math.exp(-elapsed / correlation_time)
         return a * mean, a * a * covariance + (1.0 - a * a) * prior
     # a node's steps repeat (1 ms at 1 kHz) up to the clock's rounding: one cached transition
-    transition = _transition(len(mean), round(float(elapsed), 9), correlation_time, drift_time)
-    return (transition @ mean, transition @ (covariance - prior) @ transition.T + prior)
+    transition = _transition(len(mean), round(float(elapsed), 9), correlation_time, drift_time,
+                             held)
+    # T (P - P0) T^T + P0 keeps a held block as it is
+    return transition @ mean, transition @ (covariance - prior) @ transition.T + prior
 
 
 @functools.lru_cache(maxsize=256)
-def _transition(size, elapsed, correlation_time, drift_time):
+def _transition(size, elapsed, correlation_time, drift_time, held=0):
     """Return the (size, size) transition of :func:`decayed`."""
     transition = np.eye(size) * math.exp(-elapsed / correlation_time)
+    transition[:held, :held] = np.eye(held)
+    if drift_time is None:
+        transition.setflags(write=False)
+        return transition
     lam = math.sqrt(3.0) / drift_time
     e = math.exp(-lam * elapsed)
     offset = np.arange(size - 6, size - 3)  # each axis's offset; its rate three further on
@@ -264,9 +344,16 @@ def estimate_state(robot, lengths, tip_force, tip_moment, tensions, sensors, sta
     ``stamp`` (s). ``previous`` carries the unmodelled loads and the load columns.
     """
     readings = _readings(robot, sensors)
+    prior = propagate(robot, getattr(previous, 'unmodelled', None), stamp)
+    j = load_size(robot)
+    if j:  # the model solved at the tip load estimated so far (module doc)
+        prior = dataclasses.replace(prior, origin=np.concatenate([prior.mean[:j],
+                                                                  np.zeros(len(prior.mean) - j)]))
+        wrench = robot.load_model.basis @ prior.mean[:j]
+        tip_force = np.asarray(tip_force, dtype=float) + wrench[:3]
+        tip_moment = np.asarray(tip_moment, dtype=float) + wrench[3:]
     model = shape_estimation.estimate_shape(robot, lengths, tip_force, tip_moment, tensions,
                                             start, jacobians, previous, tracking)
-    prior = propagate(robot, getattr(previous, 'unmodelled', None), stamp)
     if not len(prior.mean):
         verdicts = {name: SensorVerdict(False, math.nan, 'the robot file gives no '
                                         'model_uncertainty to correct')
@@ -277,7 +364,7 @@ def estimate_state(robot, lengths, tip_force, tip_moment, tensions, sensors, sta
     history = _history(getattr(previous, 'history', ()), stamp, model.shape, sensitivity)
     posterior, verdicts = _update(robot, model.shape, sensitivity, prior, readings, stamp,
                                   history)
-    shape = _corrected(model.shape, sensitivity, posterior.mean)
+    shape = _corrected(model.shape, sensitivity, posterior.correction)
     return dataclasses.replace(model, shape=shape, unmodelled=posterior, sensors=verdicts,
                                sensitivity=sensitivity, history=history)
 
@@ -329,7 +416,7 @@ def stale_columns(robot, estimate):
     sensitivity = getattr(estimate, 'sensitivity', None)
     if sensitivity is None or not len(sensitivity.tips):
         return False
-    tip = estimate.shape.tip_position - sensitivity.positions[-1] @ estimate.unmodelled.mean
+    tip = estimate.shape.tip_position - sensitivity.positions[-1] @ estimate.unmodelled.correction
     moved = _moved_since(robot, sensitivity.tips, tip)
     return bool(np.max(moved) > REFRESH_DISTANCE * robot.length)
 
@@ -402,7 +489,8 @@ def _sensitivity(robot, model, lengths, tip_force, tip_moment, tensions, carried
             continue
         step = np.zeros(size)
         small = names[j].startswith('cable_length') and robot.tendons.is_ideal
-        step[j] = sigma[j] * (COLUMN_STEP if small else 1.0)
+        step[j] = sigma[j] * (LOAD_COLUMN_STEP if group == 'tip_load'
+                              else COLUMN_STEP if small else 1.0)
         # central differences from the estimate's state: an unfinished estimate's error cancels
         # (every column at once, the first time: solved to the end)
         up, down = (_moved(robot, model, lengths, tip_force, tip_moment, tensions, sign * step,
@@ -431,8 +519,13 @@ def _moved(robot, model, lengths, tip_force, tip_moment, tensions, load, trackin
 
 
 def split_loads(robot, load):
-    """Return (tip force (3,), tip moment (3,), cable length errors (n,)) of a load vector."""
-    parts, at = [], 0
+    """Return (tip force (3,), tip moment (3,), cable length errors (n,)) of a state vector.
+
+    The tip load's parameters (B p) and the unmodelled tip force and moment add up.
+    """
+    at = load_size(robot)
+    wrench = robot.load_model.basis @ load[:at] if at else np.zeros(6)
+    parts = []
     for group, size, _ in GROUPS[:3]:
         size = len(robot.cable_names) if size is None else size
         if getattr(robot.model_uncertainty, group) > 0.0:
@@ -440,7 +533,7 @@ def split_loads(robot, load):
             at += size
         else:
             parts.append(np.zeros(size))
-    return parts
+    return parts[0] + wrench[:3], parts[1] + wrench[3:], parts[2]
 
 
 def _small_rotations(rotations, reference):
@@ -488,14 +581,17 @@ def _update(robot, shape, sensitivity, prior, readings, stamp, history=()):
     Each reading is predicted by the model of its own stamp (``history``, :func:`_rows_at`).
     """
     mean, covariance = prior.mean, prior.covariance
+    origin = np.zeros_like(mean) if prior.origin is None else prior.origin
+    j = load_size(robot)
+    prior_load, renewed = _prior(robot)[1][:j, :j], False
     verdicts, rows, residuals, noises = {}, [], [], []
     for sensor, reading in readings.items():
         predicted, jac, rotation = _rows_at(history, reading.stamp, sensor, shape, sensitivity)
-        innovation = reading.position - predicted - jac[:3] @ mean
+        innovation = reading.position - predicted - jac[:3] @ (mean - origin)
         sigmas = [reading.sigma or sensor.position_sigma] * 3  # the device's own wins
         if sensor.kind == 'pose' and reading.rotation is not None:
             angle = _small_rotations(reading.rotation[None], rotation[None])[0]
-            innovation = np.concatenate([innovation, angle - jac[3:] @ mean])
+            innovation = np.concatenate([innovation, angle - jac[3:] @ (mean - origin)])
             sigmas += [sensor.angle_sigma] * 3
         else:
             jac = jac[:3]
@@ -506,12 +602,24 @@ def _update(robot, shape, sensitivity, prior, readings, stamp, history=()):
         spread = jac @ covariance @ jac.T + noise
         chi2 = float(innovation @ _solve(spread, innovation))
         gate = gates.gate(len(innovation), gates.SENSOR_GATE_PROBABILITY)
+        renewing = False
+        if not chi2 <= gate and j and not renewed:
+            # a new tip load (a payload taken, a contact made), if that explains the reading
+            candidate = covariance.copy()
+            candidate[:j, :] = candidate[:, :j] = 0.0
+            candidate[:j, :j] = prior_load
+            spread = jac @ candidate @ jac.T + noise
+            again = float(innovation @ _solve(spread, innovation))
+            if again <= gate:
+                covariance, chi2, renewed = candidate, again, True
+                renewing = True
         if not chi2 <= gate:
             verdicts[sensor.name] = SensorVerdict(False, chi2, (
                 'innovation chi2 %.1f above the gate %.1f (%.1f mm from the estimate)'
                 % (chi2, gate, 1e3 * float(np.linalg.norm(innovation[:3])))))
             continue
-        verdicts[sensor.name] = SensorVerdict(True, chi2)
+        verdicts[sensor.name] = SensorVerdict(
+            True, chi2, 'the tip load changed: started again from its prior' if renewing else '')
         rows.append(jac)
         residuals.append(innovation)
         noises.append(noise)
@@ -522,7 +630,7 @@ def _update(robot, shape, sensitivity, prior, readings, stamp, history=()):
     # a fault slower than the gate: the correction readings add up to over calls is judged too
     # (a first correction, from nothing carried, is the gate's alone)
     beyond = np.any(prior.mean) and _beyond_the_prior(robot, shape, sensitivity, readings,
-                                                     verdicts, mean)
+                                                     verdicts, mean - origin)
     if beyond:
         for name in beyond:
             verdicts[name] = SensorVerdict(False, verdicts[name].chi2, beyond[name])
@@ -538,8 +646,13 @@ def _beyond_the_prior(robot, shape, sensitivity, readings, verdicts, mean):
     reading used). The correction the estimate now applies at each sensor, G m, is judged
     against what the model's uncertainty allows there (G P0 G^T): beyond CORRECTION_SIGMAS
     along its direction, the readings are set aside and the correction kept where it was.
+    The model's error alone is judged (the tip load's part of ``mean`` is left out: a load may
+    be anything its prior allows).
     """
-    p0 = _prior(robot)[1]
+    p0 = _prior(robot)[1].copy()
+    j = load_size(robot)
+    mean = np.concatenate([np.zeros(j), mean[j:]])
+    p0[:j, :] = p0[:, :j] = 0.0
     beyond = {}
     for sensor in readings:
         if not verdicts[sensor.name].used:
