@@ -8,7 +8,8 @@ every node; without them the nodes use their parameters (default: the tendon rob
 ``config/`` and the simulated driver). Ctrl-C (SIGINT) or SIGTERM stops everything and exits
 with code 0. ``--load-estimator`` adds the
 tip_load_estimator node: ``auto`` (default) for a robot file with a tendon model, whose cable
-tensions the simulated driver reports (ideal cables alone give it nothing that sees a load).
+tensions the simulated driver reports (ideal cables alone give it nothing that sees a load);
+never for a robot file with ``load_model`` (statics estimates that load with the shape).
 
 On a robot computer with ROS installed, ``launch/continuum_robot.launch.py`` starts the same
 three nodes as separate processes.
@@ -52,15 +53,25 @@ def use_fast_discovery_profile():
 
 
 def wants_load_estimator(choice, robot=None):
-    """Whether bringup runs tip_load_estimator (``auto``: the robot has a tendon model)."""
-    if choice != 'auto':
-        return choice == 'on'
+    """Whether bringup runs tip_load_estimator (``auto``: the robot has a tendon model).
+
+    Never for a robot file with ``load_model``: statics estimates that load with the shape and
+    publishes ``tip_wrench_estimate`` and ``tip_contact`` itself.
+    """
+    if choice == 'off':
+        return False
     from continuum_statics.config_paths import default_robot_file, load_robot_file
     try:
         model = load_robot_file(robot or default_robot_file())
     except ValueError:
-        return False  # the nodes report the bad file themselves
-    return bool(model.cable_names) and not model.tendons.is_ideal
+        return choice == 'on'  # the nodes report the bad file themselves
+    if model.load_model is not None:
+        if choice == 'on':
+            print('bringup: the robot file names load_model: statics publishes '
+                  'tip_wrench_estimate and tip_contact; tip_load_estimator is not started',
+                  file=sys.stderr)
+        return False
+    return choice == 'on' or (bool(model.cable_names) and not model.tendons.is_ideal)
 
 
 def node_factories(robot=None, driver=None, namespace='continuum', load_estimator=False):

@@ -159,8 +159,14 @@ def tip_wrench_limits(robot, params):
     return params['max_tip_force'] or force, params['max_tip_torque'] or torque
 
 
-def tip_wrench_topic(params):
-    """Return the topic a node takes its tip load from (``tip_wrench_source``)."""
+def tip_wrench_topic(params, robot=None):
+    """Return the topic a node takes its tip load from (``tip_wrench_source``).
+
+    statics passes its ``robot``: with the file's ``load_model`` it estimates the load itself
+    (and publishes tip_wrench_estimate), so a known extra load may come on tip_wrench only.
+    """
+    if robot is not None and robot.load_model is not None:
+        return 'tip_wrench'
     return 'tip_wrench_estimate' if params['tip_wrench_source'] == 'estimate' else 'tip_wrench'
 
 

@@ -27,6 +27,20 @@ def _check_wrench_source(value):
     return None if value in ('topic', 'estimate') else "must be 'topic' or 'estimate'"
 
 
+def contact_specs(read_only=False):
+    """Return the tip_contact parameters (tip_load_estimator; statics with a load_model)."""
+    return [
+        ParamSpec('contact_threshold', 0.0, 'tip_contact turns true when the force exceeds '
+                  'this with 3-sigma confidence, N (0: E I / L^2 of the rod, the force that '
+                  'bends it by about 30 degrees)', 0.0, 1e6, read_only=read_only),
+        # 0.2 s: 20 estimates at the default rate, so that no single outlier or transient
+        # declares contact, and still below a human's reaction time (~0.25 s)
+        ParamSpec('contact_min_time', 0.2, 'tip_contact changes only once the force has '
+                  'stayed past the threshold this long (and the cables have stood still), s',
+                  0.0, 60.0, read_only=read_only),
+    ]
+
+
 def _check_load_model(value):
     return None if value in ('weight', 'force', 'wrench', 'direction') else (
         "must be 'weight', 'force', 'wrench' or 'direction' (with load_direction)")
@@ -83,8 +97,10 @@ def statics_parameters():
                   'replaced by zero, s (0: never expires)', 0.0, 3600.0),
         ParamSpec('tip_wrench_source', 'topic', 'where the tip load comes from: topic '
                   '(tip_wrench, a force sensor or your estimator) or estimate '
-                  '(tip_wrench_estimate, from the tip_load_estimator node)', read_only=True,
-                  check=_check_wrench_source),
+                  '(tip_wrench_estimate, from the tip_load_estimator node; a robot file with '
+                  'load_model: statics estimates the load itself and reads tip_wrench)',
+                  read_only=True, check=_check_wrench_source),
+        *contact_specs(read_only=True),
         ParamSpec('warn_residual', 1e-4, 'above this cable-length residual (RMS) the '
                   'lengths are not exactly a shape: the best fit is published with WARN on '
                   'diagnostics, m (>= 1e-7: a smaller one would warn on round-off)', 1e-7,
@@ -257,13 +273,6 @@ def tip_load_estimator_parameters():
                   check=_direction),
         ParamSpec('input_timeout', 0.5, 'cable_states and tip_pose_measured older than this '
                   'are not used, s', 0.001, 60.0),
-        ParamSpec('contact_threshold', 0.0, 'tip_contact turns true when the force exceeds '
-                  'this with 3-sigma confidence, N (0: E I / L^2 of the rod, the force that '
-                  'bends it by about 30 degrees)', 0.0, 1e6),
-        # 0.2 s: 20 estimates at the default rate, so that no single outlier or transient
-        # declares contact, and still below a human's reaction time (~0.25 s)
-        ParamSpec('contact_min_time', 0.2, 'tip_contact changes only once the force has '
-                  'stayed past the threshold this long (and the cables have stood still), s',
-                  0.0, 60.0),
+        *contact_specs(),
         max_stamp_offset_spec(),
     ]

@@ -21,7 +21,8 @@ With ``model_uncertainty``: ``tip_pose_covariance``
 z, rotation about x, y, z) and ``backbone_estimate``
 (continuum_statics_interfaces/msg/BackboneEstimate: the published backbone's poses with each
 point's position covariance, 9 values per pose, row-major). Both latched like ``tip_pose``, at
-most ``covariance_rate`` Hz.
+most ``covariance_rate`` Hz. With the file's ``load_model``: ``tip_wrench_estimate`` and
+``tip_contact`` (:mod:`.load_outputs`).
 """
 import math
 import threading
@@ -32,6 +33,7 @@ import numpy as np
 
 from continuum_statics.control.health import OK, WARN
 from continuum_statics.core.rod.rotations import quaternion_to_rotation, rotation_to_quaternion
+from continuum_statics.nodes.load_outputs import TipLoadOutputs
 from continuum_statics.nodes.obstacle_messages import transforms_of
 from continuum_statics.nodes.obstacle_set import FrameTree, frame_name
 from continuum_statics.nodes.qos import LATCHED_QOS, LATEST_SENSOR_QOS, TF_QOS, TF_STATIC_QOS
@@ -41,7 +43,8 @@ from continuum_statics.nodes.ros_conversions import tracked_pose
 class SensorTopics:
     """Subscriptions of a robot's sensors and publishers of the fused estimate's covariance."""
 
-    def __init__(self, node, robot, inbox, rate=0.0):
+    def __init__(self, node, robot, inbox, rate=0.0, contact=(0.0, 0.2)):
+        """``contact``: (contact_threshold N, contact_min_time s) of the file's load_model."""
         self.robot = robot
         # the covariance messages are built in Python (~0.15 ms with the backbone's): at most
         # ``rate`` Hz, not at the encoders' 1 kHz (0: with every estimate)
@@ -83,6 +86,8 @@ class SensorTopics:
             if message is not None:
                 self._backbone_pub = node.create_publisher(message, 'backbone_estimate',
                                                            LATCHED_QOS)
+        self.load = (TipLoadOutputs(node, robot, *contact) if robot.load_model is not None
+                     else None)
 
     def _on_tf(self, msg):
         with self._tree_lock:
@@ -158,6 +163,8 @@ class SensorTopics:
         message.pose.pose = _pose(points[-1], quaternions[-1])
         message.pose.covariance = [float(v) for v in tip.ravel()]
         self._covariance_pub.publish(message)
+        if self.load is not None:
+            self.load.publish(estimate, header)
         if self._backbone_pub is None:
             return
         nodes = np.clip(np.searchsorted(estimate.shape.s, s_samples), 0, len(covariance) - 1)
@@ -201,6 +208,8 @@ class SensorTopics:
         """
         values.update(self.values())
         values['tip_sigma_mm'] = tip_sigma
+        if self.load is not None:
+            level, message = self.load.diagnose(level, message, values)
         note = self.problems()
         return (WARN, note) if note and level == OK else (level, message)
 

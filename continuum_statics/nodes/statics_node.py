@@ -11,16 +11,11 @@ the shape (:mod:`.shape_markers` says why); ``/diagnostics`` at 1 Hz. Obstacles 
 file's and the ``obstacles`` topic's) rest the body in every solve; ``contacts`` goes out with
 every shape (:mod:`.statics_obstacles`).
 
-Newest measurement, no backlog: ``cable_states`` is served by a thread of its own
-(:mod:`~continuum_statics.nodes.dedicated_intake`) from a short queue (``input_queue_depth``) that
-absorbs millisecond scheduling stalls; as soon as the oldest queued measurement is older than
-``max_input_lag`` the queue is drained and only the newest is solved. (With depth 1, stalls of a
-few ms on a loaded 2-core machine lost 5-10 % of a 1 kHz stream.) Without the dedicated thread the
-subscription is depth 1 on the executor.
-
-Backbone and tip pose are published as serialized bytes filled from a template
-(:class:`~continuum_statics.nodes.pose_encoder.PoseSequenceEncoder`): converting a Path
-object costs rclpy ~0.2 ms, which matters at 1 kHz.
+Newest measurement, no backlog: ``cable_states`` is served by a thread of its own from a short
+queue (:mod:`~continuum_statics.nodes.dedicated_intake` says why); backbone and tip pose are
+serialized from a template (:class:`~continuum_statics.nodes.pose_encoder.PoseSequenceEncoder`).
+Sensors, covariances and, with the robot file's ``load_model``, the tip load estimated with the
+shape (``tip_wrench_estimate``, ``tip_contact``): :mod:`.sensor_topics`, :mod:`.load_outputs`.
 
 Two residual thresholds (RMS difference between the measured cable lengths and those of the
 best-fitting shape, m). Up to ``warn_residual`` the lengths are a shape of the robot. Above it the
@@ -141,7 +136,9 @@ class StaticsNode(RunnerHooks, Node):
                                      self._problems.reject, self._obstacles.topic)
         # before the intake starts: its thread reads the sensors from the first message on
         self._sensors = (SensorTopics(self, self.robot, self._tracker.inbox,
-                                      self._params['covariance_rate'])
+                                      self._params['covariance_rate'],
+                                      (self._params['contact_threshold'],
+                                       self._params['contact_min_time']))
                          if self.robot.sensors or self.robot.model_uncertainty else None)
         self._intake = make_intake(self, self._params['dedicated_intake_thread'])
         self._input = None
@@ -151,7 +148,7 @@ class StaticsNode(RunnerHooks, Node):
                 measurement_queue_qos(self._params['input_queue_depth']), raw=True,
                 max_lag=self._params['max_input_lag'], fallback_qos=LATEST_SENSOR_QOS)
             self._intake.start()
-        self.create_subscription(WrenchStamped, tip_wrench_topic(self._params),
+        self.create_subscription(WrenchStamped, tip_wrench_topic(self._params, self.robot),
                                  self._on_tip_wrench, LATEST_SENSOR_QOS)
         self._markers.set_rate(self._params['marker_rate'])
         self._passive_load = None

@@ -64,6 +64,11 @@ class TipLoadEstimatorNode(RunnerHooks, Node):
         super().__init__(node_name, **kwargs)
         self._params = ParameterTable(self, tip_load_estimator_parameters())
         self.robot = load_robot_file(self._params['robot_file'], self.get_logger())
+        if self.robot.load_model is not None:  # two estimates of one load on one topic
+            raise ValueError('robot file %r names load_model: statics estimates the tip load '
+                             'with the shape and publishes tip_wrench_estimate and '
+                             'tip_contact; run tip_load_estimator with a robot file without '
+                             'it' % self._params['robot_file'])
         self._load = self._load_model()
         self._diagnostics = self.create_publisher(diag.DiagnosticArray, '/diagnostics', 10)
         diag.publish_starting(self, self._diagnostics, self.robot.name, 'compiling kernels')

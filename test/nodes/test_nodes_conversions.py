@@ -257,6 +257,24 @@ def test_bringup_splits_its_options_from_the_ros_arguments():
     assert options.namespace == 'continuum' and ros_args == []
 
 
+def test_bringup_leaves_the_load_to_statics_when_the_robot_file_names_a_load_model(
+        tmp_path, capsys):
+    import yaml
+
+    from continuum_statics.nodes.bringup import wants_load_estimator
+
+    real = REPO / 'config' / 'tendon_robot_real_tendons.yaml'
+    assert wants_load_estimator('auto', str(real))  # a tendon model: the estimator node
+    document = yaml.safe_load(real.read_text())
+    document['load_model'] = 'force'
+    path = tmp_path / 'robot.yaml'
+    path.write_text(yaml.safe_dump(document))
+    assert not wants_load_estimator('auto', str(path))  # statics estimates that load
+    assert not wants_load_estimator('on', str(path))  # two estimates of one load: refused
+    assert 'statics publishes tip_wrench_estimate' in capsys.readouterr().err
+    assert not wants_load_estimator('off', str(real))
+
+
 @pytest.mark.parametrize('spec, value, message', [
     (ParamSpec('rate', 1.0, 'Hz', 0.5, 2.0), 0.1, 'rate must be >= 0.5'),
     (ParamSpec('rate', 1.0, 'Hz', 0.5, 2.0), 3.0, 'rate must be <= 2'),

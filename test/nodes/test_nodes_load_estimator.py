@@ -234,3 +234,17 @@ def test_a_payload_is_weighed_with_load_model_weight(harness):
     assert abs(mass - 0.02) <= 3.0 * sigma and sigma < 1e-3, (mass, sigma)
     force = np.array([float(v) for v in seen['force_n'].split()])
     np.testing.assert_allclose(force, mass * np.asarray(rod.gravity), rtol=1e-3, atol=1e-9)
+
+
+@pytest.mark.ros
+def test_the_estimator_node_refuses_a_robot_file_whose_load_statics_estimates(harness,
+                                                                           tmp_path):
+    """Two estimates of one load on tip_wrench_estimate: refused at start, saying why."""
+    import yaml
+
+    document = yaml.safe_load(REAL_FILE.read_text())
+    document['load_model'] = 'weight'
+    path = tmp_path / 'robot.yaml'
+    path.write_text(yaml.safe_dump(document))
+    with pytest.raises(ValueError, match='statics estimates the tip load'):
+        harness.add(TipLoadEstimatorNode, robot_file=str(path))

@@ -44,9 +44,10 @@ def robot_file(tmp_path, correlation_time, covariance=False, frame_id=None):
 class Rig:
     """statics with sensors, a client feeding cable_states and a tip tracker."""
 
-    def __init__(self, harness, path):
+    def __init__(self, harness, path, **params):
         self.robot = load_robot(path)
-        self.node = harness.add(StaticsNode, robot_file=str(path), max_stamp_offset=1e12)
+        self.node = harness.add(StaticsNode, robot_file=str(path), max_stamp_offset=1e12,
+                                **params)
         client = harness.client()
         self.backbone = Collector(client, Path, 'backbone', LATCHED)
         self.tip = Collector(client, PoseStamped, 'tip_pose', LATCHED)
@@ -64,7 +65,7 @@ class Rig:
         self.stamp = 100
         self.lengths = np.array(self.robot.straight_cable_lengths)
         self.lengths[0] -= 0.004
-        model = self.robot.with_model_uncertainty(None)
+        model = self.robot.without_load_model().with_model_uncertainty(None)
         shape = model.solve_lengths(self.lengths).shape
         self.model_marker = shape.tip_position + shape.tip_rotation @ self.robot.tip_marker
 
@@ -265,3 +266,46 @@ def test_a_tracker_in_its_own_frame_is_read_through_tf(harness, tmp_path):
     assert passed.header.frame_id == rig.robot.base_frame_id
     position = passed.pose.position
     np.testing.assert_allclose([position.x, position.y, position.z], seen, atol=1e-9)
+
+
+def test_the_files_load_model_is_estimated_with_the_shape_and_published(harness, tmp_path):
+    """Issue 43 item 1: statics publishes tip_wrench_estimate and tip_contact from its state.
+
+    A push of 0.3 N along x (load_model 'direction') moves the tracked tip 19 mm; one reading
+    of it gives the push, and contact; the push gone, the next reading takes it back.
+    """
+    from geometry_msgs.msg import WrenchStamped
+    from std_msgs.msg import Bool
+
+    document = yaml.safe_load(SENSOR_ROBOT.read_text())
+    document.update(load_model='direction', load_direction=[1.0, 0.0, 0.0],
+                    model_uncertainty={'tip_force': 1e-3, 'base_position': 1e-5,
+                                       'correlation_time': 10.0})
+    path = FilePath(tmp_path) / 'robot.yaml'
+    path.write_text(yaml.safe_dump(document))
+    rig = Rig(harness, path, contact_threshold=0.05, contact_min_time=0.0)
+    client = harness.client('load_listener')
+    wrench = Collector(client, WrenchStamped, 'tip_wrench_estimate', 10)
+    contact = Collector(client, Bool, 'tip_contact', LATCHED)
+    model = rig.robot.without_load_model().with_model_uncertainty(None)
+    pushed = model.solve_lengths(rig.lengths, tip_force=(0.3, 0.0, 0.0)).shape
+    push = pushed.tip_position + pushed.tip_rotation @ rig.robot.tip_marker - rig.model_marker
+    assert np.linalg.norm(push) > 0.015
+    rig.feed()
+    wait_until(lambda: wrench.last is not None, 5.0, 'tip_wrench_estimate')
+    assert abs(wrench.last.wrench.force.x) < 0.01 and wrench.last.header.frame_id == 'base_link'
+    wait_until(lambda: contact.last is not None and not contact.last.data, 5.0, 'no contact')
+    rig.see(push)
+    rig.feed()
+    wait_until(lambda: wrench.last.header.stamp.sec == rig.stamp, 5.0, 'the pushed estimate')
+    assert abs(wrench.last.wrench.force.x - 0.3) < 0.01
+    assert wrench.last.wrench.force.y == wrench.last.wrench.force.z == 0.0
+    wait_until(lambda: contact.last.data, 5.0, 'tip_contact true')
+    wait_until(lambda: diagnostic_values(rig.diagnostics, '/statics') is not None and
+               'in_contact' in diagnostic_values(rig.diagnostics, '/statics')[0], 5.0,
+               'the load on diagnostics')
+    rig.see([0.0, 0.0, 0.0])
+    rig.feed()
+    wait_until(lambda: wrench.last.header.stamp.sec == rig.stamp, 5.0, 'the released estimate')
+    assert abs(wrench.last.wrench.force.x) < 0.01
+    wait_until(lambda: not contact.last.data, 5.0, 'tip_contact false')

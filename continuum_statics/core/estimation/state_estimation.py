@@ -112,6 +112,11 @@ COLUMN_STEP = 1e-3
 #: Central-difference step of a tip-load column, as a fraction of the load's prior sigma: a
 #: derivative at the load estimated so far (the model is solved there).
 LOAD_COLUMN_STEP = 1e-3
+#: A tip-load update that moves the load further than this many of its posterior sigmas from
+#: where the model was solved is done again there (the columns' linear range), at most
+#: LOAD_ITERATIONS times in a call (a payload hung, a contact made: 2-4 iterations).
+LOAD_LINEAR = 0.5
+LOAD_ITERATIONS = 8
 #: s of the model's estimates kept for late readings (an EM tracker's latency is 10-50 ms).
 HISTORY_SECONDS = 0.1
 #: ... and at most this many of them (a 1 kHz node: the last 0.1 s).
@@ -346,27 +351,46 @@ def estimate_state(robot, lengths, tip_force, tip_moment, tensions, sensors, sta
     readings = _readings(robot, sensors)
     prior = propagate(robot, getattr(previous, 'unmodelled', None), stamp)
     j = load_size(robot)
-    if j:  # the model solved at the tip load estimated so far (module doc)
-        prior = dataclasses.replace(prior, origin=np.concatenate([prior.mean[:j],
-                                                                  np.zeros(len(prior.mean) - j)]))
-        wrench = robot.load_model.basis @ prior.mean[:j]
-        tip_force = np.asarray(tip_force, dtype=float) + wrench[:3]
-        tip_moment = np.asarray(tip_moment, dtype=float) + wrench[3:]
-    model = shape_estimation.estimate_shape(robot, lengths, tip_force, tip_moment, tensions,
-                                            start, jacobians, previous, tracking)
-    if not len(prior.mean):
-        verdicts = {name: SensorVerdict(False, math.nan, 'the robot file gives no '
-                                        'model_uncertainty to correct')
-                    for name in (sensor.name for sensor in readings)}
-        return dataclasses.replace(model, unmodelled=prior, sensors=verdicts)
-    sensitivity = _sensitivity(robot, model, lengths, tip_force, tip_moment, tensions,
-                               getattr(previous, 'sensitivity', None), prior, tracking)
-    history = _history(getattr(previous, 'history', ()), stamp, model.shape, sensitivity)
-    posterior, verdicts = _update(robot, model.shape, sensitivity, prior, readings, stamp,
-                                  history)
+    carried = getattr(previous, 'sensitivity', None)
+    for _ in range(LOAD_ITERATIONS if j else 1):
+        if j:  # the model solved at the tip load estimated so far (module doc)
+            prior = dataclasses.replace(prior, origin=np.concatenate(
+                [prior.origin[:j] if prior.origin is not None else prior.mean[:j],
+                 np.zeros(len(prior.mean) - j)]))
+            wrench = robot.load_model.basis @ prior.origin[:j]
+            force, moment = tip_force + wrench[:3], tip_moment + wrench[3:]
+        else:
+            force, moment = tip_force, tip_moment
+        model = shape_estimation.estimate_shape(robot, lengths, force, moment, tensions, start,
+                                                jacobians, previous, tracking)
+        if not len(prior.mean):
+            verdicts = {name: SensorVerdict(False, math.nan, 'the robot file gives no '
+                                            'model_uncertainty to correct')
+                        for name in (sensor.name for sensor in readings)}
+            return dataclasses.replace(model, unmodelled=prior, sensors=verdicts)
+        sensitivity = _sensitivity(robot, model, lengths, force, moment, tensions, carried,
+                                   prior, tracking)
+        history = _history(getattr(previous, 'history', ()), stamp, model.shape, sensitivity)
+        posterior, verdicts = _update(robot, model.shape, sensitivity, prior, readings, stamp,
+                                      history)
+        if not j or _relinearised(posterior, j):
+            break
+        # the load moved beyond the linear range of its columns: solve the model there and
+        # update again from the same prior (an iterated Kalman update: Gauss-Newton on the
+        # maximum a posteriori load; Bell & Cathey 1993)
+        prior = dataclasses.replace(prior, origin=np.concatenate(
+            [posterior.mean[:j], np.zeros(len(prior.mean) - j)]))
+        carried = None  # every column again, at the new load
     shape = _corrected(model.shape, sensitivity, posterior.correction)
     return dataclasses.replace(model, shape=shape, unmodelled=posterior, sensors=verdicts,
                                sensitivity=sensitivity, history=history)
+
+
+def _relinearised(posterior, j):
+    """Return True when the posterior load is within LOAD_LINEAR sigma of where it was solved."""
+    moved = posterior.correction[:j]
+    sigma = np.sqrt(np.diag(posterior.covariance)[:j])
+    return bool(np.all(np.abs(moved) <= LOAD_LINEAR * sigma))
 
 
 def _history(carried, stamp, shape, sensitivity):
