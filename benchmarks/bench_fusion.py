@@ -1,7 +1,8 @@
 """``python -m benchmarks.bench_fusion``: the fused estimate at 1 kHz, two sensors.
 
 For each robot file with sensors (and every example robot given a tip tracker and an EM coil at
-its middle disk, with the stand-in ``model_uncertainty``), the motion of
+its middle disk, with the stand-in ``model_uncertainty``; the payload file also carries its
+tip load in the fused state), the motion of
 :func:`bench_noisy.motion` (motors at 20 mm/s between far-apart equilibria, 1 kHz, encoder noise
 10 um) is estimated as the statics node does (warm-started, bounded), with the tip tracker's
 readings at 125 Hz and the coil's at 40 Hz (their noise added to the model's own points), and
@@ -25,7 +26,7 @@ from continuum_statics.core.estimation.shape_estimation import Tracking
 from continuum_statics.core.robot import Robot
 from continuum_statics.core.warmup import warm_up
 
-SENSOR_FILES = ('tendon_robot_sensors.yaml', 'ftdcr_v6_fused.yaml')
+SENSOR_FILES = ('tendon_robot_sensors.yaml', 'tendon_robot_payload.yaml', 'ftdcr_v6_fused.yaml')
 PLAIN_FILES = ('tendon_robot.yaml', 'three_section_robot.yaml',
                'three_section_robot_real_tendons.yaml')
 #: Encoder noise (m) and the sensors' periods in 1 kHz samples (125 Hz optical, 40 Hz EM).
@@ -53,7 +54,8 @@ def _stats(times):
 
 def bench(robot, label, samples):
     """Print the fused estimate's and the model alone's figures on one motion."""
-    plain = Robot(dataclasses.replace(robot.description, sensors=(), model_uncertainty=None))
+    plain = Robot(dataclasses.replace(robot.description, sensors=(), model_uncertainty=None,
+                                      load=None))
     exact = motion(plain, samples)
     rng = np.random.default_rng(1)
     measured = exact + rng.normal(0.0, NOISE, exact.shape)

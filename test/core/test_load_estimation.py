@@ -259,18 +259,24 @@ def test_the_robot_files_load_model_weighs_a_payload_with_the_shape():
     for mass in np.linspace(0.0, 0.05, 21):
         tip = truth.solve_bvp(mass * gravity).tip_position
         seen = []
-        for _ in range(20):
+        for k in range(20):
             stamp += 0.1
             seen.append(tip + rng.normal(0.0, 1e-3, 3))
             previous = rod.estimate_shape([], sensors={'tracker': SensorReading(seen[-1])},
                                           stamp=stamp, warm_start=previous)
-            assert previous.sensors['tracker'].used, previous.sensors['tracker'].reason
+            verdict = previous.sensors['tracker']
+            if k == 0 and mass > 0.0:  # a new load: held until the next reading agrees
+                assert not verdict.used and 'a new tip load if the next' in verdict.reason
+                seen.pop()
+            else:
+                assert verdict.used, verdict.reason
+                assert ('the tip load changed' in verdict.reason) == (k == 1 and mass > 0.0)
         estimate, sigma = previous.unmodelled.mean[0], math.sqrt(
             previous.unmodelled.covariance[0, 0])
         np.testing.assert_allclose(previous.tip_wrench, estimate * np.r_[gravity, 0, 0, 0])
-        # 20 readings held: the one-shot estimate's sigma (Gauss-Newton, one reading) / sqrt 20
+        # the readings held: the one-shot estimate's sigma (Gauss-Newton, one reading) / sqrt n
         once = rod.estimate_tip_wrench(tip_position=np.mean(seen, axis=0), load='weight',
-                                       noise={'tip_position': 1e-3 / math.sqrt(20)})
+                                       noise={'tip_position': 1e-3 / math.sqrt(len(seen))})
         assert 0.7 < sigma / once.mass_sigma < 1.5, (sigma, once.mass_sigma)
         assert abs(estimate - once.mass) < 3.0 * once.mass_sigma + 0.01 * mass
         assert abs(estimate - mass) <= 3.0 * sigma + (1.0 / 0.95 - 1.0) * (mass + own), \
@@ -281,6 +287,34 @@ def test_the_robot_files_load_model_weighs_a_payload_with_the_shape():
     masses = np.linspace(0.0, 0.05, 21)
     assert np.sqrt(np.mean(np.square(errors))) < (1.0 / 0.95 - 1.0) * np.sqrt(
         np.mean((masses + own) ** 2)) + 3.0 * np.sqrt(np.mean(np.square(sigmas)))
+
+
+def test_an_outlier_or_a_jumping_tracker_leaves_the_held_load_where_it_was():
+    # a new load moves every reading from then on; a jumping tracker (+-10 mm, alternating) or
+    # one outlier does not: each is set aside, and the payload's estimate stays
+    from continuum_statics.core.description.sensors import SensorReading
+    robot = load_robot(REPO / 'config' / 'tendon_robot_payload.yaml')
+    model = robot.without_load_model().with_model_uncertainty(None)
+    lengths = robot.straight_cable_lengths - np.array([0.004, 0.0, 0.0, 0.0])
+    shape = model.solve_lengths(lengths).shape
+    marker = shape.tip_position + shape.tip_rotation @ robot.tip_marker
+    rng = np.random.default_rng(7)
+    previous = None
+    for k in range(60):
+        jump = 0.0 if k < 20 or k == 40 else (0.01 if k % 2 else -0.01)
+        if k > 40:
+            jump = 0.0 if k != 50 else 0.01  # one outlier
+        reading = marker + np.array([jump, 0.0, 0.0]) + rng.normal(0.0, 5e-4, 3)
+        previous = robot.estimate_shape(lengths, sensors={'tip_tracker': SensorReading(
+            reading)}, stamp=0.01 * k, warm_start=previous)
+        verdict = previous.sensors['tip_tracker']
+        assert verdict.used == (jump == 0.0), (k, verdict)
+        if k == 19:
+            held, sigma = previous.unmodelled.mean[0], math.sqrt(
+                previous.unmodelled.covariance[0, 0])
+    assert abs(previous.unmodelled.mean[0] - held) < sigma
+    tip = previous.shape.tip_position + previous.shape.tip_rotation @ robot.tip_marker
+    assert np.linalg.norm(tip - marker) < 1e-3
 
 
 def test_weight_on_the_bundled_tip_load_rows():

@@ -33,8 +33,10 @@ error: it is held, mean and variance, while the readings agree with it (a payloa
 stays while the model's error follows the motion, and only that persistence tells the two apart
 to a tip tracker: both move its point the same way; a load that changes as fast as the model's
 error left a 20 g payload's sigma at 46 of its 50 g prior after 60 s of readings). A reading
-the gate sets aside that a new load explains (the load's variance back at its prior: a payload
-taken, a contact made) starts the load again from there, and is used. The model is solved at
+the gate sets aside is held; when the same sensor's next reading agrees with it (a new load
+moves every reading from then on, an outlier one) and a new load explains it (the load's
+variance back at its prior: a payload taken, a contact made), the load starts again from
+there, and the reading is used. The model is solved at
 the load estimated so far (the tip load the caller gives plus B p), and the load's columns are
 derivatives there (:data:`LOAD_COLUMN_STEP`): the first-order correction below is about that
 point, ``Unmodelled.origin``, so a load far from zero is not a linearisation far from the
@@ -143,6 +145,9 @@ class Unmodelled:
         update; zero elsewhere), or None: zero
     :ivar load_basis: (6, j) B of the file's load model (its parameters are the first j
         entries), or None
+    :ivar pending: ((sensor name, innovation (3,) m), ...) of readings the gate set aside that a
+        new tip load may explain: the next reading of that sensor that agrees starts the load
+        again (:func:`_update`)
     """
 
     names: tuple
@@ -151,6 +156,7 @@ class Unmodelled:
     stamp: float = None
     origin: np.ndarray = None
     load_basis: np.ndarray = None
+    pending: tuple = ()
 
     @property
     def correction(self):
@@ -256,13 +262,14 @@ def propagate(robot, carried, stamp):
         return Unmodelled(names, np.zeros(len(names)), prior, stamp, load_basis=basis)
     if stamp is None or carried.stamp is None:
         return Unmodelled(names, carried.mean, carried.covariance,
-                          carried.stamp if stamp is None else stamp, load_basis=basis)
+                          carried.stamp if stamp is None else stamp, load_basis=basis,
+                          pending=carried.pending)
     # an older stamp is not a step back in time
     mean, covariance = decayed(carried.mean, carried.covariance, prior,
                                max(stamp - carried.stamp, 0.0),
                                robot.model_uncertainty.correlation_time, _drift_time(robot),
                                load_size(robot))
-    return Unmodelled(names, mean, covariance, stamp, load_basis=basis)
+    return Unmodelled(names, mean, covariance, stamp, load_basis=basis, pending=carried.pending)
 
 
 def _moved_variance(robot, elapsed):
@@ -608,6 +615,7 @@ def _update(robot, shape, sensitivity, prior, readings, stamp, history=()):
     origin = np.zeros_like(mean) if prior.origin is None else prior.origin
     j = load_size(robot)
     prior_load, renewed = _prior(robot)[1][:j, :j], False
+    pending = dict(prior.pending)
     verdicts, rows, residuals, noises = {}, [], [], []
     for sensor, reading in readings.items():
         predicted, jac, rotation = _rows_at(history, reading.stamp, sensor, shape, sensitivity)
@@ -626,9 +634,15 @@ def _update(robot, shape, sensitivity, prior, readings, stamp, history=()):
         spread = jac @ covariance @ jac.T + noise
         chi2 = float(innovation @ _solve(spread, innovation))
         gate = gates.gate(len(innovation), gates.SENSOR_GATE_PROBABILITY)
-        renewing = False
-        if not chi2 <= gate and j and not renewed:
-            # a new tip load (a payload taken, a contact made), if that explains the reading
+        renewing, held = False, ''
+        if not chi2 <= gate and j and not renewed and not _agrees(
+                pending.get(sensor.name), innovation[:3], noise[:3, :3]):
+            # a new tip load (a payload taken, a contact made) moves every reading from now
+            # on, an outlier one: the next reading of this sensor decides
+            pending[sensor.name] = innovation[:3]
+            held = '; held: a new tip load if the next reading agrees'
+        elif not chi2 <= gate and j and not renewed:
+            # the second reading that agrees: a new tip load, if that explains it
             candidate = covariance.copy()
             candidate[:j, :] = candidate[:, :j] = 0.0
             candidate[:j, :j] = prior_load
@@ -639,14 +653,16 @@ def _update(robot, shape, sensitivity, prior, readings, stamp, history=()):
                 renewing = True
         if not chi2 <= gate:
             verdicts[sensor.name] = SensorVerdict(False, chi2, (
-                'innovation chi2 %.1f above the gate %.1f (%.1f mm from the estimate)'
-                % (chi2, gate, 1e3 * float(np.linalg.norm(innovation[:3])))))
+                'innovation chi2 %.1f above the gate %.1f (%.1f mm from the estimate)%s'
+                % (chi2, gate, 1e3 * float(np.linalg.norm(innovation[:3])), held)))
             continue
+        pending.pop(sensor.name, None)
         verdicts[sensor.name] = SensorVerdict(
             True, chi2, 'the tip load changed: started again from its prior' if renewing else '')
         rows.append(jac)
         residuals.append(innovation)
         noises.append(noise)
+    prior = dataclasses.replace(prior, pending=tuple(pending.items()))
     if not rows:
         return prior, verdicts
     mean, covariance = fused(mean, covariance, np.vstack(rows), np.concatenate(residuals),
@@ -660,6 +676,19 @@ def _update(robot, shape, sensitivity, prior, readings, stamp, history=()):
             verdicts[name] = SensorVerdict(False, verdicts[name].chi2, beyond[name])
         return prior, verdicts
     return dataclasses.replace(prior, mean=mean, covariance=covariance), verdicts
+
+
+def _agrees(pending, innovation, noise):
+    """Return True when ``innovation`` (3,) agrees with a ``pending`` one within the gate.
+
+    Their difference is two readings' noise (``noise``: one reading's (3, 3)) if both saw one
+    new load.
+    """
+    if pending is None:
+        return False
+    difference = innovation - pending
+    return float(difference @ _solve(2.0 * noise, difference)) <= gates.gate(
+        3, gates.SENSOR_GATE_PROBABILITY)
 
 
 def _beyond_the_prior(robot, shape, sensitivity, readings, verdicts, mean):
