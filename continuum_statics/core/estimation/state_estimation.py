@@ -119,6 +119,9 @@ LOAD_COLUMN_STEP = 1e-3
 #: LOAD_ITERATIONS times in a call (a payload hung, a contact made: 2-4 iterations).
 LOAD_LINEAR = 0.5
 LOAD_ITERATIONS = 8
+#: ... and this many in a call with a per-call bound (a node at 1 kHz: the next call, solved at
+#: the load this one reached, goes on).
+BOUNDED_LOAD_ITERATIONS = 2
 #: s of the model's estimates kept for late readings (an EM tracker's latency is 10-50 ms).
 HISTORY_SECONDS = 0.1
 #: ... and at most this many of them (a 1 kHz node: the last 0.1 s).
@@ -141,8 +144,8 @@ class Unmodelled:
     :ivar mean: (k,) N, N m or m
     :ivar covariance: (k, k)
     :ivar stamp: s, or None
-    :ivar origin: (k,) the state the model was solved at (the tip load estimated before this
-        update; zero elsewhere), or None: zero
+    :ivar origin: (k,) the state the model was solved at (a tip load estimated earlier, kept
+        while the load stays within LOAD_LINEAR sigma of it; zero elsewhere), or None: zero
     :ivar load_basis: (6, j) B of the file's load model (its parameters are the first j
         entries), or None
     :ivar pending: ((sensor name, innovation (3,) m), ...) of readings the gate set aside that a
@@ -262,14 +265,14 @@ def propagate(robot, carried, stamp):
         return Unmodelled(names, np.zeros(len(names)), prior, stamp, load_basis=basis)
     if stamp is None or carried.stamp is None:
         return Unmodelled(names, carried.mean, carried.covariance,
-                          carried.stamp if stamp is None else stamp, load_basis=basis,
-                          pending=carried.pending)
+                          carried.stamp if stamp is None else stamp, carried.origin, basis,
+                          carried.pending)
     # an older stamp is not a step back in time
     mean, covariance = decayed(carried.mean, carried.covariance, prior,
                                max(stamp - carried.stamp, 0.0),
                                robot.model_uncertainty.correlation_time, _drift_time(robot),
                                load_size(robot))
-    return Unmodelled(names, mean, covariance, stamp, load_basis=basis, pending=carried.pending)
+    return Unmodelled(names, mean, covariance, stamp, carried.origin, basis, carried.pending)
 
 
 def _moved_variance(robot, elapsed):
@@ -303,14 +306,28 @@ def decayed(mean, covariance, prior, elapsed, correlation_time, drift_time=None,
     the drift and its rate (x, y, z each), moved by the Matern 3/2 transition (module doc).
     The first ``held`` entries (the tip load) are held: mean and variance.
     """
-    if drift_time is None and not held:
+    if drift_time is None:  # a diagonal transition T = diag(t): P <- t t^T (P - P0) + P0
         a = math.exp(-elapsed / correlation_time)
-        return a * mean, a * a * covariance + (1.0 - a * a) * prior
+        if not held:
+            return a * mean, a * a * covariance + (1.0 - a * a) * prior
+        t, outer = _held_transition(len(mean), held, a)
+        return t * mean, outer * (covariance - prior) + prior
     # a node's steps repeat (1 ms at 1 kHz) up to the clock's rounding: one cached transition
     transition = _transition(len(mean), round(float(elapsed), 9), correlation_time, drift_time,
                              held)
     # T (P - P0) T^T + P0 keeps a held block as it is
     return transition @ mean, transition @ (covariance - prior) @ transition.T + prior
+
+
+@functools.lru_cache(maxsize=256)
+def _held_transition(size, held, a):
+    """Return (t (size,), t t^T) of a diagonal transition: 1 on the held entries, else a."""
+    t = np.full(size, a)
+    t[:held] = 1.0
+    outer = np.outer(t, t)
+    t.setflags(write=False)
+    outer.setflags(write=False)
+    return t, outer
 
 
 @functools.lru_cache(maxsize=256)
@@ -359,11 +376,14 @@ def estimate_state(robot, lengths, tip_force, tip_moment, tensions, sensors, sta
     prior = propagate(robot, getattr(previous, 'unmodelled', None), stamp)
     j = load_size(robot)
     carried = getattr(previous, 'sensitivity', None)
-    for _ in range(LOAD_ITERATIONS if j else 1):
-        if j:  # the model solved at the tip load estimated so far (module doc)
-            prior = dataclasses.replace(prior, origin=np.concatenate(
-                [prior.origin[:j] if prior.origin is not None else prior.mean[:j],
-                 np.zeros(len(prior.mean) - j)]))
+    if j and (prior.origin is None or not _relinearised(prior, j)):
+        # the model solved at the tip load estimated so far (module doc); kept while the load
+        # stays within its columns' linear range (the same tip load: a warm solve's work)
+        prior = dataclasses.replace(prior, origin=np.concatenate(
+            [prior.mean[:j], np.zeros(len(prior.mean) - j)]))
+    bounded = tracking is not None and bool(tracking.max_model_runs)
+    for _ in range((BOUNDED_LOAD_ITERATIONS if bounded else LOAD_ITERATIONS) if j else 1):
+        if j:
             wrench = robot.load_model.basis @ prior.origin[:j]
             force, moment = tip_force + wrench[:3], tip_moment + wrench[3:]
         else:
@@ -387,17 +407,19 @@ def estimate_state(robot, lengths, tip_force, tip_moment, tensions, sensors, sta
         # maximum a posteriori load; Bell & Cathey 1993)
         prior = dataclasses.replace(prior, origin=np.concatenate(
             [posterior.mean[:j], np.zeros(len(prior.mean) - j)]))
-        carried = None  # every column again, at the new load
+        # the columns are made again where the tip moved far (REFRESH_DISTANCE) when solved to
+        # the end; a bounded call keeps them (a chord iteration: the model itself is solved at
+        # the new load each time), so a node's call stays bounded
+        carried = sensitivity
     shape = _corrected(model.shape, sensitivity, posterior.correction)
     return dataclasses.replace(model, shape=shape, unmodelled=posterior, sensors=verdicts,
                                sensitivity=sensitivity, history=history)
 
 
-def _relinearised(posterior, j):
-    """Return True when the posterior load is within LOAD_LINEAR sigma of where it was solved."""
-    moved = posterior.correction[:j]
-    sigma = np.sqrt(np.diag(posterior.covariance)[:j])
-    return bool(np.all(np.abs(moved) <= LOAD_LINEAR * sigma))
+def _relinearised(state, j):
+    """Return True when the state's load is within LOAD_LINEAR sigma of where it was solved."""
+    moved = state.mean[:j] - state.origin[:j]
+    return bool((moved * moved <= LOAD_LINEAR ** 2 * state.covariance.diagonal()[:j]).all())
 
 
 def _history(carried, stamp, shape, sensitivity):
@@ -612,18 +634,17 @@ def _update(robot, shape, sensitivity, prior, readings, stamp, history=()):
     Each reading is predicted by the model of its own stamp (``history``, :func:`_rows_at`).
     """
     mean, covariance = prior.mean, prior.covariance
-    origin = np.zeros_like(mean) if prior.origin is None else prior.origin
+    moved = prior.correction  # what the model's shape does not have yet
     j = load_size(robot)
-    prior_load, renewed = _prior(robot)[1][:j, :j], False
-    pending = dict(prior.pending)
+    renewed, pending, changed = False, dict(prior.pending), False
     verdicts, rows, residuals, noises = {}, [], [], []
     for sensor, reading in readings.items():
         predicted, jac, rotation = _rows_at(history, reading.stamp, sensor, shape, sensitivity)
-        innovation = reading.position - predicted - jac[:3] @ (mean - origin)
+        innovation = reading.position - predicted - jac[:3] @ moved
         sigmas = [reading.sigma or sensor.position_sigma] * 3  # the device's own wins
         if sensor.kind == 'pose' and reading.rotation is not None:
             angle = _small_rotations(reading.rotation[None], rotation[None])[0]
-            innovation = np.concatenate([innovation, angle - jac[3:] @ (mean - origin)])
+            innovation = np.concatenate([innovation, angle - jac[3:] @ moved])
             sigmas += [sensor.angle_sigma] * 3
         else:
             jac = jac[:3]
@@ -639,13 +660,13 @@ def _update(robot, shape, sensitivity, prior, readings, stamp, history=()):
                 pending.get(sensor.name), innovation[:3], noise[:3, :3]):
             # a new tip load (a payload taken, a contact made) moves every reading from now
             # on, an outlier one: the next reading of this sensor decides
-            pending[sensor.name] = innovation[:3]
+            pending[sensor.name], changed = innovation[:3], True
             held = '; held: a new tip load if the next reading agrees'
         elif not chi2 <= gate and j and not renewed:
             # the second reading that agrees: a new tip load, if that explains it
             candidate = covariance.copy()
             candidate[:j, :] = candidate[:, :j] = 0.0
-            candidate[:j, :j] = prior_load
+            candidate[:j, :j] = _prior(robot)[1][:j, :j]
             spread = jac @ candidate @ jac.T + noise
             again = float(innovation @ _solve(spread, innovation))
             if again <= gate:
@@ -656,21 +677,22 @@ def _update(robot, shape, sensitivity, prior, readings, stamp, history=()):
                 'innovation chi2 %.1f above the gate %.1f (%.1f mm from the estimate)%s'
                 % (chi2, gate, 1e3 * float(np.linalg.norm(innovation[:3])), held)))
             continue
-        pending.pop(sensor.name, None)
+        changed = pending.pop(sensor.name, None) is not None or changed
         verdicts[sensor.name] = SensorVerdict(
             True, chi2, 'the tip load changed: started again from its prior' if renewing else '')
         rows.append(jac)
         residuals.append(innovation)
         noises.append(noise)
-    prior = dataclasses.replace(prior, pending=tuple(pending.items()))
+    if changed:
+        prior = dataclasses.replace(prior, pending=tuple(pending.items()))
     if not rows:
         return prior, verdicts
     mean, covariance = fused(mean, covariance, np.vstack(rows), np.concatenate(residuals),
                              _block_diagonal(noises))
     # a fault slower than the gate: the correction readings add up to over calls is judged too
     # (a first correction, from nothing carried, is the gate's alone)
-    beyond = np.any(prior.mean) and _beyond_the_prior(robot, shape, sensitivity, readings,
-                                                     verdicts, mean - origin)
+    beyond = np.any(prior.mean) and _beyond_the_prior(  # on the posterior's correction
+        robot, shape, sensitivity, readings, verdicts, mean - prior.mean + moved)
     if beyond:
         for name in beyond:
             verdicts[name] = SensorVerdict(False, verdicts[name].chi2, beyond[name])
