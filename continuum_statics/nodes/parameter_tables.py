@@ -36,7 +36,8 @@ def contact_specs(read_only=False):
         # 0.2 s: 20 estimates at the default rate, so that no single outlier or transient
         # declares contact, and still below a human's reaction time (~0.25 s)
         ParamSpec('contact_min_time', 0.2, 'tip_contact changes only once the force has '
-                  'stayed past the threshold this long (and the cables have stood still), s',
+                  'stayed past the threshold this long (tip_load_estimator: and the cables have '
+                  'stood still; statics: the load is not updated while they move), s',
                   0.0, 60.0, read_only=read_only),
     ]
 

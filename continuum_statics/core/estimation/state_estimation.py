@@ -122,6 +122,13 @@ LOAD_ITERATIONS = 8
 #: ... and this many in a call with a per-call bound (a node at 1 kHz: the next call, solved at
 #: the load this one reached, goes on).
 BOUNDED_LOAD_ITERATIONS = 2
+#: A cable length that moved this far (m) from where the cables last moved is motion, and the
+#: tip load is not updated until LOAD_SETTLE s after the last motion (a moving or swinging rod
+#: is no statics).
+LOAD_MOTION = 5e-5
+LOAD_SETTLE = 1.0
+#: A reading held as a possible new tip load expires after this many s.
+PENDING_SECONDS = 1.0
 #: s of the model's estimates kept for late readings (an EM tracker's latency is 10-50 ms).
 HISTORY_SECONDS = 0.1
 #: ... and at most this many of them (a 1 kHz node: the last 0.1 s).
@@ -148,9 +155,11 @@ class Unmodelled:
         while the load stays within LOAD_LINEAR sigma of it; zero elsewhere), or None: zero
     :ivar load_basis: (6, j) B of the file's load model (its parameters are the first j
         entries), or None
-    :ivar pending: ((sensor name, innovation (3,) m), ...) of readings the gate set aside that a
-        new tip load may explain: the next reading of that sensor that agrees starts the load
-        again (:func:`_update`)
+    :ivar pending: ((sensor name, (position (3,) m, stamp s)), ...) of readings the gate set
+        aside that a new tip load may explain: the next reading of that sensor that agrees
+        renews the load (:func:`_update`)
+    :ivar still: (cable lengths (n,) m, stamp s) where the cables last moved: while they move
+        and LOAD_SETTLE s after, the tip load is not updated (:func:`_moving`)
     """
 
     names: tuple
@@ -160,6 +169,7 @@ class Unmodelled:
     origin: np.ndarray = None
     load_basis: np.ndarray = None
     pending: tuple = ()
+    still: tuple = None
 
     @property
     def correction(self):
@@ -266,13 +276,14 @@ def propagate(robot, carried, stamp):
     if stamp is None or carried.stamp is None:
         return Unmodelled(names, carried.mean, carried.covariance,
                           carried.stamp if stamp is None else stamp, carried.origin, basis,
-                          carried.pending)
+                          carried.pending, carried.still)
     # an older stamp is not a step back in time
     mean, covariance = decayed(carried.mean, carried.covariance, prior,
                                max(stamp - carried.stamp, 0.0),
                                robot.model_uncertainty.correlation_time, _drift_time(robot),
                                load_size(robot))
-    return Unmodelled(names, mean, covariance, stamp, carried.origin, basis, carried.pending)
+    return Unmodelled(names, mean, covariance, stamp, carried.origin, basis, carried.pending,
+                      carried.still)
 
 
 def _moved_variance(robot, elapsed):
@@ -307,10 +318,11 @@ def decayed(mean, covariance, prior, elapsed, correlation_time, drift_time=None,
     The first ``held`` entries (the tip load) are held: mean and variance.
     """
     if drift_time is None:  # a diagonal transition T = diag(t): P <- t t^T (P - P0) + P0
-        a = math.exp(-elapsed / correlation_time)
         if not held:
+            a = math.exp(-elapsed / correlation_time)
             return a * mean, a * a * covariance + (1.0 - a * a) * prior
-        t, outer = _held_transition(len(mean), held, a)
+        t, outer = _held_transition(len(mean), held, round(float(elapsed), 9),
+                                    correlation_time)
         return t * mean, outer * (covariance - prior) + prior
     # a node's steps repeat (1 ms at 1 kHz) up to the clock's rounding: one cached transition
     transition = _transition(len(mean), round(float(elapsed), 9), correlation_time, drift_time,
@@ -320,9 +332,9 @@ def decayed(mean, covariance, prior, elapsed, correlation_time, drift_time=None,
 
 
 @functools.lru_cache(maxsize=256)
-def _held_transition(size, held, a):
+def _held_transition(size, held, elapsed, correlation_time):
     """Return (t (size,), t t^T) of a diagonal transition: 1 on the held entries, else a."""
-    t = np.full(size, a)
+    t = np.full(size, math.exp(-elapsed / correlation_time))
     t[:held] = 1.0
     outer = np.outer(t, t)
     t.setflags(write=False)
@@ -335,9 +347,6 @@ def _transition(size, elapsed, correlation_time, drift_time, held=0):
     """Return the (size, size) transition of :func:`decayed`."""
     transition = np.eye(size) * math.exp(-elapsed / correlation_time)
     transition[:held, :held] = np.eye(held)
-    if drift_time is None:
-        transition.setflags(write=False)
-        return transition
     lam = math.sqrt(3.0) / drift_time
     e = math.exp(-lam * elapsed)
     offset = np.arange(size - 6, size - 3)  # each axis's offset; its rate three further on
@@ -355,10 +364,15 @@ def _solve(spread, vector):
     return np.linalg.solve(factor.T, np.linalg.solve(factor, vector))
 
 
-def fused(mean, covariance, jac, innovation, noise):
-    """Return (mean, covariance) after the Kalman update with rows ``jac`` (the module's)."""
+def fused(mean, covariance, jac, innovation, noise, frozen=0):
+    """Return (mean, covariance) after the Kalman update with rows ``jac`` (the module's).
+
+    The first ``frozen`` entries are not updated (their gain is zero; the others' update
+    considers their uncertainty: a Schmidt-Kalman update, valid in the Joseph form).
+    """
     spread = jac @ covariance @ jac.T + noise
     gain = np.linalg.solve(spread, jac @ covariance).T
+    gain[:frozen] = 0.0
     # Joseph form: stays symmetric positive semi-definite in floating point
     keep = np.eye(len(mean)) - gain @ jac
     covariance = keep @ covariance @ keep.T + gain @ noise @ gain.T
@@ -375,12 +389,13 @@ def estimate_state(robot, lengths, tip_force, tip_moment, tensions, sensors, sta
     readings = _readings(robot, sensors)
     prior = propagate(robot, getattr(previous, 'unmodelled', None), stamp)
     j = load_size(robot)
+    if j:
+        prior = _moving(prior, lengths, stamp, tracking)
     carried = getattr(previous, 'sensitivity', None)
-    if j and (prior.origin is None or not _relinearised(prior, j)):
+    if j and (prior.origin is None or not _within_linear_range(prior, j)):
         # the model solved at the tip load estimated so far (module doc); kept while the load
         # stays within its columns' linear range (the same tip load: a warm solve's work)
-        prior = dataclasses.replace(prior, origin=np.concatenate(
-            [prior.mean[:j], np.zeros(len(prior.mean) - j)]))
+        prior = _solved_at(prior, prior.mean, j)
     bounded = tracking is not None and bool(tracking.max_model_runs)
     for _ in range((BOUNDED_LOAD_ITERATIONS if bounded else LOAD_ITERATIONS) if j else 1):
         if j:
@@ -397,16 +412,16 @@ def estimate_state(robot, lengths, tip_force, tip_moment, tensions, sensors, sta
             return dataclasses.replace(model, unmodelled=prior, sensors=verdicts)
         sensitivity = _sensitivity(robot, model, lengths, force, moment, tensions, carried,
                                    prior, tracking)
-        history = _history(getattr(previous, 'history', ()), stamp, model.shape, sensitivity)
+        history = _history(getattr(previous, 'history', ()), stamp, model.shape, sensitivity,
+                           prior.origin)
         posterior, verdicts = _update(robot, model.shape, sensitivity, prior, readings, stamp,
                                       history)
-        if not j or _relinearised(posterior, j):
+        if not j or _within_linear_range(posterior, j):
             break
         # the load moved beyond the linear range of its columns: solve the model there and
         # update again from the same prior (an iterated Kalman update: Gauss-Newton on the
         # maximum a posteriori load; Bell & Cathey 1993)
-        prior = dataclasses.replace(prior, origin=np.concatenate(
-            [posterior.mean[:j], np.zeros(len(prior.mean) - j)]))
+        prior = _solved_at(prior, posterior.mean, j)
         # the columns are made again where the tip moved far (REFRESH_DISTANCE) when solved to
         # the end; a bounded call keeps them (a chord iteration: the model itself is solved at
         # the new load each time), so a node's call stays bounded
@@ -416,17 +431,50 @@ def estimate_state(robot, lengths, tip_force, tip_moment, tensions, sensors, sta
                                sensitivity=sensitivity, history=history)
 
 
-def _relinearised(state, j):
+def _moving(prior, lengths, stamp, tracking):
+    """Return ``prior`` with ``still`` updated: where and when the cables last moved.
+
+    A cable that moved more than LOAD_MOTION (or 5 sigma of the encoders) from where the
+    cables last moved is motion; the statics model has no dynamics, so a moving rod (and one
+    still swinging, LOAD_SETTLE s after) looks loaded: the load is not updated then, as the
+    tip_load_estimator node holds its last estimate at rest.
+    """
+    if stamp is None or lengths is None or not len(lengths):
+        return prior
+    lengths = np.asarray(lengths, dtype=float)
+    threshold = max(LOAD_MOTION, 5.0 * getattr(tracking, 'length_noise', 0.0))
+    if prior.still is None or prior.still[0].shape != lengths.shape:
+        return dataclasses.replace(prior, still=(lengths.copy(), -math.inf))
+    if np.max(np.abs(lengths - prior.still[0])) > threshold:
+        return dataclasses.replace(prior, still=(lengths.copy(), stamp))
+    return prior
+
+
+def load_held(state):
+    """Return True while the tip load is not updated: the cables moved under LOAD_SETTLE s ago."""
+    return (state.still is not None and state.stamp is not None
+            and state.stamp - state.still[1] < LOAD_SETTLE)
+
+
+def _solved_at(prior, mean, j):
+    """Return ``prior`` with its origin at the tip load of ``mean`` (zero elsewhere)."""
+    origin = np.zeros(len(mean))
+    origin[:j] = mean[:j]
+    return dataclasses.replace(prior, origin=origin)
+
+
+def _within_linear_range(state, j):
     """Return True when the state's load is within LOAD_LINEAR sigma of where it was solved."""
     moved = state.mean[:j] - state.origin[:j]
     return bool((moved * moved <= LOAD_LINEAR ** 2 * state.covariance.diagonal()[:j]).all())
 
 
-def _history(carried, stamp, shape, sensitivity):
+def _history(carried, stamp, shape, sensitivity, origin=None):
     """Return the model's estimates of the last HISTORY_SECONDS up to this one (oldest first).
 
-    Without a stamp there is no history; a stamp before the newest kept (a replay started
-    again, a clock reset) starts it again.
+    Each entry: (stamp, shape, sensitivity, the state it was solved at). Without a stamp
+    there is no history; a stamp before the newest kept (a replay started again, a clock
+    reset) starts it again.
     """
     if stamp is None:
         return ()
@@ -436,27 +484,33 @@ def _history(carried, stamp, shape, sensitivity):
     while first < len(carried) and carried[first][0] < stamp - HISTORY_SECONDS:
         first += 1  # usually one a call: the history moves on with the stamps
     first = max(first, len(carried) - HISTORY_LENGTH + 1)
-    return carried[first:] + ((stamp, shape, sensitivity),)
+    return carried[first:] + ((stamp, shape, sensitivity, origin),)
 
 
-def _rows_at(history, stamp, sensor, shape, sensitivity):
-    """Return ``sensor``'s (prediction, H, rotation) of the model at ``stamp`` (d = 0).
+def _rows_at(history, stamp, sensor, shape, sensitivity, origin=None):
+    """Return ``sensor``'s (prediction, H, rotation, shift) of the model at ``stamp`` (d = 0).
 
     Interpolated between the kept estimates that bracket ``stamp`` (the oldest kept for an
     older one); the current estimate when ``stamp`` is None, not before it or nothing is kept.
+    ``shift`` (rows of H) brings a kept estimate solved at another state (a tip load since
+    relinearised) to the current ``origin``: H_k (origin - origin_k), zero without a load.
     """
     if stamp is None or len(history) < 2 or stamp >= history[-1][0]:
-        return _sensor_rows(shape, sensitivity, sensor)
+        return (*_sensor_rows(shape, sensitivity, sensor), 0.0)
     after = max(bisect.bisect_left(history, stamp, key=lambda moment: moment[0]), 1)
-    (t0, shape0, sens0), (t1, shape1, sens1) = history[after - 1], history[after]
+    (t0, shape0, sens0, origin0), (t1, shape1, sens1, origin1) = (history[after - 1],
+                                                                  history[after])
     k = sensitivity.positions.shape[2]
     if sens0.positions.shape[2] != k or sens1.positions.shape[2] != k:
-        return _sensor_rows(shape, sensitivity, sensor)  # other unmodelled loads then
+        return (*_sensor_rows(shape, sensitivity, sensor), 0.0)  # other unmodelled loads then
     w = min(max((stamp - t0) / (t1 - t0), 0.0), 1.0) if t1 > t0 else 1.0
     point0, jac0, rotation0 = _sensor_rows(shape0, sens0, sensor)
     point1, jac1, rotation1 = _sensor_rows(shape1, sens1, sensor)
+    shift = 0.0
+    if origin is not None:
+        shift = ((1.0 - w) * jac0 @ (origin - origin0) + w * jac1 @ (origin - origin1))
     return ((1.0 - w) * point0 + w * point1, (1.0 - w) * jac0 + w * jac1,
-            rotation1 if w >= 0.5 else rotation0)
+            rotation1 if w >= 0.5 else rotation0, shift)
 
 
 def stale_columns(robot, estimate):
@@ -637,14 +691,17 @@ def _update(robot, shape, sensitivity, prior, readings, stamp, history=()):
     moved = prior.correction  # what the model's shape does not have yet
     j = load_size(robot)
     renewed, pending, changed = False, dict(prior.pending), False
+    moving = bool(j) and load_held(prior)
     verdicts, rows, residuals, noises = {}, [], [], []
     for sensor, reading in readings.items():
-        predicted, jac, rotation = _rows_at(history, reading.stamp, sensor, shape, sensitivity)
-        innovation = reading.position - predicted - jac[:3] @ moved
+        predicted, jac, rotation, shift = _rows_at(history, reading.stamp, sensor, shape,
+                                                   sensitivity, prior.origin)
+        shift = np.broadcast_to(shift, len(jac))
+        innovation = reading.position - predicted - shift[:3] - jac[:3] @ moved
         sigmas = [reading.sigma or sensor.position_sigma] * 3  # the device's own wins
         if sensor.kind == 'pose' and reading.rotation is not None:
             angle = _small_rotations(reading.rotation[None], rotation[None])[0]
-            innovation = np.concatenate([innovation, angle - jac[3:] @ moved])
+            innovation = np.concatenate([innovation, angle - shift[3:] - jac[3:] @ moved])
             sigmas += [sensor.angle_sigma] * 3
         else:
             jac = jac[:3]
@@ -656,22 +713,22 @@ def _update(robot, shape, sensitivity, prior, readings, stamp, history=()):
         chi2 = float(innovation @ _solve(spread, innovation))
         gate = gates.gate(len(innovation), gates.SENSOR_GATE_PROBABILITY)
         renewing, held = False, ''
-        if not chi2 <= gate and j and not renewed and not _agrees(
-                pending.get(sensor.name), innovation[:3], noise[:3, :3]):
-            # a new tip load (a payload taken, a contact made) moves every reading from now
-            # on, an outlier one: the next reading of this sensor decides
-            pending[sensor.name], changed = innovation[:3], True
-            held = '; held: a new tip load if the next reading agrees'
-        elif not chi2 <= gate and j and not renewed:
-            # the second reading that agrees: a new tip load, if that explains it
-            candidate = covariance.copy()
-            candidate[:j, :] = candidate[:, :j] = 0.0
-            candidate[:j, :j] = _prior(robot)[1][:j, :j]
-            spread = jac @ candidate @ jac.T + noise
-            again = float(innovation @ _solve(spread, innovation))
-            if again <= gate:
-                covariance, chi2, renewed = candidate, again, True
-                renewing = True
+        if not chi2 <= gate and j and not renewed and not moving:
+            # a new tip load (a payload taken, a contact made) moves every reading from then
+            # on, an outlier one: a reading set aside is held, and the next of that sensor
+            # that agrees with it decides, if a new load explains it (the load's variance back
+            # at its prior, around the load so far)
+            if _agrees(pending.get(sensor.name), reading, noise[:3, :3], stamp):
+                candidate = covariance.copy()
+                candidate[:j, :] = candidate[:, :j] = 0.0
+                candidate[:j, :j] = _prior(robot)[1][:j, :j]
+                again = float(innovation @ _solve(jac @ candidate @ jac.T + noise, innovation))
+                if again <= gate:
+                    covariance, chi2, renewed = candidate, again, True
+                    renewing = True
+            if not renewing:
+                pending[sensor.name], changed = (reading.position, stamp), True
+                held = '; held: a new tip load if the next reading agrees'
         if not chi2 <= gate:
             verdicts[sensor.name] = SensorVerdict(False, chi2, (
                 'innovation chi2 %.1f above the gate %.1f (%.1f mm from the estimate)%s'
@@ -679,7 +736,8 @@ def _update(robot, shape, sensitivity, prior, readings, stamp, history=()):
             continue
         changed = pending.pop(sensor.name, None) is not None or changed
         verdicts[sensor.name] = SensorVerdict(
-            True, chi2, 'the tip load changed: started again from its prior' if renewing else '')
+            True, chi2, 'the tip load changed: its variance back at its prior' if renewing
+            else '')
         rows.append(jac)
         residuals.append(innovation)
         noises.append(noise)
@@ -688,11 +746,12 @@ def _update(robot, shape, sensitivity, prior, readings, stamp, history=()):
     if not rows:
         return prior, verdicts
     mean, covariance = fused(mean, covariance, np.vstack(rows), np.concatenate(residuals),
-                             _block_diagonal(noises))
+                             _block_diagonal(noises), j if moving else 0)
     # a fault slower than the gate: the correction readings add up to over calls is judged too
     # (a first correction, from nothing carried, is the gate's alone)
-    beyond = np.any(prior.mean) and _beyond_the_prior(  # on the posterior's correction
-        robot, shape, sensitivity, readings, verdicts, mean - prior.mean + moved)
+    beyond = np.any(prior.mean[j:]) and _beyond_the_prior(  # on the posterior's correction
+        robot, shape, sensitivity, readings, verdicts,
+        mean if prior.origin is None else mean - prior.origin)
     if beyond:
         for name in beyond:
             verdicts[name] = SensorVerdict(False, verdicts[name].chi2, beyond[name])
@@ -700,15 +759,19 @@ def _update(robot, shape, sensitivity, prior, readings, stamp, history=()):
     return dataclasses.replace(prior, mean=mean, covariance=covariance), verdicts
 
 
-def _agrees(pending, innovation, noise):
-    """Return True when ``innovation`` (3,) agrees with a ``pending`` one within the gate.
+def _agrees(pending, reading, noise, stamp):
+    """Return True when ``reading`` agrees with a ``pending`` (position (3,), stamp) one.
 
-    Their difference is two readings' noise (``noise``: one reading's (3, 3)) if both saw one
-    new load.
+    The robot at rest (the load is only renewed then), two readings of one new load differ by
+    two readings' noise (``noise``: one reading's (3, 3)), within the gate; a held reading
+    older than PENDING_SECONDS has expired.
     """
     if pending is None:
         return False
-    difference = innovation - pending
+    position, then = pending
+    if stamp is not None and then is not None and stamp - then > PENDING_SECONDS:
+        return False
+    difference = reading.position - position
     return float(difference @ _solve(2.0 * noise, difference)) <= gates.gate(
         3, gates.SENSOR_GATE_PROBABILITY)
 
