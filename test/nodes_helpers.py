@@ -154,6 +154,17 @@ def call(client, request, timeout):
     return future.result()
 
 
+def goal_request(frame_id, goal, tolerance):
+    """Return a tip_goal request (nav_msgs/GetPlan) for ``goal`` (m) in ``frame_id``."""
+    from nav_msgs.srv import GetPlan
+
+    request = GetPlan.Request(tolerance=float(tolerance))
+    request.goal.header.frame_id = frame_id
+    p = request.goal.pose.position
+    p.x, p.y, p.z = (float(v) for v in goal)
+    return request
+
+
 def all_finite_path(path):
     """Return True if every number of a Path is finite."""
     return all(math.isfinite(v) for p in path.poses for v in (

@@ -10,6 +10,7 @@ from nodes_helpers import (
     Collector,
     call,
     diagnostic_values,
+    goal_request,
     pose_xyz,
     wait_until,
 )
@@ -50,10 +51,7 @@ def test_goals_on_the_robot_in_motion_come_to_rest_where_the_controller_says(har
     rest = []
     for bending in ([3.0, 0.0], [0.0, -4.0], [-2.5, 2.5]):
         goal = ROBOT.solve_ivp([bending[0], bending[1], 0.0]).tip_position
-        request = GetPlan.Request(tolerance=TOLERANCE)
-        request.goal.header.frame_id = ROBOT.base_frame_id
-        p = request.goal.pose.position
-        p.x, p.y, p.z = (float(v) for v in goal)
+        request = goal_request(ROBOT.base_frame_id, goal, TOLERANCE)
         assert call(service, request, 60.0).plan.poses, controller.control.last_outcome
 
         def true_error():
@@ -95,10 +93,7 @@ def test_a_fast_goal_overshoots_and_settles_as_simulate_predicts(harness):
     service = client.create_client(GetPlan, 'tip_goal')
     assert service.wait_for_service(timeout_sec=10.0)
     goal = ROBOT.solve_ivp([0.0, -6.0, 0.0]).tip_position
-    request = GetPlan.Request(tolerance=TOLERANCE)
-    request.goal.header.frame_id = ROBOT.base_frame_id
-    p = request.goal.pose.position
-    p.x, p.y, p.z = (float(v) for v in goal)
+    request = goal_request(ROBOT.base_frame_id, goal, TOLERANCE)
     first = len(true_tips)
     assert call(service, request, 60.0).plan.poses
     wait_until(lambda: len(true_tips) > first + 400, 10.0, '2 s of the true tip after the goal')

@@ -15,7 +15,15 @@ newtons and the model tip wandered 45.6 mm with the cables still.
 import threading
 
 from conftest import REPO
-from nodes_helpers import LATCHED, Collector, call, diagnostic_values, pose_xyz, wait_until
+from nodes_helpers import (
+    LATCHED,
+    Collector,
+    call,
+    diagnostic_values,
+    goal_request,
+    pose_xyz,
+    wait_until,
+)
 import numpy as np
 import pytest
 import yaml
@@ -99,10 +107,7 @@ def test_the_payload_estimated_with_the_shape_holds_at_rest_and_goals_reach_the_
     errors = []
     for bending in ([3.0, 0.0], [0.0, -4.0], [-2.5, 2.5]):
         goal = robot.solve_ivp([bending[0], bending[1], 0.0]).tip_position
-        request = GetPlan.Request(tolerance=TOLERANCE)
-        request.goal.header.frame_id = robot.base_frame_id
-        p = request.goal.pose.position
-        p.x, p.y, p.z = (float(v) for v in goal)
+        request = goal_request(robot.base_frame_id, goal, TOLERANCE)
         assert call(service, request, 60.0).plan.poses, controller.control.last_outcome
         # the true tip at rest on the goal: within the tolerance, 1 mm of the statics' friction
         # resolution (the dynamics test's), and 3 sigma of the tracker's noise
