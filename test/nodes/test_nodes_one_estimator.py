@@ -1,9 +1,5 @@
 """One estimator in normal use over DDS (issue 43 items 1 and 4).
 
-The payload's mean is printed, not asserted: a tracker alone barely sees a weight that hangs
-along the straight rod, the load is not updated while the cables move, and the stand-in model
-uncertainty explains much of what it does see (estimates of -1 to 16 g for 10 g, sigma 2-29 g).
-
 The simulated robot in motion (``sim.dynamics``) carries a hidden 10 g payload
 (``sim_tip_wrench``); a tracker (the test's relay of ``sim/tip_pose_true``, 0.3 mm noise, the
 true stamps) sees its tip. The robot file names ``load_model: weight``: statics estimates the
@@ -11,8 +7,17 @@ payload with the shape and publishes it, tip_controller takes it (``tip_wrench_s
 estimate``) for its goals. Before, the estimate came from the tip_load_estimator node and went
 back into statics as its tip load, and the tracker was counted twice: the estimate swung by
 newtons and the model tip wandered 45.6 mm with the cables still.
+
+The payload's mean is printed, not asserted: a tracker alone barely sees a weight that hangs
+along the straight rod, the load is not updated while the cables move, and the stand-in model
+uncertainty explains much of what it does see (estimates of -1 to 16 g for 10 g, sigma 2-29 g).
+In a fresh-clone CI run beside another DDS test, a load held at 14.7 g (the rod still swinging
+when the load was updated, or the simulation behind real time) set the honest tracker aside and
+the fused tip went 9 mm from it until the load was renewed: the test now runs alone, and
+measures from 2 s after the last goal.
 """
 import threading
+import time
 
 from conftest import REPO
 from nodes_helpers import (
@@ -35,6 +40,7 @@ from nav_msgs.srv import GetPlan  # noqa: E402
 from rclpy.qos import qos_profile_sensor_data  # noqa: E402
 
 from continuum_statics import load_robot  # noqa: E402
+from continuum_statics.core.estimation.state_estimation import LOAD_SETTLE  # noqa: E402
 from continuum_statics.nodes.cable_driver_node import CableDriverNode  # noqa: E402
 from continuum_statics.nodes.statics_node import StaticsNode  # noqa: E402
 from continuum_statics.nodes.tip_controller_node import TipControllerNode  # noqa: E402
@@ -85,6 +91,7 @@ class Relay:
 
 
 @pytest.mark.ros
+@pytest.mark.alone  # a real-time simulation of the rod in motion: a core of its own
 def test_the_payload_estimated_with_the_shape_holds_at_rest_and_goals_reach_the_true_tip(
         harness, tmp_path):
     robot_file = payload_robot(tmp_path)
@@ -116,7 +123,9 @@ def test_the_payload_estimated_with_the_shape_holds_at_rest_and_goals_reach_the_
                    'the true tip at rest on the goal (%.2f mm away)'
                    % (1e3 * np.linalg.norm(relay.last() - goal)))
         errors.append(np.linalg.norm(relay.last() - goal))
-    # at rest, the cables still: the load estimate and the model tip hold
+    # at rest, the cables still: the load estimate and the model tip hold, from when the load
+    # is updated again (LOAD_SETTLE after the last motion) and the rod has stopped swinging
+    time.sleep(LOAD_SETTLE + 1.0)
     start = len(wrenches)
     tips = len(estimates)
     wait_until(lambda: len(wrenches) >= start + 100, 20.0, 'estimates at rest')
