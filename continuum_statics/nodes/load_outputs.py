@@ -23,7 +23,7 @@ from std_msgs.msg import Bool
 from continuum_statics.control.contact import ContactDetector, force_along
 from continuum_statics.control.health import OK, WARN
 from continuum_statics.core.estimation.load_estimation import plausible_tip_load
-from continuum_statics.core.estimation.state_estimation import load_held
+from continuum_statics.core.estimation.state_estimation import cables_settling
 from continuum_statics.nodes.qos import LATCHED_QOS
 
 
@@ -56,10 +56,10 @@ class TipLoadOutputs:
                                                                          for v in wrench[3:])
         self._wrench_pub.publish(msg)
         self._last = (wrench, covariance)
-        # contact never begins while the load is held (the cables moving: a moving rod looks
-        # loaded), as the tip_load_estimator node's
+        # contact never begins while the cables move or settle (a moving rod looks loaded), as
+        # the tip_load_estimator node's
         if self.contact.update(wrench[:3], covariance, time.monotonic(),
-                               not load_held(estimate.unmodelled)):
+                               not cables_settling(estimate.unmodelled)):
             self._contact_pub.publish(Bool(data=self.contact.in_contact))
             magnitude, sigma = force_along(wrench[:3], covariance)
             if self.contact.in_contact:
