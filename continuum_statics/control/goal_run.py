@@ -37,6 +37,9 @@ from continuum_statics.core.statics.tendon_commands import command_for
 OFF_COMMAND = 2e-3
 #: Tip samples needed before the mean is judged (three identical ones: no noise).
 MIN_TIP_SAMPLES = 3
+#: Cables still closing on their command by more than a tenth of the gap per ``settle_time``
+#: are still moving: the tip is not judged yet.
+STILL_CLOSING = 0.9
 
 
 class Outcome(str, enum.Enum):
@@ -171,6 +174,7 @@ class GoalRun:
         self._straight = False  # no equilibrium path found: straight in cable space
         self._recover_target = None
         self._settle_start = None
+        self._settle_gap = None  # (largest cable gap to its command m, now s) at the last look
         self._judge_start = None
 
     @property
@@ -400,15 +404,16 @@ class GoalRun:
             if self._fraction >= 1.0:
                 self.phase, self._settle_start = Phase.SETTLE, now
         elif self.phase is Phase.SETTLE:
-            # Settled: every cable measured at its command (or settle_time passed, e.g. with
-            # noise). The tip is judged only on poses that arrived from then on (arrival time,
-            # never a stamp the sender controls: unstamped input and clock jumps happen), so a
-            # tip pose of the moving cables never triggers a wrong correction.
-            if measurement is not None and measurement.received > self._settle_start and (
-                    now - self._settle_start >= self.settings.settle_time or float(
-                        np.max(np.abs(measurement.lengths - self.commanded)))
-                    <= self.settings.settled_cable_error):
-                self.phase, self._judge_start = Phase.JUDGE, now
+            # Settled: every cable measured at its command, or (noise keeps it from there) its
+            # gap to the command stopped closing over a settle_time. The tip is judged only on
+            # poses that arrived from then on (arrival time, never a stamp the sender controls:
+            # unstamped input and clock jumps happen), so a tip pose of the moving cables never
+            # triggers a wrong correction. Before, settle_time alone ended the wait: motors
+            # still following (a simulated rod slower than real time: 51 mm of model tip motion
+            # inside the judged samples) were judged, corrected and the goal failed.
+            if measurement is not None and measurement.received > self._settle_start:
+                if self._settled(measurement, now):
+                    self.phase, self._judge_start = Phase.JUDGE, now
         else:
             self._judge(goal, now, tips, load, measurement)
         if goal.done.is_set():
@@ -484,6 +489,20 @@ class GoalRun:
         self.commanded = towards(self.commanded, self._target, budget)
         if np.array_equal(self.commanded, self._target):
             self._fraction, self.command_state = 1.0, solution
+
+    def _settled(self, measurement, now):
+        """Return True once the cables are at their command or have stopped closing on it."""
+        gap = float(np.max(np.abs(measurement.lengths - self.commanded)))
+        if gap <= self.settings.settled_cable_error:
+            return True
+        last = self._settle_gap
+        if last is None or last[1] < self._settle_start:  # the first look of this settle
+            self._settle_gap = (gap, now)
+            return False
+        if now - last[1] < self.settings.settle_time:
+            return False
+        self._settle_gap = (gap, now)
+        return gap > STILL_CLOSING * last[0]
 
     def _judge(self, goal, now, tips, load, measurement):
         """Judge the mean tip since the cables settled: reached, correct, or wait for more."""

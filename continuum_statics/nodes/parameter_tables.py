@@ -157,8 +157,9 @@ def tip_controller_parameters():
                   3600.0),
         ParamSpec('default_tolerance', 0.001, 'tip position tolerance of tip_goal_pose '
                   'goals, m', 1e-6, 1.0),
-        ParamSpec('settle_time', 0.2, 'longest wait for the cables to settle after a ramp '
-                  'before the tip error is judged, s', 0.0, 10.0),
+        ParamSpec('settle_time', 0.2, 'after a ramp, cables not yet at their command count as '
+                  'settled once their gap to it closed by less than a tenth over this long '
+                  '(noise, friction); only then is the tip error judged, s', 0.0, 10.0),
         ParamSpec('settled_cable_error', 1e-6, 'cables count as settled when every measured '
                   'length is this close to its command, m (the tip moves ~L/r times as '
                   'much)', 0.0, 0.01),

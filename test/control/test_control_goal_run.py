@@ -122,6 +122,37 @@ def test_a_model_error_is_corrected_in_closed_loop():
     assert np.linalg.norm(plant.tips[-1].position - target) <= 1e-3
 
 
+def test_cables_still_closing_on_their_command_are_waited_for():
+    # motors lagging 0.5 s (a simulated rod behind real time, a slow drive): settle_time (0.2 s)
+    # alone ended the wait, the tip of the moving cables was judged and "corrected" past the
+    # goal; the cables' gap must stop closing first
+    run = GoalRun(ROBOT, RunSettings())
+    plant = Plant(ROBOT.straight_cable_lengths, tau=0.5)
+    target = ROBOT.solve_ivp([2.0, 1.0, 0.0]).tip_position
+    goal, _, _ = start(run, plant, target)
+    drive(run, plant, goal)
+    assert goal.reached and run.corrections == 0, goal.reason
+    assert np.linalg.norm(plant.tips[-1].position - target) <= 1e-3
+
+
+def test_noisy_cables_that_never_reach_their_command_are_judged():
+    # the gap to the command stops closing at the noise: the tip is judged, not waited on
+    rng = np.random.default_rng(3)
+
+    class Noisy(Plant):
+        def step(self, command, now):
+            measurement, tip = super().step(command, now)
+            return Measurement(measurement.lengths + rng.normal(0.0, 2e-6, 4)[:len(
+                measurement.lengths)], measurement.stamp_ns, now), tip
+
+    run = GoalRun(ROBOT, RunSettings())
+    plant = Noisy(ROBOT.straight_cable_lengths)
+    target = ROBOT.solve_ivp([-1.0, 2.0, 0.0]).tip_position
+    goal, _, _ = start(run, plant, target)
+    drive(run, plant, goal)
+    assert goal.reached, goal.reason
+
+
 def test_unstamped_tips_are_judged_by_arrival_time():
     # every sample stamped 0: a judgement by stamp would average the poses of the move in
     run = GoalRun(ROBOT, RunSettings())

@@ -3,6 +3,8 @@
 A node's intake thread, its executor and, in one bringup process, the other nodes are Python
 threads. A kernel that kept the GIL for a whole tip-goal solve (milliseconds) stalled them all
 (the statics intake of one process once waited 0.5 s behind a burst of goals).
+The one exception keeps it on purpose, said in its own comment: the rod in motion's time step,
+called a thousand times a second, which would otherwise wait for the GIL after every step.
 """
 import ast
 from pathlib import Path
@@ -14,6 +16,8 @@ import numpy as np
 from continuum_statics import load_robot
 
 PACKAGE = Path(__file__).resolve().parents[2] / 'continuum_statics'
+#: Kernels that keep the GIL, declared ``nogil=False`` with the reason beside them.
+HOLDS_THE_GIL = {'core/rod/dynamics_kernel.py:advance'}
 
 
 def test_every_compiled_function_is_declared_nogil():
@@ -26,8 +30,10 @@ def test_every_compiled_function_is_declared_nogil():
                 if isinstance(decorator, ast.Call) and ast.unparse(decorator.func) in (
                         'numba.njit', 'njit', 'numba.jit'):
                     flags = {k.arg: ast.unparse(k.value) for k in decorator.keywords}
-                    if flags.get('nogil') != 'True':
-                        missing.append('%s:%s' % (path.relative_to(PACKAGE), node.name))
+                    name = '%s:%s' % (path.relative_to(PACKAGE), node.name)
+                    expected = 'False' if name in HOLDS_THE_GIL else 'True'
+                    if flags.get('nogil') != expected:
+                        missing.append(name)
     assert not missing
 
 

@@ -32,6 +32,12 @@ from continuum_statics.nodes.tip_controller_node import TipControllerNode  # noq
 DYNAMIC_FILE = str(REPO / 'config' / 'tendon_robot_dynamic.yaml')
 ROBOT = load_robot(DYNAMIC_FILE)
 TOLERANCE = 1e-3  # m, the goals'
+#: s of simulated time the driver may drop (slower than real time) before the comparison
+#: with simulate means nothing
+DROPPED = 0.05
+#: ... and the real-time factor it needs to step each command on time (bench_dynamics: 10.7-11.4
+#: on the machine this test was written on, 4.0 on a 2-GHz Zen 1)
+MIN_REAL_TIME = 3.0
 
 
 @pytest.mark.ros
@@ -89,14 +95,27 @@ def test_a_fast_goal_overshoots_and_settles_as_simulate_predicts(harness):
     true_tips = Collector(client, PoseStamped, 'sim/tip_pose_true', qos_profile_sensor_data)
     commands = Collector(client, JointState, 'cable_commands', 100)
     estimates = Collector(client, PoseStamped, 'tip_pose', 100)
+    diagnostics = Collector(client, DiagnosticArray, '/diagnostics', 10)
     wait_until(lambda: len(true_tips) >= 10, 60.0, 'the true tip')
     service = client.create_client(GetPlan, 'tip_goal')
     assert service.wait_for_service(timeout_sec=10.0)
+    wait_until(lambda: diagnostic_values(diagnostics, 'cable_driver')[0], 5.0, 'the driver')
+    before = float(diagnostic_values(diagnostics, 'cable_driver')[0]['dropped_time_s'])
     goal = ROBOT.solve_ivp([0.0, -6.0, 0.0]).tip_position
     request = goal_request(ROBOT.base_frame_id, goal, TOLERANCE)
     first = len(true_tips)
     assert call(service, request, 60.0).plan.poses
     wait_until(lambda: len(true_tips) > first + 400, 10.0, '2 s of the true tip after the goal')
+    driver = diagnostic_values(diagnostics, 'cable_driver')[0]
+    if (float(driver['dropped_time_s']) - before > DROPPED
+            or float(driver['real_time_factor']) < MIN_REAL_TIME):
+        # a rod that skipped simulated time, or stepped late behind its commands, moved
+        # otherwise than simulate's: nothing to compare (the driver's WARN says so). On a 2-GHz
+        # Zen 1 machine with the three nodes as threads of one process: real-time factor
+        # 1.5-1.8, up to 0.55 s dropped, overshoot 1.2 % against simulate's 6.0 % with none
+        pytest.skip('the simulated rod kept no real time (%.2f s dropped during the goal, '
+                    'real-time factor %s)' % (float(driver['dropped_time_s']) - before,
+                                              driver['real_time_factor']))
 
     def stamp(msg):
         return msg.header.stamp.sec + 1e-9 * msg.header.stamp.nanosec

@@ -538,7 +538,12 @@ def solve_step(model, c0, history, x, inverse, pivots, tip, cables, states, left
     return converged, ivps, refreshes
 
 
-@numba.njit(cache=True, nogil=True)
+# Keeps the GIL (the one kernel that does): the simulated driver steps it a thousand times a
+# second beside the other nodes' Python threads, and a kernel that releases the GIL must win it
+# back after every step, waiting out another thread's switch interval (5 ms): beside one busy
+# Python thread a 0.24 ms step took 5.7 ms (0.26 ms holding it), and the rod fell behind real
+# time. A step is a fraction of a millisecond: holding the GIL that long stalls nobody.
+@numba.njit(cache=True, nogil=False)
 def advance(model, coefficients, memory, x, last_x, inverse, pivots, tip, cables, states,
             left, stages, motor, tolerance, max_iterations):
     """One time step: BDF-alpha history, predictor, :func:`solve_step`, memory moved on.
