@@ -14,6 +14,11 @@ from continuum_statics.nodes.node_params import (
     tip_wrench_limit_specs,
 )
 
+#: s a tip_wrench estimate stays in use (statics, tip_controller): a dead stream, not a slow
+#: solve (tip_load_estimator's capped solve under friction took 1.08 s on a 2-GHz machine; at
+#: 1 s statics fell to zero load and a goal was judged on a model tip 10 mm from the true one).
+TIP_WRENCH_TIMEOUT = 3.0
+
 
 def _check_backend(value):
     try:
@@ -94,8 +99,8 @@ def statics_parameters():
         ParamSpec('covariance_rate', 50.0, 'tip_pose_covariance and backbone_estimate (robot '
                   'files with model_uncertainty) at most this often, Hz (0: with every '
                   'estimate)', 0.0, 10000.0, read_only=True),
-        ParamSpec('tip_wrench_timeout', 1.0, 'a tip_wrench estimate older than this is '
-                  'replaced by zero, s (0: never expires)', 0.0, 3600.0),
+        ParamSpec('tip_wrench_timeout', TIP_WRENCH_TIMEOUT, 'a tip_wrench estimate older than '
+                  'this is replaced by zero, s (0: never expires)', 0.0, 3600.0),
         ParamSpec('tip_wrench_source', 'topic', 'where the tip load comes from: topic '
                   '(tip_wrench, a force sensor or your estimator) or estimate '
                   '(tip_wrench_estimate, from the tip_load_estimator node; a robot file with '
@@ -179,8 +184,8 @@ def tip_controller_parameters():
                   'this namespace: its /diagnostics status tells when it refuses commands '
                   '(goals then wait, fail or are rejected, naming the reason)',
                   read_only=True),
-        ParamSpec('tip_wrench_timeout', 1.0, 'a tip_wrench estimate older than this is '
-                  'replaced by zero, s (0: never expires)', 0.0, 3600.0),
+        ParamSpec('tip_wrench_timeout', TIP_WRENCH_TIMEOUT, 'a tip_wrench estimate older than '
+                  'this is replaced by zero, s (0: never expires)', 0.0, 3600.0),
         ParamSpec('tip_wrench_source', 'topic', 'where the tip load comes from: topic '
                   '(tip_wrench, a force sensor or your estimator) or estimate '
                   '(tip_wrench_estimate, from the tip_load_estimator node)', read_only=True,

@@ -15,7 +15,8 @@ runs :meth:`Robot.estimate_tip_wrench` (warm-started from the previous estimate)
 
 A robot whose cable_states carry no tensions and which has no tracker gives the estimator nothing
 that sees a load: it says so on /diagnostics (WARN) and publishes no estimate. Nothing
-non-finite is published; a failed estimate keeps the last good one and is counted.
+non-finite is published; a failed estimate keeps the last good one (published again: statics
+and tip_controller hold it, not zero load) and is counted.
 
 What is published is decided by :class:`~continuum_statics.control.load_watch.LoadWatch`: a
 measurement the model cannot explain (tensions beyond their limits, the chi-square gate, a
@@ -200,7 +201,8 @@ class TipLoadEstimatorNode(RunnerHooks, Node):
         if outcome.verdict is Verdict.SET_ASIDE:
             self._failures += 1
             self._problems.reject('estimate', outcome.reason)
-            return
+            if outcome.estimate is None:
+                return
         if outcome.verdict is Verdict.PUBLISH:
             self._times.add(time.perf_counter() - start)
         self._publish(outcome.estimate, outcome.contact_changed)

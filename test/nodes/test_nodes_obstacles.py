@@ -207,7 +207,7 @@ def test_statics_finds_the_simulated_robot_resting_on_the_drivers_obstacle(harne
     def gap():  # statics' tip from the true one, m, once both have settled on the lengths
         return np.linalg.norm(pose_xyz(tip.last.pose) - pose_xyz(truth.last.pose))
 
-    publish_until(commands, command, lambda: truth.last is not None and tip.last is not None
+    publish_until(commands, command, lambda: None not in (truth.last, tip.last, states.last)
                   and np.abs(np.subtract(states.last.position, lengths)).max() < 1e-7, 20.0,
                   'the simulated cables at the commanded lengths')
     wait_until(lambda: 2e-3 < gap() < 5e-3, 10.0, 'statics without the ball 2-5 mm off')
