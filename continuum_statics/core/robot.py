@@ -150,6 +150,9 @@ class Robot:
         # without a stated model error correct the defaults', which calibrate replaces
         self.sensors = description.sensors
         self.model_uncertainty = description.model_uncertainty
+        # a measured tension's sigma (N or 'P%'): with it, measured tensions are a measurement
+        # of the fused state like a sensor's readings (state_estimation); None: they are not
+        self.tension_noise = description.tension_noise
         if self.sensors and self.model_uncertainty is None:
             self.model_uncertainty = default_model_uncertainty(rod.bending_stiffness[0],
                                                                rod.length)

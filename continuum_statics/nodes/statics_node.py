@@ -221,6 +221,9 @@ class StaticsNode(RunnerHooks, Node):
         if result.load_problem:
             self._problems.reject('tip_wrench', result.load_problem)
             self._load = None
+        verdict = getattr(result.estimate, 'tensions_verdict', None)  # tension_noise in the file
+        if verdict is not None and not verdict.used:
+            self._problems.reject('tensions', 'set aside by the estimator: ' + verdict.reason)
         if result.estimate is None:
             self.health.rejected(result.rejection, result.outside_limits)
             return

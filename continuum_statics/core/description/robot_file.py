@@ -205,6 +205,7 @@ class RobotDescription:
     clearance: float = 0.0
     body_radius: float = None
     load: tuple = None
+    tension_noise: object = None
 
     def routes(self):
         """One route per cable (:mod:`~continuum_statics.core.description.routing`), straight."""
@@ -228,7 +229,7 @@ BENDING_SCALE_RANGE = (0.1, 100.0)
 _TOP_KEYS = {'name', 'description', 'rod', 'base', 'gravity', 'cables', 'guides', 'solver',
              'sections', 'cable_model', 'tendons', 'tip_marker', 'sensors', 'model_uncertainty',
              'dynamics', 'obstacles', 'clearance', 'body_radius', 'load_model', 'load_direction',
-             'load_prior'}
+             'load_prior', 'tension_noise'}
 #: The load models a robot file may name (``load_model``): the tip load in the fused state.
 LOAD_MODELS = ('weight', 'direction', 'force', 'wrench')
 
@@ -681,7 +682,17 @@ def parse_robot_description(data, source='robot file'):
         clearance=_clearance(data.get('clearance', 0.0), 'clearance'),
         body_radius=(None if data.get('body_radius') is None
                      else _positive(data['body_radius'], 'body_radius')),
-        load=_parse_load(data))
+        load=_parse_load(data), tension_noise=_tension_noise(data.get('tension_noise')))
+
+
+def _tension_noise(value):
+    """Return a measured tension's sigma: N (> 0) or 'P%' of each reading; None when absent."""
+    if value is None:
+        return None
+    if isinstance(value, str) and value.strip().endswith('%'):
+        percent = _positive(value.strip()[:-1], 'tension_noise (percent)')
+        return '%g%%' % percent
+    return _positive(value, 'tension_noise')
 
 
 def _parse_load(data):

@@ -123,6 +123,8 @@ class ShapeEstimate:
     :ivar unmodelled: the unmodelled loads explained so far, and the tip load of the file's
         ``load_model`` (:class:`state_estimation.Unmodelled`; :attr:`tip_wrench`)
     :ivar sensors: {name: :class:`sensors.SensorVerdict`} of the readings given
+    :ivar tensions_verdict: the :class:`sensors.SensorVerdict` of the measured tensions when
+        they were a measurement of the fused state (the robot file's ``tension_noise``), or None
     :ivar sensitivity: the load columns (:class:`state_estimation.Sensitivity`), kept for the
         next call
     :ivar history: the model's recent estimates ((stamp s, model shape, sensitivity), oldest
@@ -144,6 +146,7 @@ class ShapeEstimate:
     slack_attempt: object = None
     unmodelled: object = None
     sensors: dict = None
+    tensions_verdict: object = None
     sensitivity: object = None
     history: tuple = ()
 

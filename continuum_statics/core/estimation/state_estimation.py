@@ -87,6 +87,7 @@ import numpy as np
 from continuum_statics.core.description.layout import POSITION_AT, ROTATION_AT
 from continuum_statics.core.description.sensors import SensorVerdict, as_reading
 from continuum_statics.core.estimation import gates, shape_estimation
+from continuum_statics.core.estimation.load_estimation import tension_sigma
 from continuum_statics.core.rod.rotations import rotation_vector_into
 
 #: The tip may move this fraction of the rod's length from where the load columns were made
@@ -211,12 +212,15 @@ class Sensitivity:
     :ivar angles: (N, 3, k) d theta(s_i) / d d (small rotations, base frame)
     :ivar tips: (k, 3) the tip position each column was made at (m)
     :ivar rest: calls since a column was last made
+    :ivar tensions: (n, k) d T / d d of the model's tensions at the motors, or None (a model
+        without tendons)
     """
 
     positions: np.ndarray
     angles: np.ndarray
     tips: np.ndarray
     rest: int = 0
+    tensions: np.ndarray = None
 
 
 def group_sigma(uncertainty, group):
@@ -410,8 +414,9 @@ def estimate_state(robot, lengths, tip_force, tip_moment, tensions, sensors, sta
                                    prior, tracking)
         history = _history(getattr(previous, 'history', ()), stamp, model.shape, sensitivity,
                            prior.origin)
-        posterior, verdicts = _update(robot, model.shape, sensitivity, prior, readings, stamp,
-                                      history)
+        posterior, verdicts = _update(
+            robot, model.shape, sensitivity, prior, readings, stamp, history,
+            _tension_measurement(robot, model, sensitivity, prior, tensions))
         if not j or _within_linear_range(posterior, j):
             break
         # the load moved beyond the linear range of its columns: solve the model there and
@@ -423,8 +428,10 @@ def estimate_state(robot, lengths, tip_force, tip_moment, tensions, sensors, sta
         # the new load each time), so a node's call stays bounded
         carried = sensitivity
     shape = _corrected(model.shape, sensitivity, posterior.correction)
+    tensions_verdict = verdicts.pop(TENSIONS, None)
     return dataclasses.replace(model, shape=shape, unmodelled=posterior, sensors=verdicts,
-                               sensitivity=sensitivity, history=history)
+                               tensions_verdict=tensions_verdict, sensitivity=sensitivity,
+                               history=history)
 
 
 def _moving(prior, lengths, stamp, tracking):
@@ -565,8 +572,9 @@ def _sensitivity(robot, model, lengths, tip_force, tip_moment, tensions, carried
     """Return the load columns at this estimate: all of them, or the stalest one (tracking)."""
     tip = model.shape.tip_position
     size = len(prior.mean)
-    fresh = carried is None or carried.positions.shape[2] != size or carried.positions.shape[
-        0] != len(model.shape.s)
+    fresh = (carried is None or carried.positions.shape[2] != size
+             or carried.positions.shape[0] != len(model.shape.s)
+             or (carried.tensions is None) != (model.tensions is None))
     bounded = tracking is not None and bool(tracking.max_model_runs)
     if not fresh and not bounded:
         moved = _moved_since(robot, carried.tips, tip)
@@ -576,21 +584,25 @@ def _sensitivity(robot, model, lengths, tip_force, tip_moment, tensions, carried
     if fresh:
         n = len(model.shape.s)
         carried = Sensitivity(np.zeros((n, 3, size)), np.zeros((n, 3, size)),
-                              np.zeros((size, 3)))
+                              np.zeros((size, 3)), tensions=None if model.tensions is None
+                              else np.zeros((len(model.tensions), size)))
         columns = range(size)
     elif (bounded and carried.rest >= COLUMN_EVERY
           and np.max(moved) > COLUMN_DISTANCE * robot.length):
         columns = [int(np.argmax(moved))]
     else:
-        return Sensitivity(carried.positions, carried.angles, carried.tips, carried.rest + 1)
+        return dataclasses.replace(carried, rest=carried.rest + 1)
     positions, angles, tips = (carried.positions.copy(), carried.angles.copy(),
                                carried.tips.copy())
+    tensions_of = None if carried.tensions is None else carried.tensions.copy()
     names, sigma = prior_scales(robot)
     for j in columns:
         tips[j] = tip
         group = names[j].split('.')[0]
         if group in _RIGID or group in _IDLE:
             positions[:, :, j] = angles[:, :, j] = 0.0
+            if tensions_of is not None:  # an offset of the backbone pulls no cable
+                tensions_of[:, j] = 0.0
             if group in _RIGID:
                 positions[:, 'xyz'.index(names[j][-1]), j] = 1.0
             continue
@@ -605,10 +617,15 @@ def _sensitivity(robot, model, lengths, tip_force, tip_moment, tensions, carried
         if up.capped or down.capped:  # a bounded solve left unfinished: keep the old column
             tips[j] = carried.tips[j]
             continue
+        if tensions_of is not None:
+            if up.tensions is None or down.tensions is None:
+                tips[j] = carried.tips[j]  # a fall-back fit without tendons: keep the column
+                continue
+            tensions_of[:, j] = (up.tensions - down.tensions) / (2.0 * step[j])
         up, down = up.shape, down.shape
         positions[:, :, j] = (up.positions - down.positions) / (2.0 * step[j])
         angles[:, :, j] = _small_rotations(up.rotations, down.rotations) / (2.0 * step[j])
-    return Sensitivity(positions, angles, tips, 0)
+    return Sensitivity(positions, angles, tips, 0, tensions_of)
 
 
 def _moved(robot, model, lengths, tip_force, tip_moment, tensions, load, tracking):
@@ -682,33 +699,70 @@ def _placement(s, sensor):
 _PLACEMENTS = {}
 
 
-def _update(robot, shape, sensitivity, prior, readings, stamp, history=()):
+def _sensor_measurement(robot, shape, sensitivity, prior, sensor, reading, stamp, history):
+    """Return (value, innovation, H, noise) of a sensor's reading against the state.
+
+    The reading is predicted by the model of its own stamp (``history``, :func:`_rows_at`);
+    ``value`` is its position, which a later reading must agree with (:func:`_agrees`).
+    """
+    predicted, jac, rotation, shift = _rows_at(history, reading.stamp, sensor, shape,
+                                               sensitivity, prior.origin)
+    shift = np.broadcast_to(shift, len(jac))
+    moved = prior.correction  # what the model's shape does not have yet
+    innovation = reading.position - predicted - shift[:3] - jac[:3] @ moved
+    sigmas = [reading.sigma or sensor.position_sigma] * 3  # the device's own wins
+    if sensor.kind == 'pose' and reading.rotation is not None:
+        angle = _small_rotations(reading.rotation[None], rotation[None])[0]
+        innovation = np.concatenate([innovation, angle - shift[3:] - jac[3:] @ moved])
+        sigmas += [sensor.angle_sigma] * 3
+    else:
+        jac = jac[:3]
+    noise = np.diag(np.square(sigmas))
+    if reading.stamp is not None and stamp is not None and stamp > reading.stamp:
+        # an older reading: the unmodelled loads may have moved since it was taken
+        noise = noise + jac @ _moved_variance(robot, stamp - reading.stamp) @ jac.T
+    return reading.position, innovation, jac, noise
+
+
+def _tension_measurement(robot, model, sensitivity, prior, tensions):
+    """Return (value, innovation, H, noise) of measured tensions, or None when not fused.
+
+    Fused when the robot file gives ``tension_noise`` and its cables are real tendons: the
+    lengths set the shape and the model predicts each motor's tension (a tip load shows in
+    them: 10 g at the tip of a 0.3 m rod with holes 10 mm out moves them by about 3 N), so
+    T = T_model + H_T d with H_T the same central differences as the shape's columns. With
+    ideal cables the measured tensions make the shape instead (no prediction to compare).
+    """
+    if (tensions is None or robot.tension_noise is None or robot.tendons.is_ideal
+            or model.tensions is None or sensitivity.tensions is None):
+        return None
+    tensions = np.asarray(tensions, dtype=float)
+    innovation = tensions - model.tensions - sensitivity.tensions @ prior.correction
+    noise = np.diag(np.square(tension_sigma(robot.tension_noise, tensions)))
+    return tensions, innovation, sensitivity.tensions, noise
+
+
+#: The verdicts' key of the measured tensions (a space: no sensor's name).
+TENSIONS = 'cable tensions'
+
+
+def _update(robot, shape, sensitivity, prior, readings, stamp, history=(), tensions=None):
     """Judge each reading against the prior, fuse those that pass; return (posterior, verdicts).
 
-    Each reading is predicted by the model of its own stamp (``history``, :func:`_rows_at`).
+    ``readings``: {sensor: reading}; ``tensions``: the measured tensions'
+    :func:`_tension_measurement`, or None (their verdict under :data:`TENSIONS`).
     """
     mean, covariance = prior.mean, prior.covariance
-    moved = prior.correction  # what the model's shape does not have yet
     j = load_size(robot)
     renewed, pending, changed = False, dict(prior.pending), False
     moving = bool(j) and cables_settling(prior)
-    verdicts, rows, residuals, noises = {}, [], [], []
-    for sensor, reading in readings.items():
-        predicted, jac, rotation, shift = _rows_at(history, reading.stamp, sensor, shape,
-                                                   sensitivity, prior.origin)
-        shift = np.broadcast_to(shift, len(jac))
-        innovation = reading.position - predicted - shift[:3] - jac[:3] @ moved
-        sigmas = [reading.sigma or sensor.position_sigma] * 3  # the device's own wins
-        if sensor.kind == 'pose' and reading.rotation is not None:
-            angle = _small_rotations(reading.rotation[None], rotation[None])[0]
-            innovation = np.concatenate([innovation, angle - shift[3:] - jac[3:] @ moved])
-            sigmas += [sensor.angle_sigma] * 3
-        else:
-            jac = jac[:3]
-        noise = np.diag(np.square(sigmas))
-        if reading.stamp is not None and stamp is not None and stamp > reading.stamp:
-            # an older reading: the unmodelled loads may have moved since it was taken
-            noise = noise + jac @ _moved_variance(robot, stamp - reading.stamp) @ jac.T
+    verdicts, rows, residuals, noises, used_rows = {}, [], [], [], {}
+    measurements = [(sensor.name, sensor, _sensor_measurement(
+        robot, shape, sensitivity, prior, sensor, reading, stamp, history))
+        for sensor, reading in readings.items()]
+    if tensions is not None:
+        measurements.append((TENSIONS, None, tensions))
+    for name, sensor, (value, innovation, jac, noise) in measurements:
         spread = jac @ covariance @ jac.T + noise
         chi2 = float(innovation @ _solve(spread, innovation))
         gate = gates.gate(len(innovation), gates.SENSOR_GATE_PROBABILITY)
@@ -718,7 +772,7 @@ def _update(robot, shape, sensitivity, prior, readings, stamp, history=()):
             # on, an outlier one: a reading set aside is held, and the next of that sensor
             # that agrees with it decides, if a new load explains it (the load's variance back
             # at its prior, around the load so far)
-            if _agrees(pending.get(sensor.name), reading, noise[:3, :3], stamp):
+            if _agrees(pending.get(name), value, noise[:len(value), :len(value)], stamp):
                 candidate = covariance.copy()
                 candidate[:j, :] = candidate[:, :j] = 0.0
                 candidate[:j, :j] = _prior(robot)[1][:j, :j]
@@ -727,20 +781,24 @@ def _update(robot, shape, sensitivity, prior, readings, stamp, history=()):
                     covariance, chi2, renewed = candidate, again, True
                     renewing = True
             if not renewing:
-                pending[sensor.name], changed = (reading.position, stamp), True
+                pending[name], changed = (value, stamp), True
                 held = '; held: a new tip load if the next reading agrees'
         if not chi2 <= gate:
-            verdicts[sensor.name] = SensorVerdict(False, chi2, (
-                'innovation chi2 %.1f above the gate %.1f (%.1f mm from the estimate)%s'
-                % (chi2, gate, 1e3 * float(np.linalg.norm(innovation[:3])), held)))
+            verdicts[name] = SensorVerdict(False, chi2, (
+                'innovation chi2 %.1f above the gate %.1f (%s from the estimate)%s'
+                % (chi2, gate, '%.1f mm' % (1e3 * float(np.linalg.norm(innovation[:3])))
+                   if sensor is not None else '%.3g N RMS' % _rms(innovation), held)))
             continue
-        changed = pending.pop(sensor.name, None) is not None or changed
-        verdicts[sensor.name] = SensorVerdict(
+        changed = pending.pop(name, None) is not None or changed
+        verdicts[name] = SensorVerdict(
             True, chi2, 'the tip load changed: its variance back at its prior' if renewing
             else '')
         rows.append(jac)
         residuals.append(innovation)
         noises.append(noise)
+        # where the drift guard judges the correction: a sensor's point on the current shape
+        used_rows[name] = (_sensor_rows(shape, sensitivity, sensor)[1][:3] if sensor is not None
+                           else jac)
     if changed:
         prior = dataclasses.replace(prior, pending=tuple(pending.items()))
     if not rows:
@@ -750,8 +808,7 @@ def _update(robot, shape, sensitivity, prior, readings, stamp, history=()):
     # a fault slower than the gate: the correction readings add up to over calls is judged too
     # (a first correction, from nothing carried, is the gate's alone)
     beyond = np.any(prior.mean[j:]) and _beyond_the_prior(  # on the posterior's correction
-        robot, shape, sensitivity, readings, verdicts,
-        mean if prior.origin is None else mean - prior.origin)
+        robot, used_rows, mean if prior.origin is None else mean - prior.origin)
     if beyond:
         for name in beyond:
             verdicts[name] = SensorVerdict(False, verdicts[name].chi2, beyond[name])
@@ -759,24 +816,28 @@ def _update(robot, shape, sensitivity, prior, readings, stamp, history=()):
     return dataclasses.replace(prior, mean=mean, covariance=covariance), verdicts
 
 
-def _agrees(pending, reading, noise, stamp):
-    """Return True when ``reading`` agrees with a ``pending`` (position (3,), stamp) one.
+def _agrees(pending, value, noise, stamp):
+    """Return True when a reading's ``value`` agrees with a ``pending`` (value, stamp) one.
 
     The robot at rest (the load is only renewed then), two readings of one new load differ by
-    two readings' noise (``noise``: one reading's (3, 3)), within the gate; a held reading
-    older than PENDING_SECONDS has expired.
+    two readings' noise (``noise``: one reading's), within the gate; a held reading older than
+    PENDING_SECONDS has expired.
     """
     if pending is None:
         return False
-    position, then = pending
+    then_value, then = pending
     if stamp is not None and then is not None and stamp - then > PENDING_SECONDS:
         return False
-    difference = reading.position - position
+    difference = value - then_value
     return float(difference @ _solve(2.0 * noise, difference)) <= gates.gate(
-        3, gates.SENSOR_GATE_PROBABILITY)
+        len(difference), gates.SENSOR_GATE_PROBABILITY)
 
 
-def _beyond_the_prior(robot, shape, sensitivity, readings, verdicts, mean):
+def _rms(values):
+    return float(np.sqrt(np.mean(np.square(values))))
+
+
+def _beyond_the_prior(robot, used_rows, mean):
     """Return {name: reason} of the used readings whose correction lies beyond the prior.
 
     The gate judges a reading against an estimate the same sensor already moved, so a sensor
@@ -785,28 +846,30 @@ def _beyond_the_prior(robot, shape, sensitivity, readings, verdicts, mean):
     against what the model's uncertainty allows there (G P0 G^T): beyond CORRECTION_SIGMAS
     along its direction, the readings are set aside and the correction kept where it was.
     The model's error alone is judged (the tip load's part of ``mean`` is left out: a load may
-    be anything its prior allows).
+    be anything its prior allows). ``used_rows``: {name: rows of H} of the used readings (a
+    sensor's position rows; the tensions' rows, in N).
     """
     p0 = _prior(robot)[1].copy()
     j = load_size(robot)
     mean = np.concatenate([np.zeros(j), mean[j:]])
     p0[:j, :] = p0[:, :j] = 0.0
     beyond = {}
-    for sensor in readings:
-        if not verdicts[sensor.name].used:
-            continue
-        _, jac, _ = _sensor_rows(shape, sensitivity, sensor)
-        correction = jac[:3] @ mean
+    for name, jac in used_rows.items():
+        correction = jac @ mean
         size = float(np.linalg.norm(correction))
         if size == 0.0:
             continue
         direction = correction / size
-        allowed = math.sqrt(max(float(direction @ jac[:3] @ p0 @ jac[:3].T @ direction), 0.0))
+        allowed = math.sqrt(max(float(direction @ jac @ p0 @ jac.T @ direction), 0.0))
         if size > CORRECTION_SIGMAS * allowed:
-            beyond[sensor.name] = (
-                'its readings would correct the model by %.1f mm at the sensor, more than %g '
-                'sigma of the model uncertainty there (%.1f mm): a drifting or biased sensor?'
-                % (1e3 * size, CORRECTION_SIGMAS, 1e3 * CORRECTION_SIGMAS * allowed))
+            tensions = name == TENSIONS
+            scale, unit = (1.0, 'N') if tensions else (1e3, 'mm')
+            beyond[name] = (
+                'its readings would correct the model by %.3g %s at the %s, more than %g '
+                'sigma of the model uncertainty there (%.3g %s): a drifting or biased %s?'
+                % (scale * size, unit, 'cables' if tensions else 'sensor', CORRECTION_SIGMAS,
+                   scale * CORRECTION_SIGMAS * allowed, unit,
+                   'load cell' if tensions else 'sensor'))
     return beyond
 
 
