@@ -43,7 +43,6 @@ from continuum_statics.core.estimation.state_estimation import (
     decayed,
     fused,
     group_sigma,
-    prior_scales,
 )
 
 #: Occlusion patterns of the fit: (rows seen, rows occluded), repeated over the run.
@@ -89,11 +88,9 @@ def residual_rows(robot, run):
     """Replay a run through the estimator; return (residuals (n, 3) m, marker columns (n, 3, k)).
 
     Each row is estimated to the end, warm-started from the previous (friction follows each
-    cable's motion); its load columns are the estimator's (refreshed as the tip moves), those
-    of the groups fitted here (the swing's, set by motion, left out).
+    cable's motion); its load columns are the estimator's (refreshed as the tip moves).
     """
     robot = robot.without_load_model()  # the model's own error: a load held is not one
-    fitted = np.array([not name.startswith('swing.') for name in prior_scales(robot)[0]])
     residuals = np.full((len(run), 3), np.nan)
     columns = None
     previous = None
@@ -106,8 +103,8 @@ def residual_rows(robot, run):
         residuals[i] = run.tips[i] - (shape.tip_position + arm)
         sens = estimate.sensitivity
         if columns is None:
-            columns = np.zeros((len(run), 3, int(fitted.sum())))
-        columns[i] = (sens.positions[-1] - _skew(arm) @ sens.angles[-1])[:, fitted]
+            columns = np.zeros((len(run), 3, sens.positions.shape[2]))
+        columns[i] = sens.positions[-1] - _skew(arm) @ sens.angles[-1]
     return residuals, columns
 
 

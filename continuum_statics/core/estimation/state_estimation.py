@@ -25,17 +25,6 @@ the exact transition of its state-space form
 A tracker's last residual is then carried at first (the last-residual baseline's strength
 between nearby rows) and handed over to the slowly varying loads as it fades.
 
-A sixth, ``swing``, is the rod's motion about its statics, which this quasi-static model does
-not have: a rod driven at 200 mm/s lags and swings 5-11 mm behind the statics of its lengths and
-still 1-2.5 mm 1.5 s after the cables stop (the simulated rod in motion, 5 % damping, 10 g at
-the tip). It is an offset along the first bending mode's shape, 1 - cos(pi s / 2 L), of an
-Ornstein-Uhlenbeck process whose variance the motion sets: a velocity change dv starts a swing
-of amplitude dv / omega, so its sigma per axis is v / (sqrt(3) omega) with v the envelope of
-the model tip's speed, max(speed now, the last envelope decayed), and both decay at the
-mode's rate zeta omega (:func:`first_mode`). At rest it is zero; in a node's stream a tracker's
-readings of the swinging rod go there, not into the loads that persist. Rows further apart than
-:data:`HISTORY_SECONDS` (a recorded run) give no speed: the rod settled between them.
-
 With the robot file's ``load_model`` the tip load is part of the state too, ahead of the
 unmodelled loads: the parameters p of its :class:`~continuum_statics.core.estimation.
 load_estimation.LoadModel` (a payload's mass, a force along a direction, a force, a wrench; w =
@@ -148,16 +137,11 @@ HISTORY_LENGTH = 128
 #: Unmodelled-load groups, in the order of d: name, size (None: one per cable), unit.
 #: The tip load's parameters (the file's load_model) come first, before these.
 GROUPS = (('tip_force', 3, 'N'), ('section_moment', 3, 'N m'), ('cable_length', None, 'm'),
-          ('base_position', 3, 'm'), ('swing', 3, 'm'), ('drift', 3, 'm'),
-          ('drift_rate', 3, 'm/s'))
-#: Groups whose columns are known without a solve: an offset of the whole backbone (the swing:
-#: along the first mode's shape) ...
-_RIGID = ('base_position', 'swing', 'drift')
+          ('base_position', 3, 'm'), ('drift', 3, 'm'), ('drift_rate', 3, 'm/s'))
+#: Groups whose columns are known without a solve: an offset of the whole backbone ...
+_RIGID = ('base_position', 'drift')
 #: ... and the drift's rate, which moves no point now.
 _IDLE = ('drift_rate',)
-#: The damping ratio of the first bending mode when the robot file gives no rod damping (the
-#: order of a Nitinol rod rubbing its tendons: tendon_robot_dynamic.yaml).
-DEFAULT_DAMPING_RATIO = 0.05
 
 
 @dataclass(frozen=True, eq=False)
@@ -178,8 +162,6 @@ class Unmodelled:
     :ivar still: (cable lengths (n,) m, stamp s) where the cables last moved: while they move
         and LOAD_SETTLE s after, no new tip load is taken and contact does not begin
         (:func:`_moving`)
-    :ivar swing: (the model tip's speed envelope m/s, the model tip (3,) m, its stamp s, the
-        state it was solved at), or None: what sets the swing's variance (:func:`_swung`)
     """
 
     names: tuple
@@ -190,7 +172,6 @@ class Unmodelled:
     load_basis: np.ndarray = None
     pending: tuple = ()
     still: tuple = None
-    swing: tuple = None
 
     @property
     def correction(self):
@@ -244,8 +225,6 @@ class Sensitivity:
 
 def group_sigma(uncertainty, group):
     """Return one group's stationary standard deviation (the drift's rate: lambda sigma_w)."""
-    if group == 'swing':
-        return 0.0  # no stationary variance: the motion sets it (:func:`_swung`)
     if group == 'drift_rate':
         return (math.sqrt(3.0) / uncertainty.drift_time * uncertainty.drift
                 if uncertainty.drift > 0.0 else 0.0)
@@ -256,16 +235,13 @@ def group_sigma(uncertainty, group):
 def prior_scales(robot):
     """Return (names, sigma (k,)) of the state: the tip load's, then unmodelled loads'.
 
-    The unmodelled loads with a nonzero prior only, and the swing (sigma 0: set by the motion)
-    with them.
+    The unmodelled loads with a nonzero prior only.
     """
     uncertainty = robot.model_uncertainty
     names, sigmas = list(_load_names(robot.load_model)), list(_load_prior(robot))
-    corrected = any(group_sigma(uncertainty, group) > 0.0 for group, _, _ in GROUPS
-                    if group != 'swing')
     for group, size, _ in GROUPS:
         sigma = group_sigma(uncertainty, group)
-        if sigma <= 0.0 and not (group == 'swing' and corrected):
+        if sigma <= 0.0:
             continue
         labels = robot.cable_names if size is None else ('x', 'y', 'z')
         names.extend('%s.%s' % (group, label) for label in labels)
@@ -305,14 +281,14 @@ def propagate(robot, carried, stamp):
     if stamp is None or carried.stamp is None:
         return Unmodelled(names, carried.mean, carried.covariance,
                           carried.stamp if stamp is None else stamp, carried.origin, basis,
-                          carried.pending, carried.still, carried.swing)
+                          carried.pending, carried.still)
     # an older stamp is not a step back in time
     mean, covariance = decayed(carried.mean, carried.covariance, prior,
                                max(stamp - carried.stamp, 0.0),
                                robot.model_uncertainty.correlation_time, _drift_time(robot),
                                load_size(robot))
     return Unmodelled(names, mean, covariance, stamp, carried.origin, basis, carried.pending,
-                      carried.still, carried.swing)
+                      carried.still)
 
 
 def _moved_variance(robot, elapsed):
@@ -393,18 +369,10 @@ def _solve(spread, vector):
     return np.linalg.solve(factor.T, np.linalg.solve(factor, vector))
 
 
-def fused(mean, covariance, jac, innovation, noise, held=0):
-    """Return (mean, covariance) after the Kalman update with rows ``jac`` (the module's).
-
-    The first ``held`` entries are held: not updated, and the others' gain made as if they
-    were known; the Joseph form keeps the covariance that of the errors with that gain.
-    """
-    known = covariance
-    if held:
-        known = covariance.copy()
-        known[:held, :] = known[:, :held] = 0.0
-    spread = jac @ known @ jac.T + noise
-    gain = np.linalg.solve(spread, jac @ known).T
+def fused(mean, covariance, jac, innovation, noise):
+    """Return (mean, covariance) after the Kalman update with rows ``jac`` (the module's)."""
+    spread = jac @ covariance @ jac.T + noise
+    gain = np.linalg.solve(spread, jac @ covariance).T
     # Joseph form: stays symmetric positive semi-definite in floating point
     keep = np.eye(len(mean)) - gain @ jac
     covariance = keep @ covariance @ keep.T + gain @ noise @ gain.T
@@ -419,8 +387,6 @@ def estimate_state(robot, lengths, tip_force, tip_moment, tensions, sensors, sta
     ``stamp`` (s). ``previous`` carries the unmodelled loads and the load columns.
     """
     readings = _readings(robot, sensors)
-    last = getattr(getattr(previous, 'unmodelled', None), 'stamp', None)
-    streaming = stamp is not None and last is not None and 0.0 < stamp - last <= HISTORY_SECONDS
     prior = propagate(robot, getattr(previous, 'unmodelled', None), stamp)
     j = load_size(robot)
     if j:
@@ -431,7 +397,7 @@ def estimate_state(robot, lengths, tip_force, tip_moment, tensions, sensors, sta
         # stays within its columns' linear range (the same tip load: a warm solve's work)
         prior = _solved_at(prior, prior.mean, j)
     bounded = tracking is not None and bool(tracking.max_model_runs)
-    for iteration in range((BOUNDED_LOAD_ITERATIONS if bounded else LOAD_ITERATIONS) if j else 1):
+    for _ in range((BOUNDED_LOAD_ITERATIONS if bounded else LOAD_ITERATIONS) if j else 1):
         if j:
             wrench = robot.load_model.basis @ prior.origin[:j]
             force, moment = tip_force + wrench[:3], tip_moment + wrench[3:]
@@ -446,13 +412,11 @@ def estimate_state(robot, lengths, tip_force, tip_moment, tensions, sensors, sta
             return dataclasses.replace(model, unmodelled=prior, sensors=verdicts)
         sensitivity = _sensitivity(robot, model, lengths, force, moment, tensions, carried,
                                    prior, tracking)
-        if iteration == 0:  # the swing over the time since the last estimate, once a call
-            prior = _swung(robot, prior, model.shape.tip_position, stamp)
         history = _history(getattr(previous, 'history', ()), stamp, model.shape, sensitivity,
                            prior.origin)
         posterior, verdicts = _update(
             robot, model.shape, sensitivity, prior, readings, stamp, history,
-            _tension_measurement(robot, model, sensitivity, prior, tensions), streaming)
+            _tension_measurement(robot, model, sensitivity, prior, tensions))
         if not j or _within_linear_range(posterior, j):
             break
         # the load moved beyond the linear range of its columns: solve the model there and
@@ -470,81 +434,17 @@ def estimate_state(robot, lengths, tip_force, tip_moment, tensions, sensors, sta
                                history=history)
 
 
-def first_mode(robot, tip_mass=0.0):
-    """Return (omega rad/s, zeta) of the rod's first bending mode with ``tip_mass`` (kg) on it.
-
-    Rayleigh's estimate for a cantilever, omega = sqrt(3 E I / (L^3 (0.236 m_rod + m_tip)))
-    (the cables' stiffening left out: a lower omega, a wider swing); zeta = B omega / (2 E I)
-    of the file's rod damping B, else :data:`DEFAULT_DAMPING_RATIO`.
-    """
-    ei, length = float(robot.c[0]), robot.length
-    mass = 0.236 * robot.rod.mass_per_length * length + max(float(tip_mass), 0.0)
-    omega = math.sqrt(3.0 * ei / (length ** 3 * mass))
-    damping = robot.rod.bending_damping
-    return omega, (damping * omega / (2.0 * ei) if damping > 0.0 else DEFAULT_DAMPING_RATIO)
-
-
-def _swung(robot, state, tip, stamp):
-    """Return ``state`` with its swing moved from the last estimate's stamp to ``stamp``.
-
-    The envelope of the model tip's speed (``tip`` (3,) m now) follows the motion; the swing's
-    mean and its covariance with everything decay by a = exp(-zeta omega dt) and its variance
-    grows by (1 - a^2) sigma^2, sigma = envelope / (sqrt(3) omega) per axis (module doc).
-    """
-    at = _swing_entries(robot)
-    if not len(at) or stamp is None:
-        return state
-    now = (np.array(tip, dtype=float), stamp, state.origin)
-    if state.swing is None or not stamp > state.swing[2]:
-        return dataclasses.replace(state, swing=(0.0, *now))
-    envelope, last_tip, last, origin = state.swing
-    elapsed = stamp - last
-    mass = state.mean[0] if robot.load_model is not None and robot.load_model.name == 'weight' \
-        else 0.0
-    omega, zeta = first_mode(robot, mass)
-    a = math.exp(-elapsed * zeta * omega)
-    envelope *= a
-    # a stream that resolves the motion (rows further apart: the rod settled between them),
-    # the model solved at the same tip load (a load solved anew moves its tip, not the rod)
-    if elapsed <= HISTORY_SECONDS and _same(origin, state.origin):
-        envelope = max(envelope, float(np.linalg.norm(tip - last_tip)) / elapsed)
-    t = np.ones(len(state.mean))
-    t[at] = a
-    covariance = t[:, None] * state.covariance * t[None, :]
-    covariance[at, at] += (1.0 - a * a) * (envelope / (math.sqrt(3.0) * omega)) ** 2
-    return dataclasses.replace(state, mean=t * state.mean, covariance=covariance,
-                               swing=(envelope, *now))
-
-
-def _same(origin, other):
-    """Return True when two states the model was solved at are the same (None: zero)."""
-    if origin is None or other is None:
-        return origin is other or not np.any(origin if other is None else other)
-    return bool(np.array_equal(origin, other))
-
-
-@functools.lru_cache(maxsize=64)
-def _swing_entries(robot):
-    """Return the indices of the swing in the state (none without unmodelled loads)."""
-    names, _ = prior_scales(robot)
-    entries = np.array([i for i, name in enumerate(names) if name.startswith('swing.')], int)
-    entries.setflags(write=False)
-    return entries
-
-
 def _moving(prior, lengths, stamp, tracking):
     """Return ``prior`` with ``still`` updated: where and when the cables last moved.
 
     A cable that moved more than LOAD_MOTION (or 5 sigma of the encoders) from where the
     cables last moved is motion; the statics model has no dynamics, so a moving rod (and one
     still swinging, LOAD_SETTLE s after) looks loaded: no new load is taken then (the readings
-    of a moving robot never agree anyway), and contact does not begin. In a stream of
-    estimates that sees the rod move (under HISTORY_SECONDS apart) the held load is not
-    updated then either (:func:`fused`'s ``held``: the swing and the model's error take the
-    readings; before, a swinging rod read as 56-79 g of a 10 g payload). Rows further apart (a
-    recorded run) are each a statics and update it: on the v6 run, whose rows all follow a
-    motion, holding it there gave 15.7 mm against 11.4 on 40/40 (without its uncertainty in
-    the gain) or let its wide prior explain every reading (10.5 mm against 3.0 on 1/1).
+    of a moving robot never agree anyway), and contact does not begin. The held load is still
+    updated: holding it through motion (its uncertainty considered in the gain) let its wide
+    prior explain every tracker reading of the v6 run, whose rows all follow a motion: the
+    fused tip fell back to the model's, 10.5 mm against 3.0 mm on the 1/1 rows; holding it
+    without its uncertainty in the gain gave 15.7 mm against 11.9 on 40/40.
     """
     if stamp is None or lengths is None or not len(lengths):
         return prior
@@ -704,9 +604,7 @@ def _sensitivity(robot, model, lengths, tip_force, tip_moment, tensions, carried
             if tensions_of is not None:  # an offset of the backbone pulls no cable
                 tensions_of[:, j] = 0.0
             if group in _RIGID:
-                positions[:, 'xyz'.index(names[j][-1]), j] = (
-                    1.0 - np.cos(0.5 * np.pi * model.shape.s / robot.length)
-                    if group == 'swing' else 1.0)
+                positions[:, 'xyz'.index(names[j][-1]), j] = 1.0
             continue
         step = np.zeros(size)
         small = names[j].startswith('cable_length') and robot.tendons.is_ideal
@@ -848,14 +746,11 @@ def _tension_measurement(robot, model, sensitivity, prior, tensions):
 TENSIONS = 'cable tensions'
 
 
-def _update(robot, shape, sensitivity, prior, readings, stamp, history=(), tensions=None,
-            streaming=False):
+def _update(robot, shape, sensitivity, prior, readings, stamp, history=(), tensions=None):
     """Judge each reading against the prior, fuse those that pass; return (posterior, verdicts).
 
     ``readings``: {sensor: reading}; ``tensions``: the measured tensions'
-    :func:`_tension_measurement`, or None (their verdict under :data:`TENSIONS`);
-    ``streaming``: the last estimate is under HISTORY_SECONDS old (a node's stream, which sees
-    the rod move; rows further apart are statics each).
+    :func:`_tension_measurement`, or None (their verdict under :data:`TENSIONS`).
     """
     mean, covariance = prior.mean, prior.covariance
     j = load_size(robot)
@@ -908,9 +803,8 @@ def _update(robot, shape, sensitivity, prior, readings, stamp, history=(), tensi
         prior = dataclasses.replace(prior, pending=tuple(pending.items()))
     if not rows:
         return prior, verdicts
-    # a rod seen in motion is no statics: its readings move no tip load (the swing takes them)
     mean, covariance = fused(mean, covariance, np.vstack(rows), np.concatenate(residuals),
-                             _block_diagonal(noises), j if moving and streaming else 0)
+                             _block_diagonal(noises))
     # a fault slower than the gate: the correction readings add up to over calls is judged too
     # (a first correction, from nothing carried, is the gate's alone)
     beyond = np.any(prior.mean[j:]) and _beyond_the_prior(  # on the posterior's correction
@@ -951,15 +845,13 @@ def _beyond_the_prior(robot, used_rows, mean):
     reading used). The correction the estimate now applies at each sensor, G m, is judged
     against what the model's uncertainty allows there (G P0 G^T): beyond CORRECTION_SIGMAS
     along its direction, the readings are set aside and the correction kept where it was.
-    The model's error alone is judged (the tip load's and the swing's parts of ``mean`` are
-    left out: a load may be anything its prior allows, a swing anything the motion does).
-    ``used_rows``: {name: rows of H} of the used readings (a sensor's position rows; the
-    tensions' rows, in N).
+    The model's error alone is judged (the tip load's part of ``mean`` is left out: a load may
+    be anything its prior allows). ``used_rows``: {name: rows of H} of the used readings (a
+    sensor's position rows; the tensions' rows, in N).
     """
     p0 = _prior(robot)[1].copy()
     j = load_size(robot)
     mean = np.concatenate([np.zeros(j), mean[j:]])
-    mean[_swing_entries(robot)] = 0.0
     p0[:j, :] = p0[:, :j] = 0.0
     beyond = {}
     for name, jac in used_rows.items():
