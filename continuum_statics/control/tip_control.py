@@ -422,7 +422,13 @@ class TipControl:
         now, previous = self.clock(), self._twist
         self._twist = Twist(linear, angular, now, twist_hold(
             None if previous is None else previous.received, now, timeout))
-        if self.teleop.active or not (linear.any() or angular.any()):
+        if self.teleop.active:
+            # the operator still drives: a goal that arrived before this twist and is still
+            # waiting for state or being solved must not start once the twists stop (on a
+            # loaded machine one waited out the stream and ran after the dead-man stop)
+            self.handover.take('teleoperation (tip_twist)')
+            return
+        if not (linear.any() or angular.any()):
             return
         self._start_teleop()
 

@@ -206,6 +206,23 @@ def test_teleoperation_takes_over_a_goal_from_the_motor_side_lengths_of_the_esti
     assert not control.teleop.active and control.run.commanded is not None
 
 
+def test_a_goal_that_waits_while_the_operator_drives_never_starts_after_the_twists():
+    control, _, _ = make()
+    feed(control, ROBOT.straight_cable_lengths)
+    control.twist([0.0, 0.01, 0.0], [0.0, 0.0, 0.0])
+    assert control.teleop.active
+    wait = control.wait_until
+
+    async def twists_while_waiting(*args):  # the goal waits for state; the twists go on
+        control.twist([0.0, 0.01, 0.0], [0.0, 0.0, 0.0])
+        return await wait(*args)
+
+    control.wait_until = twists_while_waiting
+    goal = start(control, TARGET)
+    assert goal.done.is_set() and goal.outcome is Outcome.PREEMPTED, goal.reason
+    assert 'teleoperation' in goal.reason and control.teleop.active
+
+
 def test_a_twist_stamped_far_from_now_is_refused_and_an_unstamped_one_is_taken():
     control, _, _ = make()
     feed(control, ROBOT.straight_cable_lengths)
