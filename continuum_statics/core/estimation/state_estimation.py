@@ -756,7 +756,7 @@ def _update(robot, shape, sensitivity, prior, readings, stamp, history=(), tensi
     j = load_size(robot)
     renewed, pending, changed = False, dict(prior.pending), False
     moving = bool(j) and cables_settling(prior)
-    verdicts, rows, residuals, noises, used_rows = {}, [], [], [], {}
+    verdicts, rows, residuals, noises, used = {}, [], [], [], {}
     measurements = [(sensor.name, sensor, _sensor_measurement(
         robot, shape, sensitivity, prior, sensor, reading, stamp, history))
         for sensor, reading in readings.items()]
@@ -796,9 +796,7 @@ def _update(robot, shape, sensitivity, prior, readings, stamp, history=(), tensi
         rows.append(jac)
         residuals.append(innovation)
         noises.append(noise)
-        # where the drift guard judges the correction: a sensor's point on the current shape
-        used_rows[name] = (_sensor_rows(shape, sensitivity, sensor)[1][:3] if sensor is not None
-                           else jac)
+        used[name] = (sensor, jac)
     if changed:
         prior = dataclasses.replace(prior, pending=tuple(pending.items()))
     if not rows:
@@ -808,7 +806,7 @@ def _update(robot, shape, sensitivity, prior, readings, stamp, history=(), tensi
     # a fault slower than the gate: the correction readings add up to over calls is judged too
     # (a first correction, from nothing carried, is the gate's alone)
     beyond = np.any(prior.mean[j:]) and _beyond_the_prior(  # on the posterior's correction
-        robot, used_rows, mean if prior.origin is None else mean - prior.origin)
+        robot, shape, sensitivity, used, mean if prior.origin is None else mean - prior.origin)
     if beyond:
         for name in beyond:
             verdicts[name] = SensorVerdict(False, verdicts[name].chi2, beyond[name])
@@ -837,7 +835,7 @@ def _rms(values):
     return float(np.sqrt(np.mean(np.square(values))))
 
 
-def _beyond_the_prior(robot, used_rows, mean):
+def _beyond_the_prior(robot, shape, sensitivity, used, mean):
     """Return {name: reason} of the used readings whose correction lies beyond the prior.
 
     The gate judges a reading against an estimate the same sensor already moved, so a sensor
@@ -846,15 +844,17 @@ def _beyond_the_prior(robot, used_rows, mean):
     against what the model's uncertainty allows there (G P0 G^T): beyond CORRECTION_SIGMAS
     along its direction, the readings are set aside and the correction kept where it was.
     The model's error alone is judged (the tip load's part of ``mean`` is left out: a load may
-    be anything its prior allows). ``used_rows``: {name: rows of H} of the used readings (a
-    sensor's position rows; the tensions' rows, in N).
+    be anything its prior allows). ``used``: {name: (sensor or None, H)} of the used readings:
+    a sensor is judged at its point on the current shape, the tensions on their rows (N).
     """
     p0 = _prior(robot)[1].copy()
     j = load_size(robot)
     mean = np.concatenate([np.zeros(j), mean[j:]])
     p0[:j, :] = p0[:, :j] = 0.0
     beyond = {}
-    for name, jac in used_rows.items():
+    for name, (sensor, jac) in used.items():
+        if sensor is not None:  # made here: only a correction carried over is judged
+            jac = _sensor_rows(shape, sensitivity, sensor)[1][:3]
         correction = jac @ mean
         size = float(np.linalg.norm(correction))
         if size == 0.0:
