@@ -9,7 +9,9 @@ A state machine (:class:`Phase`) the tip_controller node ticks at its control ra
    (``Robot.equilibrium_between``: section moments interpolated, base state solved), so every
    command is the cable-length set of an equilibrium, with no cable faster than
    ``max_cable_speed`` (straight in cable space only where no equilibrium is found);
-3. ``SETTLE``: wait until every cable is measured at its command (or ``settle_time``);
+3. ``SETTLE``: wait until every cable is measured at its command, or has answered it and
+   stopped closing on it over ``settle_time`` (a driver that has not answered: at most
+   :data:`ANSWER_TIME`);
 4. ``JUDGE``: average the tip poses that *arrived* since then (enough that the noise of the mean
    is inside the tolerance, at most ``tip_average_time``): reached, or correct the goal by the
    remaining error (``target += goal - mean_tip``) and ramp again, up to ``max_corrections``
@@ -40,6 +42,12 @@ MIN_TIP_SAMPLES = 3
 #: Cables still closing on their command by more than a tenth of the gap per ``settle_time``
 #: are still moving: the tip is not judged yet.
 STILL_CLOSING = 0.9
+#: s after a ramp that cables further than :data:`OFF_COMMAND` from their command, and not yet
+#: closing on it, are waited for (a driver behind its commands) before the tip is judged anyway
+#: (a failure then names the driver). On a loaded 2-core machine the simulated driver in
+#: motion acted on a command 0.1-0.3 s late; within ``settle_time`` the gap had not closed and
+#: the tip of the old lengths was judged: a correction of 160-246 mm, the goal refused.
+ANSWER_TIME = 1.0
 
 
 class Outcome(str, enum.Enum):
@@ -174,7 +182,8 @@ class GoalRun:
         self._straight = False  # no equilibrium path found: straight in cable space
         self._recover_target = None
         self._settle_start = None
-        self._settle_gap = None  # (largest cable gap to its command m, now s) at the last look
+        # (largest cable gap to its command m, arrival s, answered) at the last look
+        self._settle_gap = None
         self._judge_start = None
 
     @property
@@ -412,7 +421,7 @@ class GoalRun:
             # still following (a simulated rod slower than real time: 51 mm of model tip motion
             # inside the judged samples) were judged, corrected and the goal failed.
             if measurement is not None and measurement.received > self._settle_start:
-                if self._settled(measurement, now):
+                if self._settled(measurement):
                     self.phase, self._judge_start = Phase.JUDGE, now
         else:
             self._judge(goal, now, tips, load, measurement)
@@ -490,19 +499,27 @@ class GoalRun:
         if np.array_equal(self.commanded, self._target):
             self._fraction, self.command_state = 1.0, solution
 
-    def _settled(self, measurement, now):
-        """Return True once the cables are at their command or have stopped closing on it."""
+    def _settled(self, measurement):
+        """Return True once the cables are at their command or have stopped closing on it.
+
+        Looked at by the readings' arrival (a driver that sends nothing does not count as
+        still). Cables that have not yet answered the command (never within
+        :data:`OFF_COMMAND` of it, never closing) are waited for up to :data:`ANSWER_TIME`.
+        """
         gap = float(np.max(np.abs(measurement.lengths - self.commanded)))
         if gap <= self.settings.settled_cable_error:
             return True
+        at = measurement.received
         last = self._settle_gap
         if last is None or last[1] < self._settle_start:  # the first look of this settle
-            self._settle_gap = (gap, now)
+            self._settle_gap = (gap, at, gap <= OFF_COMMAND)
             return False
-        if now - last[1] < self.settings.settle_time:
+        if at - last[1] < self.settings.settle_time:
             return False
-        self._settle_gap = (gap, now)
-        return gap > STILL_CLOSING * last[0]
+        closing = gap <= STILL_CLOSING * last[0]
+        answered = last[2] or closing or gap <= OFF_COMMAND
+        self._settle_gap = (gap, at, answered)
+        return not closing and (answered or at - self._settle_start >= ANSWER_TIME)
 
     def _judge(self, goal, now, tips, load, measurement):
         """Judge the mean tip since the cables settled: reached, correct, or wait for more."""
