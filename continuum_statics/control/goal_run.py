@@ -42,11 +42,9 @@ MIN_TIP_SAMPLES = 3
 #: Cables still closing on their command by more than a tenth of the gap per ``settle_time``
 #: are still moving: the tip is not judged yet.
 STILL_CLOSING = 0.9
-#: s after a ramp that cables further than :data:`OFF_COMMAND` from their command, and not yet
-#: closing on it, are waited for (a driver behind its commands) before the tip is judged anyway
-#: (a failure then names the driver). On a loaded 2-core machine the simulated driver in
-#: motion acted on a command 0.1-0.3 s late; within ``settle_time`` the gap had not closed and
-#: the tip of the old lengths was judged: a correction of 160-246 mm, the goal refused.
+#: s from the settle's start that cables never within :data:`OFF_COMMAND` of their command
+#: and never closing on it (a driver behind its commands) are waited for before the tip is
+#: judged anyway (a failure then names the driver).
 ANSWER_TIME = 1.0
 
 
@@ -414,7 +412,8 @@ class GoalRun:
                 self.phase, self._settle_start = Phase.SETTLE, now
         elif self.phase is Phase.SETTLE:
             # Settled: every cable measured at its command, or (noise keeps it from there) its
-            # gap to the command stopped closing over a settle_time. The tip is judged only on
+            # gap to the command stopped closing over a settle_time (a driver not yet answering
+            # the command: up to ANSWER_TIME; :meth:`_settled`). The tip is judged only on
             # poses that arrived from then on (arrival time, never a stamp the sender controls:
             # unstamped input and clock jumps happen), so a tip pose of the moving cables never
             # triggers a wrong correction. Before, settle_time alone ended the wait: motors
@@ -503,8 +502,9 @@ class GoalRun:
         """Return True once the cables are at their command or have stopped closing on it.
 
         Looked at by the readings' arrival (a driver that sends nothing does not count as
-        still). Cables that have not yet answered the command (never within
-        :data:`OFF_COMMAND` of it, never closing) are waited for up to :data:`ANSWER_TIME`.
+        still). Until the largest gap has answered the command (within :data:`OFF_COMMAND`
+        of it, or closing) it is waited for up to :data:`ANSWER_TIME`: on a loaded 2-core
+        machine the simulated driver acted 0.1-0.3 s late, the old lengths' tip was judged.
         """
         gap = float(np.max(np.abs(measurement.lengths - self.commanded)))
         if gap <= self.settings.settled_cable_error:

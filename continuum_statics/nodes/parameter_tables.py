@@ -164,7 +164,8 @@ def tip_controller_parameters():
                   'goals, m', 1e-6, 1.0),
         ParamSpec('settle_time', 0.2, 'after a ramp, cables not yet at their command count as '
                   'settled once their gap to it closed by less than a tenth over this long '
-                  '(noise, friction); only then is the tip error judged, s', 0.0, 10.0),
+                  '(noise, friction; cables over 2 mm off that never moved towards it: up to '
+                  '1 s); only then is the tip error judged, s', 0.0, 10.0),
         ParamSpec('settled_cable_error', 1e-6, 'cables count as settled when every measured '
                   'length is this close to its command, m (the tip moves ~L/r times as '
                   'much)', 0.0, 0.01),
