@@ -9,8 +9,8 @@ A state machine (:class:`Phase`) the tip_controller node ticks at its control ra
    (``Robot.equilibrium_between``: section moments interpolated, base state solved), so every
    command is the cable-length set of an equilibrium, with no cable faster than
    ``max_cable_speed`` (straight in cable space only where no equilibrium is found);
-3. ``SETTLE``: wait until every cable is measured at its command, or has answered it and
-   stopped closing on it over ``settle_time`` (a driver that has not answered: at most
+3. ``SETTLE``: wait until every cable is measured at its command, or its gap to it has
+   stopped closing over ``settle_time`` (further than :data:`OFF_COMMAND` from it: up to
    :data:`ANSWER_TIME`);
 4. ``JUDGE``: average the tip poses that *arrived* since then (enough that the noise of the mean
    is inside the tolerance, at most ``tip_average_time``): reached, or correct the goal by the
@@ -42,9 +42,9 @@ MIN_TIP_SAMPLES = 3
 #: Cables still closing on their command by more than a tenth of the gap per ``settle_time``
 #: are still moving: the tip is not judged yet.
 STILL_CLOSING = 0.9
-#: s from the settle's start that cables never within :data:`OFF_COMMAND` of their command
-#: and never closing on it (a driver behind its commands) are waited for before the tip is
-#: judged anyway (a failure then names the driver).
+#: s from the settle's start that cables further than :data:`OFF_COMMAND` from their command
+#: are waited for, though no longer closing on it (a driver behind its commands, or stalled),
+#: before the tip is judged anyway (a failure then names the driver).
 ANSWER_TIME = 1.0
 
 
@@ -180,7 +180,7 @@ class GoalRun:
         self._straight = False  # no equilibrium path found: straight in cable space
         self._recover_target = None
         self._settle_start = None
-        # (largest cable gap to its command m, arrival s, answered) at the last look
+        # (largest cable gap to its command m, arrival s) at the last look
         self._settle_gap = None
         self._judge_start = None
 
@@ -412,8 +412,8 @@ class GoalRun:
                 self.phase, self._settle_start = Phase.SETTLE, now
         elif self.phase is Phase.SETTLE:
             # Settled: every cable measured at its command, or (noise keeps it from there) its
-            # gap to the command stopped closing over a settle_time (a driver not yet answering
-            # the command: up to ANSWER_TIME; :meth:`_settled`). The tip is judged only on
+            # gap to the command stopped closing over a settle_time (a driver behind or stalled:
+            # up to ANSWER_TIME; :meth:`_settled`). The tip is judged only on
             # poses that arrived from then on (arrival time, never a stamp the sender controls:
             # unstamped input and clock jumps happen), so a tip pose of the moving cables never
             # triggers a wrong correction. Before, settle_time alone ended the wait: motors
@@ -502,9 +502,10 @@ class GoalRun:
         """Return True once the cables are at their command or have stopped closing on it.
 
         Looked at by the readings' arrival (a driver that sends nothing does not count as
-        still). Until the largest gap has answered the command (within :data:`OFF_COMMAND`
-        of it, or closing) it is waited for up to :data:`ANSWER_TIME`: on a loaded 2-core
-        machine the simulated driver acted 0.1-0.3 s late, the old lengths' tip was judged.
+        still). A largest gap over :data:`OFF_COMMAND` that stopped closing (a driver behind
+        its commands, or stalled) is waited for up to :data:`ANSWER_TIME`: on a loaded 2-core
+        machine the simulated driver acted 0.1-0.3 s late or stalled 2.6 mm short, and the
+        old lengths' tip was judged.
         """
         gap = float(np.max(np.abs(measurement.lengths - self.commanded)))
         if gap <= self.settings.settled_cable_error:
@@ -512,14 +513,13 @@ class GoalRun:
         at = measurement.received
         last = self._settle_gap
         if last is None or last[1] < self._settle_start:  # the first look of this settle
-            self._settle_gap = (gap, at, gap <= OFF_COMMAND)
+            self._settle_gap = (gap, at)
             return False
         if at - last[1] < self.settings.settle_time:
             return False
-        closing = gap <= STILL_CLOSING * last[0]
-        answered = last[2] or closing or gap <= OFF_COMMAND
-        self._settle_gap = (gap, at, answered)
-        return not closing and (answered or at - self._settle_start >= ANSWER_TIME)
+        self._settle_gap = (gap, at)
+        return gap > STILL_CLOSING * last[0] and (
+            gap <= OFF_COMMAND or at - self._settle_start >= ANSWER_TIME)
 
     def _judge(self, goal, now, tips, load, measurement):
         """Judge the mean tip since the cables settled: reached, correct, or wait for more."""

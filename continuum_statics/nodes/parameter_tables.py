@@ -164,7 +164,7 @@ def tip_controller_parameters():
                   'goals, m', 1e-6, 1.0),
         ParamSpec('settle_time', 0.2, 'after a ramp, cables not yet at their command count as '
                   'settled once their gap to it closed by less than a tenth over this long '
-                  '(noise, friction; cables over 2 mm off that never moved towards it: up to '
+                  '(noise, friction; a cable over 2 mm off: up to '
                   '1 s); only then is the tip error judged, s', 0.0, 10.0),
         ParamSpec('settled_cable_error', 1e-6, 'cables count as settled when every measured '
                   'length is this close to its command, m (the tip moves ~L/r times as '
