@@ -95,17 +95,30 @@ class SensorInbox:
         record.last_used = False
         record.last_reason = reason
 
-    def take(self, now):
-        """Return {name: SensorReading} of the fresh unread readings (then read), or None."""
+    def take(self, now, stamp=None):
+        """Return {name: SensorReading} of the fresh unread readings (then read), or None.
+
+        ``stamp``: the measurement's stamp (s), or None. A reading stamped after it stays unread
+        for a later measurement (fused at this one's stamp, its correction would decay over an
+        interval it was not yet taken in), for at most half the timeout after its arrival (a
+        clock ahead of every measurement's still gets its readings used).
+        """
         with self._lock:
             unread, self._unread = self._unread, {}
-        fresh, self._taken = {}, {}
+        fresh, self._taken, later = {}, {}, {}
         for name, (reading, arrival, source) in unread.items():
-            if now - arrival <= self.timeout:
+            if now - arrival > self.timeout:
+                self.records[name].stale += 1
+            elif (stamp is not None and reading.stamp is not None and reading.stamp > stamp
+                  and now - arrival < 0.5 * self.timeout):
+                later[name] = (reading, arrival, source)
+            else:
                 fresh[name] = reading
                 self._taken[name] = source
-            else:
-                self.records[name].stale += 1
+        if later:
+            with self._lock:  # a newer reading that arrived meanwhile wins
+                for name, entry in later.items():
+                    self._unread.setdefault(name, entry)
         return fresh or None
 
     def used_sources(self, verdicts):

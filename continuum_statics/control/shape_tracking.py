@@ -126,7 +126,7 @@ class ShapeTracker:
         """
         inbox = self.inbox if sensors is None else None
         if inbox is not None:
-            sensors = inbox.take(self._clock())
+            sensors = inbox.take(self._clock(), stamp)
         result = self._update(lengths, tensions, load, thresholds, tension_limit, sensors, stamp)
         if inbox is not None and result.estimate is not None:
             inbox.judged(result.estimate.sensors)
