@@ -17,6 +17,8 @@ import numpy as np
 
 #: Levels as ints, equal to diagnostic_msgs/DiagnosticStatus OK, WARN, ERROR, STALE.
 OK, WARN, ERROR, STALE = 0, 1, 2, 3
+#: s a matched publisher of cable_states may stay unheard before statics names the transport.
+UNHEARD_TIME = 5.0
 #: Message prefix of a node that cannot serve yet (compiling kernels, waiting for its inputs).
 STARTING = 'starting: '
 #: A rejection of one kind is logged at most once in this many seconds.
@@ -173,6 +175,7 @@ class StaticsHealth:
         self.limit_rejections = 0
         self.not_converged = 0
         self.tensions_distrusted = 0
+        self._started = clock()
         self._distrust = ('', None)  # (why the tensions were not used, monotonic time)
         self._lost_reported = 0
 
@@ -221,11 +224,12 @@ class StaticsHealth:
         if cycle_time is not None:
             self.cycle_times.add(cycle_time)
 
-    def report(self, warn_residual, drop_residual, lost=0, skipped=0) -> Health:
+    def report(self, warn_residual, drop_residual, lost=0, skipped=0, publishers=0) -> Health:
         """Return the :class:`Health` of now (and start new windows).
 
         :param warn_residual: the warn threshold in force, m (``drop_residual`` likewise)
         :param lost: measurements the intake lost in all; ``skipped`` drained in all
+        :param publishers: how many nodes publish ``cable_states``
         """
         now, last = self._clock(), self.last
         input_rate, output_rate = self.input_rate.report(), self.output_rate.report()
@@ -236,6 +240,13 @@ class StaticsHealth:
         level, message = OK, 'estimating the shape'
         if self.passive:
             message = last['message']
+        elif (self.input_rate.total == 0 and publishers
+              and now - self._started > UNHEARD_TIME):
+            level, message = WARN, (
+                'no cable_states in %.0f s from its %d publisher(s): is cable_driver inactive? '
+                'If this node was restarted after a crash, Fast DDS can go on delivering to the '
+                'dead process (eProsima/Fast-DDS#5053): restart cable_driver'
+                % (now - self._started, publishers))
         elif self.output_rate.total == 0:
             message = STARTING + (
                 'waiting for the first cable_states (is cable_driver running?)'

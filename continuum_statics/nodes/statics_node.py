@@ -315,7 +315,7 @@ class StaticsNode(RunnerHooks, Node):
         thresholds, intake = self._thresholds(), self._input
         level, message, values = self.health.report(
             thresholds.warn, thresholds.drop, 0 if intake is None else max(intake.lost, 0),
-            0 if intake is None else intake.skipped)
+            0 if intake is None else intake.skipped, self.count_publishers('cable_states'))
         values['max_tension_n'] = self._tension_limit()
         values.update(self._stamps.values())
         values.update(load_values(

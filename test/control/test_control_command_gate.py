@@ -228,6 +228,22 @@ def test_statics_health_levels():
     assert values['outside_limits_total'] == 1 and values['iterations'] == 0
 
 
+def test_a_matched_cable_states_publisher_never_heard_is_named():
+    # a statics SIGKILLed and restarted heard no cable_states for 60 s while cable_driver
+    # published them (Fast DDS shared memory, eProsima/Fast-DDS#5053); its status said "is
+    # cable_driver running?", which it was
+    clock = Clock()
+    health = StaticsHealth(NAMES, clock=clock)
+    clock.now = 6.0
+    level, message, _ = health.report(1e-4, 1e-3)  # nobody publishes: the driver is not up
+    assert level == OK and 'is cable_driver running?' in message
+    level, message, values = health.report(1e-4, 1e-3, publishers=1)
+    assert level == WARN and 'restart cable_driver' in message and values['state'] == 'starting'
+    health.received(b'x')
+    level, message, _ = health.report(1e-4, 1e-3, publishers=1)
+    assert 'restart cable_driver' not in message
+
+
 def test_a_rejection_is_logged_at_most_once_per_throttle_per_kind():
     clock, lines = Clock(), []
     problems = Problems(lines.append, throttle=2.0, clock=clock)

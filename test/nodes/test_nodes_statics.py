@@ -340,3 +340,18 @@ def test_measured_tensions_are_used_when_complete(harness):
     publish_until(rig.states, msg,
                   lambda: rig.values().get('measured_tensions_used') == 'False', 5.0,
                   'tensions not used')
+
+
+def test_a_matched_publisher_never_heard_is_named_on_diagnostics(harness):
+    # a statics restarted after SIGKILL heard nothing from the driver's matched publisher
+    # (eProsima/Fast-DDS#5053) and said "is cable_driver running?": here the client's
+    # publisher is matched and sends nothing
+    rig = Rig(harness)
+
+    def status():
+        found = diagnostic_values(rig.diagnostics, '/statics')
+        return found[1] if found else None
+
+    wait_until(lambda: status() is not None and 'restart cable_driver' in status().message,
+               15.0, 'the unheard publisher named')
+    assert status().level == b'\x01' and '1 publisher(s)' in status().message
