@@ -81,7 +81,7 @@ class Robot:
 
         Fast DDS's shared-memory transport (rmw_fastrtps uses it on LOCALHOST) can go on
         writing to a killed process's port after a new participant reopened it, so the peers'
-        messages never reach the restarted node (eProsima/Fast-DDS#5053; here 2 restarts of ~20
+        messages never reach the restarted node (eProsima/Fast-DDS#5053; here 2 restarts of 36
         under a CPU hog: a restarted statics that never heard cable_states, a restarted
         tip_controller that never heard a goal). A participant opened now takes the lowest free
         participant ID, the dead one's, and the restarted node gets ports of its own: what is
