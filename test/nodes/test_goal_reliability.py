@@ -333,11 +333,17 @@ def test_a_goal_sent_during_teleoperation_never_runs_after_the_dead_man_stop(har
     twist.header.frame_id = 'base_link'
     answers = []
     for trial, goal in enumerate(reachable(3, 10)):
-        for k in range(40):  # 0.4 s of twists at 100 Hz; a goal in the middle
+        # 0.4 s of twists at 100 Hz, a goal in the middle; they go on until the controller has
+        # answered the goal's request: under a CPU hog it was handled after the twists that
+        # followed it, so it came last and rightly ran
+        k, deadline = 0, time.monotonic() + 10.0
+        while k < 40 or not answers[-1].done():
+            assert time.monotonic() < deadline, 'trial %d: the goal never answered' % trial
             twist.twist.linear.y = 0.01 * (1 if trial % 2 else -1)
             robot.twists.publish(twist)
             if k == 20:
                 answers.append(robot.send(goal))
+            k += 1
             time.sleep(0.01)
         wait_until(lambda: robot.values().get('teleoperation') == 'False', 5.0,
                    'the dead-man stop')
