@@ -30,6 +30,7 @@ import numpy as np
 from scipy.optimize import minimize
 
 from continuum_statics.calibration.error_budget import folds, pattern_groups
+from continuum_statics.calibration.filter_replay import replay_rows
 from continuum_statics.calibration.fit import fit as fit_run
 from continuum_statics.calibration.run_model import RunModel
 from continuum_statics.core.description.sensors import (
@@ -40,8 +41,6 @@ from continuum_statics.core.description.sensors import (
 from continuum_statics.core.estimation.gates import chi2_quantile
 from continuum_statics.core.estimation.state_estimation import (
     GROUPS,
-    decayed,
-    fused,
     group_sigma,
 )
 
@@ -192,8 +191,9 @@ def replay_filter(times, residuals, columns, sigma, tau, tracker_noise, seen, dr
     marker rows of the load columns; ``sigma`` (k,) the prior; ``seen`` (n,) rows the tracker
     is used on; ``drift``: (sigma m, time s) of the drift, or None. Returns each row's
     innovation (n, 3) before its update and its covariance (n, 3, 3) (the prediction error of
-    an occluded row and what the estimate says of it). The same
-    :func:`state_estimation.decayed` / :func:`state_estimation.fused` as the estimator.
+    an occluded row and what the estimate says of it). The arithmetic of
+    :func:`state_estimation.decayed` / :func:`state_estimation.fused`, the estimator's, compiled
+    (:mod:`.filter_replay`).
     """
     drift_time = None
     if drift is not None:
@@ -203,24 +203,10 @@ def replay_filter(times, residuals, columns, sigma, tau, tracker_noise, seen, dr
         # the drift moves the marker as an offset; its rate moves nothing now
         columns = np.concatenate([columns, np.broadcast_to(np.eye(3), (len(columns), 3, 3)),
                                   np.zeros((len(columns), 3, 3))], axis=2)
-    prior = np.diag(sigma ** 2)
-    noise = tracker_noise ** 2 * np.eye(3)
-    mean, covariance = np.zeros(len(sigma)), prior
-    innovations = np.zeros_like(residuals)
-    spreads = np.tile(np.eye(3), (len(residuals), 1, 1))
-    last = None
-    for i, (residual, jac) in enumerate(zip(residuals, columns)):
-        if last is not None:
-            mean, covariance = decayed(mean, covariance, prior, max(times[i] - last, 0.0), tau,
-                                       drift_time)
-        last = times[i]
-        if not np.all(np.isfinite(residual)):
-            continue
-        innovations[i] = residual - jac @ mean
-        spreads[i] = jac @ covariance @ jac.T + noise
-        if seen[i]:
-            mean, covariance = fused(mean, covariance, jac, innovations[i], noise)
-    return innovations, spreads
+    return replay_rows(np.asarray(times, dtype=float), np.ascontiguousarray(residuals, float),
+                       np.ascontiguousarray(columns, float), np.ascontiguousarray(sigma, float),
+                       float(tau), float(drift_time or 0.0), float(tracker_noise),
+                       np.asarray(seen, dtype=bool))
 
 
 def _sigma_vector(groups, sigmas):
