@@ -17,7 +17,8 @@ import numpy as np
 
 #: Levels as ints, equal to diagnostic_msgs/DiagnosticStatus OK, WARN, ERROR, STALE.
 OK, WARN, ERROR, STALE = 0, 1, 2, 3
-#: s a matched publisher of cable_states may stay unheard before statics names the transport.
+#: s a matched publisher of cable_states (or tip_pose, for tip_controller) may stay unheard
+#: before the node names the transport.
 UNHEARD_TIME = 5.0
 #: Message prefix of a node that cannot serve yet (compiling kernels, waiting for its inputs).
 STARTING = 'starting: '
@@ -356,12 +357,15 @@ class ControllerHealth:
 
     def __init__(self, control):
         self.control = control
+        self._started = control.clock()
 
-    def report(self, command_publishers=1, command_topic='cable_commands') -> Health:
+    def report(self, publishers=None, command_topic='cable_commands') -> Health:
         """Return the :class:`Health` of now.
 
-        :param command_publishers: how many nodes publish ``command_topic`` (this one included)
+        :param publishers: topic -> how many nodes publish it (``Node.count_publishers``: this
+            node included for ``command_topic``); None: nobody else
         """
+        publishers = publishers or (lambda topic: 0)
         control = self.control
         with control.lock:
             run = control.run
@@ -376,8 +380,12 @@ class ControllerHealth:
         missing = control.missing_state()
         if missing:
             message = STARTING + 'waiting for state: ' + missing
+            unheard = _unheard(control, publishers, control.clock() - self._started)
+            if unheard:
+                level, message = WARN, unheard
         if problems.recent(5.0):
             level, message = WARN, problems.last_reason
+        command_publishers = publishers(command_topic) or 0
         if command_publishers > 1:  # e.g. two bringups in one namespace: two loops fight
             level, message = WARN, (
                 'another node also publishes %s (%d publishers): two controllers in one '
@@ -405,3 +413,21 @@ class ControllerHealth:
             values['ramp_fraction'] = fraction
         values.update(problems.values())
         return Health(level, message, values)
+
+
+def _unheard(control, publishers, elapsed):
+    """Name an input that has publishers and was never heard in UNHEARD_TIME s, or ''."""
+    if elapsed <= UNHEARD_TIME:
+        return ''
+    for topic, state, node in (('cable_states', control.measurement, 'cable_driver'),
+                               ('tip_pose', control.tip, 'statics')):
+        if state is None:
+            # the first input missing decides: statics publishes tip_pose for cable_states
+            count = publishers(topic)
+            if not count:
+                return ''  # nobody publishes it yet: the node is still waiting for it
+            return ('no %s in %.0f s from its %d publisher(s): is %s inactive or failing (its '
+                    '/diagnostics)? If this node was restarted after a crash, Fast DDS can go '
+                    'on delivering to the dead process (eProsima/Fast-DDS#5053): restart %s'
+                    % (topic, elapsed, count, node, node))
+    return ''

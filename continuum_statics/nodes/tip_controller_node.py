@@ -319,8 +319,8 @@ class TipControllerNode(RunnerHooks, Node):
 
     # -- diagnostics and shutdown --------------------------------------------------------------
     def _publish_diagnostics(self):
-        topic = self._command_pub.topic_name
-        level, message, values = self.health.report(self.count_publishers(topic), topic)
+        level, message, values = self.health.report(self.count_publishers,
+                                                    self._command_pub.topic_name)
         level, message = self._obstacles.diagnose(level, message, values)
         self._diagnostics.publish(diag.diagnostic_array(
             self.get_clock().now().to_msg(), self.get_fully_qualified_name().lstrip('/'),

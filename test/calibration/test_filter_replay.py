@@ -14,7 +14,7 @@ from continuum_statics.core.estimation.state_estimation import decayed, fused, g
 
 
 def reference(times, residuals, columns, sigma, tau, noise, seen, drift=None):
-    """The filter with the estimator's functions, one row at a time (slow)."""
+    """Replay with the estimator's functions, one row at a time (slow)."""
     drift_time = None
     if drift is not None:
         drift_time = drift[1]

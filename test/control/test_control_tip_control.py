@@ -246,8 +246,30 @@ def test_controller_health_levels():
     assert level == WARN and 'unreachable goal' in message
     assert values['goals_rejected'] == 1 and values['goals_reached'] == 0
     clock.now += 10.0  # the problem is old; two publishers of cable_commands is not
-    level, message, _ = health.report(command_publishers=2)
+    level, message, _ = health.report({'cable_commands': 2}.get)
     assert level == WARN and 'two controllers' in message
+
+
+def test_a_matched_input_never_heard_is_named():
+    # a tip_controller SIGKILLed and restarted heard neither its state nor its goals while its
+    # peers published them (Fast DDS shared memory, eProsima/Fast-DDS#5053); it said "waiting
+    # for state", with no hint at the transport or what to restart
+    control, clock, _ = make()
+    health = ControllerHealth(control)
+    published = {'cable_states': 1, 'tip_pose': 1}.get
+    level, message, _ = health.report(published)
+    assert level == OK and message.startswith(STARTING)  # just started: waiting is normal
+    clock.now += 6.0
+    level, message, _ = health.report({}.get)  # nobody publishes: the drivers are not up
+    assert level == OK and message.startswith(STARTING)
+    level, message, values = health.report(published)
+    assert level == WARN and 'no cable_states in 6 s' in message
+    assert 'restart cable_driver' in message and values['state'] == 'starting'
+    control.on_cable_states(ROBOT.straight_cable_lengths, 0)  # statics is the one unheard
+    level, message, _ = health.report(published)
+    assert level == WARN and 'restart statics' in message
+    feed(control, ROBOT.straight_cable_lengths)
+    assert health.report(published)[:2] == (OK, 'idle')
 
 
 def test_backbone_after_waits_for_the_backbone_of_the_reached_tip():

@@ -380,3 +380,23 @@ def test_streamed_goals_never_run_in_the_control_timers_callback_group(harness):
                 for srv in controller.services}
     for group in (groups['tip_goal_pose'], groups['tip_goal_point'], services['tip_goal']):
         assert group is not control_group and group is controller.goal_group
+
+
+def test_a_matched_state_publisher_never_heard_is_named_on_diagnostics(harness):
+    # a tip_controller restarted after SIGKILL heard neither state nor goals from its peers
+    # (eProsima/Fast-DDS#5053) and said "waiting for state": here the client's publishers of
+    # cable_states and tip_pose are matched and send nothing
+    harness.add(TipControllerNode)
+    client = harness.client()
+    diagnostics = Collector(client, DiagnosticArray, '/diagnostics', 10)
+    silent = [client.create_publisher(JointState, 'cable_states', qos_profile_sensor_data),
+              client.create_publisher(PoseStamped, 'tip_pose', LATCHED)]
+
+    def status():
+        found = diagnostic_values(diagnostics, 'tip_controller')
+        return found[1] if found else None
+
+    wait_until(lambda: status() is not None and 'restart cable_driver' in status().message,
+               15.0, 'the unheard publisher named')
+    assert status().level == b'\x01' and 'no cable_states' in status().message
+    assert len(silent) == 2
