@@ -59,7 +59,7 @@ def write_robot_file(output, robot_file, robot, fit, header, uncertainty=None):
         document['model_uncertainty'] = {
             key: _number(getattr(uncertainty, key)) for key in (
                 'tip_force', 'section_moment', 'cable_length', 'base_position',
-                'correlation_time', 'drift', 'drift_time')}
+                'correlation_time', 'drift', 'drift_time', 'point_noise')}
     routes = robot.description.routes()
     j = 0
     for holder in holders:

@@ -221,6 +221,8 @@ def _run_report(summary):
                          1e3 * u.get('base_position', 0.0), u['correlation_time']))
         if u.get('drift'):
             lines[-1] += ', drift %.3g mm over %.3g s' % (1e3 * u['drift'], u['drift_time'])
+        if u.get('point_noise'):
+            lines[-1] += ', point noise %.3g mm at the tip' % (1e3 * u['point_noise'])
     if summary['output']:
         lines.append('wrote %s' % summary['output'])
     return '\n'.join(lines)

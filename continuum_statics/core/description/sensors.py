@@ -20,7 +20,7 @@ SENSOR_KINDS = ('position', 'pose')
 DEFAULT_SENSOR_NOISE = {'position': 5.0e-4, 'angle': 0.01}
 _SENSOR_KEYS = {'name', 'at', 'offset', 'kind', 'noise', 'frame_id', 'covariance'}
 _UNCERTAINTY_KEYS = ('tip_force', 'section_moment', 'cable_length', 'base_position',
-                     'correlation_time', 'drift', 'drift_time')
+                     'correlation_time', 'drift', 'drift_time', 'point_noise')
 
 
 @dataclass(frozen=True, eq=False)
@@ -69,6 +69,9 @@ class ModelUncertainty:
         the error that follows the robot's motion from one measurement to the next (friction
         history, hysteresis), which the slowly varying loads above cannot
     :ivar drift_time: s, the time over which that offset changes (its Matern 3/2 length scale)
+    :ivar point_noise: m, of the model's error at the tip that none of the above explains and
+        that changes from one configuration to the next (white): added to each backbone point's
+        covariance, growing as s / L along the rod, and to a sensor's noise at its point
     """
 
     tip_force: float = 0.0
@@ -78,6 +81,7 @@ class ModelUncertainty:
     correlation_time: float = 10.0
     drift: float = 0.0
     drift_time: float = 5.0
+    point_noise: float = 0.0
 
     @property
     def any(self):

@@ -156,7 +156,9 @@ class ShapeEstimate:
         if self.sensitivity is None:
             return None
         g = self.sensitivity.positions
-        return (g @ self.unmodelled.covariance) @ g.transpose(0, 2, 1)
+        floor = self.unmodelled.point_variance(self.shape, self.shape.s)
+        return ((g @ self.unmodelled.covariance) @ g.transpose(0, 2, 1)
+                + floor[:, None, None] * np.eye(3))
 
     @functools.cached_property
     def tip_covariance(self):
@@ -164,7 +166,9 @@ class ShapeEstimate:
         if self.sensitivity is None:
             return None
         tip = np.concatenate([self.sensitivity.positions[-1], self.sensitivity.angles[-1]])
-        return tip @ self.unmodelled.covariance @ tip.T
+        covariance = tip @ self.unmodelled.covariance @ tip.T
+        covariance[:3, :3] += self.unmodelled.point_noise ** 2 * np.eye(3)
+        return covariance
 
     @property
     def tip_wrench(self):

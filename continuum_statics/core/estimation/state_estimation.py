@@ -25,6 +25,11 @@ the exact transition of its state-space form
 A tracker's last residual is then carried at first (the last-residual baseline's strength
 between nearby rows) and handed over to the slowly varying loads as it fades.
 
+What none of these makes, a shape error new with each configuration, is ``point_noise``: white,
+of standard deviation point_noise s / L at arc length s, added to each point's covariance and
+to a sensor's noise at its point (R_k + F(s_k)), never part of the state (the nugget of
+kriging, a Gaussian process's white-noise term).
+
 With the robot file's ``load_model`` the tip load is part of the state too, ahead of the
 unmodelled loads: the parameters p of its :class:`~continuum_statics.core.estimation.
 load_estimation.LoadModel` (a payload's mass, a force along a direction, a force, a wrench; w =
@@ -162,6 +167,8 @@ class Unmodelled:
     :ivar still: (cable lengths (n,) m, stamp s) where the cables last moved: while they move
         and LOAD_SETTLE s after, no new tip load is taken and contact does not begin
         (:func:`_moving`)
+    :ivar point_noise: m, the model's error at the tip that no load explains (white), the robot
+        file's ``model_uncertainty.point_noise`` (:meth:`point_variance`)
     """
 
     names: tuple
@@ -172,6 +179,7 @@ class Unmodelled:
     load_basis: np.ndarray = None
     pending: tuple = ()
     still: tuple = None
+    point_noise: float = 0.0
 
     @property
     def correction(self):
@@ -197,6 +205,14 @@ class Unmodelled:
     def sigma(self):
         """(k,) standard deviations."""
         return np.sqrt(np.diag(self.covariance))
+
+    def point_variance(self, shape, s):
+        """Return the variance (m^2, each axis) of the model's white error at arc lengths ``s``.
+
+        :attr:`point_noise` at the tip, growing as s / L from the clamped base (zero there):
+        the error of a rod bent by what the model misses grows along it.
+        """
+        return (self.point_noise * _fraction(s, shape)) ** 2
 
     def as_dict(self):
         """{name: (mean, sigma)} for reports."""
@@ -276,19 +292,21 @@ def propagate(robot, carried, stamp):
     """Return the state at ``stamp`` from the last estimate's (:func:`decayed`)."""
     names, prior = _prior(robot)
     basis = None if robot.load_model is None else robot.load_model.basis
+    floor = robot.model_uncertainty.point_noise
     if carried is None or carried.names != names:
-        return Unmodelled(names, np.zeros(len(names)), prior, stamp, load_basis=basis)
+        return Unmodelled(names, np.zeros(len(names)), prior, stamp, load_basis=basis,
+                          point_noise=floor)
     if stamp is None or carried.stamp is None:
         return Unmodelled(names, carried.mean, carried.covariance,
                           carried.stamp if stamp is None else stamp, carried.origin, basis,
-                          carried.pending, carried.still)
+                          carried.pending, carried.still, floor)
     # an older stamp is not a step back in time
     mean, covariance = decayed(carried.mean, carried.covariance, prior,
                                max(stamp - carried.stamp, 0.0),
                                robot.model_uncertainty.correlation_time, _drift_time(robot),
                                load_size(robot))
     return Unmodelled(names, mean, covariance, stamp, carried.origin, basis, carried.pending,
-                      carried.still)
+                      carried.still, floor)
 
 
 def _moved_variance(robot, elapsed):
@@ -710,7 +728,9 @@ def _sensor_measurement(robot, shape, sensitivity, prior, sensor, reading, stamp
     shift = np.broadcast_to(shift, len(jac))
     moved = prior.correction  # what the model's shape does not have yet
     innovation = reading.position - predicted - shift[:3] - jac[:3] @ moved
-    sigmas = [reading.sigma or sensor.position_sigma] * 3  # the device's own wins
+    # the device's own noise wins; the model's error no load explains adds to it
+    sigmas = [math.sqrt((reading.sigma or sensor.position_sigma) ** 2
+                        + prior.point_variance(shape, sensor.s))] * 3
     if sensor.kind == 'pose' and reading.rotation is not None:
         angle = _small_rotations(reading.rotation[None], rotation[None])[0]
         innovation = np.concatenate([innovation, angle - shift[3:] - jac[3:] @ moved])
@@ -915,4 +935,10 @@ def point_covariance(estimate, sensor):
     """
     _, jac, _ = _sensor_rows(estimate.shape, estimate.sensitivity, sensor)
     jac = jac[:3]
-    return jac @ estimate.unmodelled.covariance @ jac.T
+    floor = estimate.unmodelled.point_variance(estimate.shape, sensor.s)
+    return jac @ estimate.unmodelled.covariance @ jac.T + floor * np.eye(3)
+
+
+def _fraction(s, shape):
+    """Return s / L (clipped to [0, 1]) of arc lengths ``s`` on ``shape``."""
+    return np.clip(np.asarray(s, dtype=float) / shape.s[-1], 0.0, 1.0)
