@@ -16,15 +16,13 @@ import dataclasses
 import time
 
 import numpy as np
-import yaml
 
 from continuum_statics.calibration import model_uncertainty
 from continuum_statics.calibration.recorded_run import RecordedRun
 from continuum_statics.config_paths import config_file
-from continuum_statics.core.description.robot_file import parse_robot_description
 from continuum_statics.core.description.sensors import ModelUncertainty, SensorReading
 from continuum_statics.core.estimation.gates import chi2_quantile
-from continuum_statics.core.robot import Robot
+from continuum_statics.tools.fusion import mismatched_truth, smooth_path
 
 FILE = 'tendon_robot_sensors.yaml'
 #: Row period (s), rows between targets, largest pull (m).
@@ -34,34 +32,12 @@ FRACTIONS = (0.25, 0.5, 0.75, 1.0)
 
 def robots(seed=0):
     """Return (the file's robot, the truth's robot)."""
-    with open(config_file(FILE), encoding='utf-8') as stream:
-        document = yaml.safe_load(stream)
-    nominal = Robot(parse_robot_description(document))
-    rng = np.random.default_rng(seed)
-    truth = dict(document)
-    truth.pop('sensors')
-    truth.pop('model_uncertainty')
-    stiffer = 1.08 * float(document['rod']['youngs_modulus'])  # PyYAML reads 58.0e9 as text
-    truth['rod'] = dict(document['rod'], youngs_modulus=stiffer)
-    truth['tendons'] = dict(document['tendons'], stiffness=400.0)
-    cables = [dict(cable, zero_offset=float(rng.uniform(-1.5e-3, 1.5e-3)))
-              for cable in document['cables']]
-    truth['sections'] = [{'name': 'all', 'guides': truth.pop('guides'),
-                          'cables': cables, 'disk_mass': 0.01}]
-    truth.pop('cables')
-    return nominal, Robot(parse_robot_description(truth))
+    return mismatched_truth(config_file(FILE), seed)
 
 
 def path(robot, rows, seed):
     """Return (rows, n) motor lengths: smooth moves between random pulls."""
-    rng = np.random.default_rng(seed)
-    n = len(robot.cable_names)
-    targets = robot.straight_cable_lengths - rng.uniform(0.0, PULL, (rows // HOLD + 2, n)) * (
-        rng.uniform(size=(rows // HOLD + 2, n)) < 0.6)
-    phase = np.arange(rows) / HOLD
-    k = phase.astype(int)
-    w = 0.5 - 0.5 * np.cos(np.pi * (phase - k))[:, None]
-    return (1.0 - w) * targets[k] + w * targets[k + 1]
+    return smooth_path(robot, rows, seed, HOLD, PULL)
 
 
 def truth_run(truth, lengths):

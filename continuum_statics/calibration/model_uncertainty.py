@@ -228,18 +228,26 @@ def replay_filter(times, residuals, columns, sigma, tau, tracker_noise, seen, dr
     :func:`state_estimation.decayed` / :func:`state_estimation.fused`, the estimator's, compiled
     (:mod:`.filter_replay`).
     """
-    drift_time = None
-    if drift is not None:
-        drift_time = drift[1]
-        rate = group_sigma(ModelUncertainty(drift=drift[0], drift_time=drift_time), 'drift_rate')
-        sigma = np.concatenate([sigma, [drift[0]] * 3, [rate] * 3])
-        # the drift moves the marker as an offset; its rate moves nothing now
-        columns = np.concatenate([columns, np.broadcast_to(np.eye(3), (len(columns), 3, 3)),
-                                  np.zeros((len(columns), 3, 3))], axis=2)
+    sigma, columns, drift_time = with_drift(sigma, columns, drift)
     return replay_rows(np.asarray(times, dtype=float), np.ascontiguousarray(residuals, float),
                        np.ascontiguousarray(columns, float), np.ascontiguousarray(sigma, float),
                        float(tau), float(drift_time or 0.0), float(tracker_noise),
                        np.asarray(seen, dtype=bool))
+
+
+def with_drift(sigma, columns, drift):
+    """Return (sigma, columns, drift time s or None) with the drift's six entries appended.
+
+    ``drift``: (sigma m, time s), or None (``sigma`` and ``columns`` as they are).
+    """
+    if drift is None:
+        return sigma, columns, None
+    rate = group_sigma(ModelUncertainty(drift=drift[0], drift_time=drift[1]), 'drift_rate')
+    sigma = np.concatenate([sigma, [drift[0]] * 3, [rate] * 3])
+    # the drift moves the marker as an offset; its rate moves nothing now
+    columns = np.concatenate([columns, np.broadcast_to(np.eye(3), (len(columns), 3, 3)),
+                              np.zeros((len(columns), 3, 3))], axis=2)
+    return sigma, columns, drift[1]
 
 
 def _sigma_vector(groups, sigmas):

@@ -32,6 +32,49 @@ TABLE_S = (0.25, 0.5, 0.75, 1.0)
 PULL = 0.02
 
 
+def mismatched_truth(robot_file, seed=0):
+    """Return (the file's robot, a truth with physics the file lacks) (issue 43's truth).
+
+    The truth is the file's robot with the rod 8 % stiffer, the cables' EA 400 N, each cable
+    homed up to 1.5 mm off (``seed``) and 10 g on every guide disk; a one-section file with
+    ``guides`` and ``cables`` at its top level (``tendon_robot_sensors.yaml``).
+    """
+    import yaml
+
+    from continuum_statics.core.description.robot_file import parse_robot_description
+    from continuum_statics.core.robot import Robot
+
+    with open(robot_file, encoding='utf-8') as stream:
+        document = yaml.safe_load(stream)
+    rng = np.random.default_rng(seed)
+    truth = {key: value for key, value in document.items()
+             if key not in ('sensors', 'model_uncertainty', 'guides', 'cables')}
+    stiffer = 1.08 * float(document['rod']['youngs_modulus'])  # PyYAML reads 58.0e9 as text
+    truth['rod'] = dict(document['rod'], youngs_modulus=stiffer)
+    truth['tendons'] = dict(document['tendons'], stiffness=400.0)
+    cables = [dict(cable, zero_offset=float(rng.uniform(-1.5e-3, 1.5e-3)))
+              for cable in document['cables']]
+    truth['sections'] = [{'name': 'all', 'guides': document['guides'], 'cables': cables,
+                          'disk_mass': 0.01}]
+    return (Robot(parse_robot_description(document)),
+            Robot(parse_robot_description(truth)))
+
+
+def smooth_path(robot, rows, seed, hold=8, pull=0.012):
+    """Return (rows, n) motor lengths: smooth moves between random pulls (up to ``pull`` m).
+
+    A new target every ``hold`` rows, each cable pulled with probability 0.6.
+    """
+    rng = np.random.default_rng(seed)
+    n = len(robot.cable_names)
+    targets = robot.straight_cable_lengths - rng.uniform(0.0, pull, (rows // hold + 2, n)) * (
+        rng.uniform(size=(rows // hold + 2, n)) < 0.6)
+    phase = np.arange(rows) / hold
+    k = phase.astype(int)
+    w = 0.5 - 0.5 * np.cos(np.pi * (phase - k))[:, None]
+    return (1.0 - w) * targets[k] + w * targets[k + 1]
+
+
 def simulated_truth(robot, cases, seed=0):
     """Return rows of {sensors, rms (len(TABLE_S),) m, coverage} for 0..len(robot.sensors).
 

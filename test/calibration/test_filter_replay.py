@@ -8,20 +8,13 @@ import math
 import numpy as np
 import pytest
 
-from continuum_statics.calibration.model_uncertainty import replay_filter, seen_mask
-from continuum_statics.core.description.sensors import ModelUncertainty
-from continuum_statics.core.estimation.state_estimation import decayed, fused, group_sigma
+from continuum_statics.calibration.model_uncertainty import replay_filter, seen_mask, with_drift
+from continuum_statics.core.estimation.state_estimation import decayed, fused
 
 
 def reference(times, residuals, columns, sigma, tau, noise, seen, drift=None):
     """Replay with the estimator's functions, one row at a time (slow)."""
-    drift_time = None
-    if drift is not None:
-        drift_time = drift[1]
-        rate = group_sigma(ModelUncertainty(drift=drift[0], drift_time=drift_time), 'drift_rate')
-        sigma = np.concatenate([sigma, [drift[0]] * 3, [rate] * 3])
-        columns = np.concatenate([columns, np.broadcast_to(np.eye(3), (len(columns), 3, 3)),
-                                  np.zeros((len(columns), 3, 3))], axis=2)
+    sigma, columns, drift_time = with_drift(sigma, columns, drift)
     prior = np.diag(sigma ** 2)
     mean, covariance = np.zeros(len(sigma)), prior
     innovations = np.zeros_like(residuals)

@@ -26,7 +26,7 @@ from continuum_statics.core.description.robot_file import parse_robot_descriptio
 from continuum_statics.core.description.sensors import ModelUncertainty, SensorReading
 from continuum_statics.core.estimation.state_estimation import point_covariance
 from continuum_statics.core.robot import Robot
-from continuum_statics.tools.fusion import simulated_truth
+from continuum_statics.tools.fusion import mismatched_truth, simulated_truth, smooth_path
 
 REPO = Path(__file__).resolve().parents[2]
 SENSOR_ROBOT = REPO / 'config' / 'tendon_robot_sensors.yaml'
@@ -490,37 +490,6 @@ def test_calibrate_recovers_a_known_hidden_offset():
     assert dataclasses.asdict(measured).keys() >= {'tip_force', 'cable_length'}
 
 
-def _mismatched_truth():
-    """Return (the file's robot, a truth with physics it lacks): ``bench_mismatch``'s truth.
-
-    The rod 8 % stiffer, the cables' EA 400 N, each cable homed up to 1.5 mm off, 10 g on
-    every guide disk.
-    """
-    document = yaml.safe_load(SENSOR_ROBOT.read_text())
-    rng = np.random.default_rng(0)
-    truth = {key: value for key, value in document.items()
-             if key not in ('sensors', 'model_uncertainty', 'guides', 'cables')}
-    truth['rod'] = dict(document['rod'], youngs_modulus=1.08 * float(
-        document['rod']['youngs_modulus']))
-    truth['tendons'] = dict(document['tendons'], stiffness=400.0)
-    truth['sections'] = [{'name': 'all', 'guides': document['guides'], 'disk_mass': 0.01,
-                          'cables': [dict(cable, zero_offset=float(rng.uniform(-1.5e-3, 1.5e-3)))
-                                     for cable in document['cables']]}]
-    return Robot(parse_robot_description(document)), Robot(parse_robot_description(truth))
-
-
-def _smooth_path(robot, rows, seed, hold=8, pull=0.012):
-    """Return (rows, n) motor lengths moving smoothly between random pulls."""
-    rng = np.random.default_rng(seed)
-    n = len(robot.cable_names)
-    targets = robot.straight_cable_lengths - rng.uniform(0.0, pull, (rows // hold + 2, n)) * (
-        rng.uniform(size=(rows // hold + 2, n)) < 0.6)
-    phase = np.arange(rows) / hold
-    k = phase.astype(int)
-    w = 0.5 - 0.5 * np.cos(np.pi * (phase - k))[:, None]
-    return (1.0 - w) * targets[k] + w * targets[k + 1]
-
-
 def _truth_points(truth, lengths, sensor):
     points, previous = [], None
     for row in lengths:
@@ -533,14 +502,16 @@ def _truth_points(truth, lengths, sensor):
 def test_on_truth_with_physics_the_file_lacks_a_tracked_runs_tip_ellipsoid_is_honest():
     """Calibrated on a training run of the truth, a held-out run tracked on every row.
 
+    The truth: the rod 8 % stiffer, the cables' EA 400 N, homing errors, 10 g guide disks.
+
     ``bench_mismatch``'s case with the tip tracker: before ``point_noise`` (the model's white
     error, fitted on the rows a tracker sees) the tip's 95 % ellipsoid held 74.7 % of the rows.
     """
-    nominal, truth = _mismatched_truth()
+    nominal, truth = mismatched_truth(SENSOR_ROBOT)
     tracker = nominal.sensors[0]
     rng = np.random.default_rng(3)
     period, train, held_out = 0.5, 400, 300
-    lengths = _smooth_path(nominal, train, seed=1)
+    lengths = smooth_path(nominal, train, seed=1)
     tips = _truth_points(truth, lengths, tracker) + rng.normal(0.0, tracker.position_sigma,
                                                                (train, 3))
     run = RecordedRun(times=period * np.arange(train), labels=('',) * train, lengths=lengths,
@@ -549,7 +520,7 @@ def test_on_truth_with_physics_the_file_lacks_a_tracked_runs_tip_ellipsoid_is_ho
         nominal.with_model_uncertainty(ModelUncertainty()), run)
     assert measured.point_noise > 0.0, report
     robot = nominal.with_model_uncertainty(measured)
-    lengths = _smooth_path(nominal, held_out, seed=2)
+    lengths = smooth_path(nominal, held_out, seed=2)
     errors, nees, previous = [], [], None
     for i, (row, point) in enumerate(zip(lengths, _truth_points(truth, lengths, tracker))):
         seen = point + rng.normal(0.0, tracker.position_sigma, 3)
