@@ -243,11 +243,8 @@ class StaticsHealth:
             message = last['message']
         elif (self.input_rate.total == 0 and publishers
               and now - self._started > UNHEARD_TIME):
-            level, message = WARN, (
-                'no cable_states in %.0f s from its %d publisher(s): is cable_driver inactive? '
-                'If this node was restarted after a crash, Fast DDS can go on delivering to the '
-                'dead process (eProsima/Fast-DDS#5053): restart cable_driver'
-                % (now - self._started, publishers))
+            level, message = WARN, unheard_message('cable_states', now - self._started,
+                                                   publishers, 'cable_driver')
         elif self.output_rate.total == 0:
             message = STARTING + (
                 'waiting for the first cable_states (is cable_driver running?)'
@@ -426,8 +423,13 @@ def _unheard(control, publishers, elapsed):
             count = publishers(topic)
             if not count:
                 return ''  # nobody publishes it yet: the node is still waiting for it
-            return ('no %s in %.0f s from its %d publisher(s): is %s inactive or failing (its '
-                    '/diagnostics)? If this node was restarted after a crash, Fast DDS can go '
-                    'on delivering to the dead process (eProsima/Fast-DDS#5053): restart %s'
-                    % (topic, elapsed, count, node, node))
+            return unheard_message(topic, elapsed, count, node)
     return ''
+
+
+def unheard_message(topic, elapsed, count, node):
+    """Return the WARN of a ``topic`` whose ``count`` publishers sent nothing in ``elapsed`` s."""
+    return ('no %s in %.0f s from its %d publisher(s): is %s inactive or failing (its '
+            '/diagnostics)? If this node was restarted after a crash, Fast DDS can go on '
+            'delivering to the dead process (eProsima/Fast-DDS#5053): restart %s'
+            % (topic, elapsed, count, node, node))
