@@ -15,6 +15,7 @@ too (``--base-paths src src/continuum_statics/continuum_statics_interfaces``, as
 says). The first test shows that.
 """
 import ast
+import hashlib
 import os
 from pathlib import Path
 import shutil
@@ -67,6 +68,18 @@ def clone(workspace):
             (target / name).parent.mkdir(parents=True, exist_ok=True)
             shutil.copy2(source, target / name)
     return target
+
+
+def kernel_cache(directory, root):
+    """Return where numba caches the kernels of the modules in ``directory``.
+
+    numba.core.caching: ``__pycache__`` beside the sources, or under ``NUMBA_CACHE_DIR``
+    (``root``) the sources' directory name and the SHA-1 of its absolute path.
+    """
+    if not root:
+        return directory / '__pycache__'
+    path = os.path.abspath(directory)
+    return Path(root) / '_'.join((os.path.basename(path), hashlib.sha1(path.encode()).hexdigest()))
 
 
 def sourced_environment(install):
@@ -186,16 +199,19 @@ def test_nodes_start_from_the_install_space_and_reach_a_goal(workspace):
 
     install = workspace / 'install'
     env = sourced_environment(install)
-    env.pop('NUMBA_CACHE_DIR', None)
     lib = install / PACKAGE / 'lib' / PACKAGE
-    # The kernels this tree compiled (make venv) serve the installed copies of the same sources
-    # (numba keys its cache by the source's mtime and size, which the copies keep); where they
-    # do not match, the warm-up compiles (a minute).
+    # The kernels this tree compiled (make venv, conftest) serve the installed copies of the same
+    # sources (numba keys a kernel by its source's content hash); without them the warm-up
+    # compiles every kernel (100-150 s of a loaded CI worker).
     installed = next((install / PACKAGE / 'lib').glob('python*/site-packages')) / PACKAGE
-    for cached in (REPO / PACKAGE).glob('*/__pycache__/*.nb[ic]'):
-        target = installed / cached.parent.parent.name / '__pycache__' / cached.name
-        target.parent.mkdir(exist_ok=True)
-        shutil.copy2(cached, target)
+    if os.environ.get('NUMBA_CACHE_DIR'):  # the installed copies' kernels in a cache of their own
+        env['NUMBA_CACHE_DIR'] = str(workspace / 'numba_cache')
+    for source in {path.parent for path in (REPO / PACKAGE).rglob('*.py')}:
+        target = kernel_cache(installed / source.relative_to(REPO / PACKAGE),
+                              env.get('NUMBA_CACHE_DIR'))
+        for cached in kernel_cache(source, os.environ.get('NUMBA_CACHE_DIR')).glob('*.nb[ic]'):
+            target.mkdir(parents=True, exist_ok=True)
+            shutil.copy2(cached, target / cached.name)
     warm = subprocess.run([sys.executable, '-c', 'import continuum_statics as c; print(c.__file__)'
                            '; from continuum_statics.tools.warmup import main; main([])'],
                           env=env, capture_output=True, text=True, timeout=600, cwd=workspace)
