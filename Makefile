@@ -29,14 +29,15 @@ docs: venv
 	@echo "docs: build/doc/index.html"
 
 # The second route: the ROS-facing tests on ROS 2 Jazzy wheels (requirements-jazzy.txt,
-# .venv-jazzy). test/core, test/control and test/drivers' fast tests are left out: the modules
-# they test import no ROS (test_layer_contracts) and both venvs pin the same non-ROS packages
-# (test_tools_routes), so their results cannot depend on the distribution; `make test` runs them.
-# Every `ros` test (nodes over DDS, processes, the driver nodes) runs on both, but the cold-start
-# ones (test_cold_start.py: the kernels compiled from an empty cache, in subprocesses, before the
-# demo and a bringup serve; 190-330 s of a worker on a 2-GHz machine): what they test is numba's
-# compile and cache (the same pins on both); the nodes they start are the other tests' nodes.
-JAZZY_FAST = test/calibration test/nodes test/tools test/package
+# .venv-jazzy): the fast tests of nodes, tools and package, and the `ros` tier. The fast tests of
+# core/, control/, calibration/ and drivers/ run on Kilted only: those modules import no ROS
+# (test_layer_contracts) and both venvs pin the same non-ROS packages (test_tools_routes), so
+# their results cannot depend on the distribution. So do the `ros` tests whose subject is not
+# ROS: the cold-start ones (test_cold_start.py: numba's compile and cache from an empty cache,
+# 190-330 s of a worker on a 2-GHz machine) and the `alone` ones (figures of a quiet machine:
+# the load estimate under friction, the browser's page); the nodes they start are the nodes the
+# other `ros` tests run on both.
+JAZZY_FAST = test/nodes test/tools test/package
 JAZZY_ROS_SKIP = --deselect test/core/test_cold_start.py
 venv-jazzy:
 	@VENV=.venv-jazzy REQUIREMENTS=requirements-jazzy.txt scripts/setup_venv.sh
@@ -44,7 +45,7 @@ venv-jazzy:
 test-jazzy: venv venv-jazzy
 	scripts/install_browser.sh
 	scripts/ros_env.sh --private .venv-jazzy/bin/python -m pytest -q -n 2 -m "not ros" --durations=10 $(JAZZY_FAST)
-	scripts/ros_tier.sh .venv-jazzy/bin/python $(JAZZY_ROS_SKIP)
+	scripts/ros_tier.sh --no-alone .venv-jazzy/bin/python $(JAZZY_ROS_SKIP)
 
 bench: venv
 	scripts/ros_env.sh .venv/bin/python -m continuum_statics bench
