@@ -22,7 +22,7 @@ from continuum_statics.core.robot import Robot
 
 EXAMPLES = sorted(path.name for path in (REPO / 'config').glob('*.yaml')
                   if not path.name.endswith('params.yaml'))
-CASES = 200
+CASES = 100  # per robot file and cable model: 2,800 cases in all
 SIGMA_LENGTH, SIGMA_TENSION, SIGMA_TIP = (DEFAULT_NOISE['length'], DEFAULT_NOISE['tension'],
                                           DEFAULT_NOISE['tip_position'])
 
