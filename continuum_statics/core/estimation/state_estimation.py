@@ -212,7 +212,9 @@ class Unmodelled:
         :attr:`point_noise` at the tip, growing as s / L from the clamped base (zero there):
         the error of a rod bent by what the model misses grows along it.
         """
-        return (self.point_noise * _fraction(s, shape)) ** 2
+        if not self.point_noise:  # most files: no array work per reading
+            return 0.0 if np.ndim(s) == 0 else np.zeros(len(s))
+        return white_sigma(self.point_noise, s, shape.s[-1]) ** 2
 
     def as_dict(self):
         """{name: (mean, sigma)} for reports."""
@@ -518,20 +520,21 @@ def _rows_at(history, stamp, sensor, shape, sensitivity, origin=None):
     Interpolated between the kept estimates that bracket ``stamp`` (the oldest kept for an
     older one); the current estimate when ``stamp`` is None, not before it or nothing is kept.
     ``shift`` (rows of H) brings a kept estimate solved at another state (a tip load since
-    relinearised) to the current ``origin``: H_k (origin - origin_k), zero without a load.
+    relinearised) to the current ``origin``: H_k (origin - origin_k), zero without a load;
+    None when the rows are the current estimate's.
     """
     if stamp is None or len(history) < 2 or stamp >= history[-1][0]:
-        return (*_sensor_rows(shape, sensitivity, sensor), 0.0)
+        return (*_sensor_rows(shape, sensitivity, sensor), None)
     after = max(bisect.bisect_left(history, stamp, key=lambda moment: moment[0]), 1)
     (t0, shape0, sens0, origin0), (t1, shape1, sens1, origin1) = (history[after - 1],
                                                                   history[after])
     k = sensitivity.positions.shape[2]
     if sens0.positions.shape[2] != k or sens1.positions.shape[2] != k:
-        return (*_sensor_rows(shape, sensitivity, sensor), 0.0)  # other unmodelled loads then
+        return (*_sensor_rows(shape, sensitivity, sensor), None)  # other unmodelled loads then
     w = min(max((stamp - t0) / (t1 - t0), 0.0), 1.0) if t1 > t0 else 1.0
     point0, jac0, rotation0 = _sensor_rows(shape0, sens0, sensor)
     point1, jac1, rotation1 = _sensor_rows(shape1, sens1, sensor)
-    shift = 0.0
+    shift = np.zeros(len(jac0))
     if origin is not None:
         shift = ((1.0 - w) * jac0 @ (origin - origin0) + w * jac1 @ (origin - origin1))
     return ((1.0 - w) * point0 + w * point1, (1.0 - w) * jac0 + w * jac1,
@@ -692,9 +695,10 @@ def _sensor_rows(shape, sensitivity, sensor):
     arm = rotation @ sensor.offset
     point = (1.0 - w) * shape.positions[lower] + w * shape.positions[upper] + arm
     angles = sensitivity.angles[near]
-    # d(R o) = theta x (R o) = -[R o]x theta
+    # d(R o) = theta x (R o) = -[R o]x theta (the skew product: np.cross costs ~50 us here)
+    skew = np.array([[0.0, arm[2], -arm[1]], [-arm[2], 0.0, arm[0]], [arm[1], -arm[0], 0.0]])
     jac = ((1.0 - w) * sensitivity.positions[lower] + w * sensitivity.positions[upper]
-           + np.cross(angles.T, arm).T)
+           + skew @ angles)
     if sensor.kind != 'pose':
         return point, jac, rotation
     return point, np.vstack([jac, angles]), rotation
@@ -718,14 +722,16 @@ _PLACEMENTS = {}
 
 
 def _sensor_measurement(robot, shape, sensitivity, prior, sensor, reading, stamp, history):
-    """Return (value, innovation, H, noise) of a sensor's reading against the state.
+    """Return (value, innovation, H, noise, judged) of a sensor's reading against the state.
 
     The reading is predicted by the model of its own stamp (``history``, :func:`_rows_at`);
-    ``value`` is its position, which a later reading must agree with (:func:`_agrees`).
+    ``value`` is its position, which a later reading must agree with (:func:`_agrees`);
+    ``judged`` the position rows at its point on the current shape (:func:`_beyond_the_prior`).
     """
     predicted, jac, rotation, shift = _rows_at(history, reading.stamp, sensor, shape,
                                                sensitivity, prior.origin)
-    shift = np.broadcast_to(shift, len(jac))
+    judged = jac[:3] if shift is None else _sensor_rows(shape, sensitivity, sensor)[1][:3]
+    shift = np.zeros(len(jac)) if shift is None else shift
     moved = prior.correction  # what the model's shape does not have yet
     innovation = reading.position - predicted - shift[:3] - jac[:3] @ moved
     # the device's own noise wins; the model's error no load explains adds to it
@@ -741,11 +747,11 @@ def _sensor_measurement(robot, shape, sensitivity, prior, sensor, reading, stamp
     if reading.stamp is not None and stamp is not None and stamp > reading.stamp:
         # an older reading: the unmodelled loads may have moved since it was taken
         noise = noise + jac @ _moved_variance(robot, stamp - reading.stamp) @ jac.T
-    return reading.position, innovation, jac, noise
+    return reading.position, innovation, jac, noise, judged
 
 
 def _tension_measurement(robot, model, sensitivity, prior, tensions):
-    """Return (value, innovation, H, noise) of measured tensions, or None when not fused.
+    """Return (value, innovation, H, noise, H) of measured tensions, or None when not fused.
 
     Fused when the robot file gives ``tension_noise`` and its cables are real tendons: the
     lengths set the shape and the model predicts each motor's tension (a tip load shows in
@@ -759,7 +765,7 @@ def _tension_measurement(robot, model, sensitivity, prior, tensions):
     tensions = np.asarray(tensions, dtype=float)
     innovation = tensions - model.tensions - sensitivity.tensions @ prior.correction
     noise = np.diag(np.square(tension_sigma(robot.tension_noise, tensions)))
-    return tensions, innovation, sensitivity.tensions, noise
+    return tensions, innovation, sensitivity.tensions, noise, sensitivity.tensions
 
 
 #: The verdicts' key of the measured tensions (a space: no sensor's name).
@@ -782,7 +788,7 @@ def _update(robot, shape, sensitivity, prior, readings, stamp, history=(), tensi
         for sensor, reading in readings.items()]
     if tensions is not None:
         measurements.append((TENSIONS, None, tensions))
-    for name, sensor, (value, innovation, jac, noise) in measurements:
+    for name, sensor, (value, innovation, jac, noise, judged) in measurements:
         spread = jac @ covariance @ jac.T + noise
         chi2 = float(innovation @ _solve(spread, innovation))
         gate = gates.gate(len(innovation), gates.SENSOR_GATE_PROBABILITY)
@@ -816,7 +822,7 @@ def _update(robot, shape, sensitivity, prior, readings, stamp, history=(), tensi
         rows.append(jac)
         residuals.append(innovation)
         noises.append(noise)
-        used[name] = (sensor, jac)
+        used[name] = judged
     if changed:
         prior = dataclasses.replace(prior, pending=tuple(pending.items()))
     if not rows:
@@ -826,7 +832,7 @@ def _update(robot, shape, sensitivity, prior, readings, stamp, history=(), tensi
     # a fault slower than the gate: the correction readings add up to over calls is judged too
     # (a first correction, from nothing carried, is the gate's alone)
     beyond = np.any(prior.mean[j:]) and _beyond_the_prior(  # on the posterior's correction
-        robot, shape, sensitivity, used, mean if prior.origin is None else mean - prior.origin)
+        robot, used, mean if prior.origin is None else mean - prior.origin)
     if beyond:
         for name in beyond:
             verdicts[name] = SensorVerdict(False, verdicts[name].chi2, beyond[name])
@@ -855,7 +861,7 @@ def _rms(values):
     return float(np.sqrt(np.mean(np.square(values))))
 
 
-def _beyond_the_prior(robot, shape, sensitivity, used, mean):
+def _beyond_the_prior(robot, used, mean):
     """Return {name: reason} of the used readings whose correction lies beyond the prior.
 
     The gate judges a reading against an estimate the same sensor already moved, so a sensor
@@ -864,17 +870,15 @@ def _beyond_the_prior(robot, shape, sensitivity, used, mean):
     against what the model's uncertainty allows there (G P0 G^T): beyond CORRECTION_SIGMAS
     along its direction, the readings are set aside and the correction kept where it was.
     The model's error alone is judged (the tip load's part of ``mean`` is left out: a load may
-    be anything its prior allows). ``used``: {name: (sensor or None, H)} of the used readings:
-    a sensor is judged at its point on the current shape, the tensions on their rows (N).
+    be anything its prior allows). ``used``: {name: H} of the used readings, the rows each is
+    judged on: a sensor's position at its point on the current shape, the tensions' (N).
     """
     p0 = _prior(robot)[1].copy()
     j = load_size(robot)
     mean = np.concatenate([np.zeros(j), mean[j:]])
     p0[:j, :] = p0[:, :j] = 0.0
     beyond = {}
-    for name, (sensor, jac) in used.items():
-        if sensor is not None:  # made here: only a correction carried over is judged
-            jac = _sensor_rows(shape, sensitivity, sensor)[1][:3]
+    for name, jac in used.items():
         correction = jac @ mean
         size = float(np.linalg.norm(correction))
         if size == 0.0:
@@ -939,6 +943,9 @@ def point_covariance(estimate, sensor):
     return jac @ estimate.unmodelled.covariance @ jac.T + floor * np.eye(3)
 
 
-def _fraction(s, shape):
-    """Return s / L (clipped to [0, 1]) of arc lengths ``s`` on ``shape``."""
-    return np.clip(np.asarray(s, dtype=float) / shape.s[-1], 0.0, 1.0)
+def white_sigma(point_noise, s, length):
+    """Return the sigma (m, each axis) of the model's white error at arc lengths ``s`` (m).
+
+    ``point_noise`` at the tip, growing as s / L (``length``) from the clamped base (zero there).
+    """
+    return point_noise * np.clip(np.asarray(s, dtype=float) / length, 0.0, 1.0)
