@@ -24,7 +24,11 @@ from continuum_statics.calibration.runs import read_run
 from continuum_statics.core.description.sensors import SensorReading
 from continuum_statics.core.estimation import shape_estimation
 from continuum_statics.core.estimation.gates import chi2_quantile
-from continuum_statics.core.estimation.state_estimation import prior_scales, split_loads
+from continuum_statics.core.estimation.state_estimation import (
+    prior_scales,
+    split_loads,
+    white_sigma,
+)
 
 #: Arc-length fractions the simulated table reports the backbone error at.
 TABLE_S = (0.25, 0.5, 0.75, 1.0)
@@ -79,8 +83,9 @@ def simulated_truth(robot, cases, seed=0):
     """Return rows of {sensors, rms (len(TABLE_S),) m, coverage} for 0..len(robot.sensors).
 
     Each case: random cable lengths (pulls up to :data:`PULL` L), hidden loads drawn from the
-    prior, the truth solved by the model under them, each sensor read with its noise; every
-    estimate is a cold one (the prior is all it knows of the loads).
+    prior, the truth solved by the model under them, plus the prior's white error
+    (``point_noise`` s / L, one draw per arc length: the table's, each sensor's), each sensor
+    read with its noise; every estimate is a cold one (the prior is all it knows of the loads).
     """
     rng = np.random.default_rng(seed)
     names, sigma = prior_scales(robot)
@@ -101,23 +106,33 @@ def simulated_truth(robot, cases, seed=0):
             if name.split('.')[0] in ('base_position', 'drift'):
                 offset['xyz'.index(name[-1])] += value
         truth = _truth(robot, lengths - cable, force, moment, offset)
+        white = _white_errors(robot, truth, rng, [*s_table, *(x.s for x in robot.sensors)])
         readings = {}
         for sensor in robot.sensors:
             point, rotation = _pose_at(truth, sensor)
             readings[sensor.name] = SensorReading(
-                point + rng.normal(0.0, sensor.position_sigma, 3),
+                point + white[sensor.s] + rng.normal(0.0, sensor.position_sigma, 3),
                 rotation if sensor.kind == 'pose' else None)
+        truth_table = _at(truth, s_table) + np.array([white[s] for s in s_table])
         for count in counts:
             used = {sensor.name: readings[sensor.name] for sensor in robot.sensors[:count]}
             estimate = robot.estimate_shape(lengths, exact=True, sensors=used)
             positions = _at(estimate.shape, s_table)
-            errors[count].append(positions - _at(truth, s_table))
-            error = estimate.shape.tip_position - truth.tip_position
+            errors[count].append(positions - truth_table)
+            error = estimate.shape.tip_position - truth_table[-1]
             inside[count] += float(error @ np.linalg.solve(
                 estimate.tip_covariance[:3, :3], error)) <= gate
     return [{'sensors': [sensor.name for sensor in robot.sensors[:count]],
              'rms': np.sqrt(np.mean(np.sum(np.array(errors[count]) ** 2, axis=2), axis=0)),
              'coverage': inside[count] / cases} for count in counts]
+
+
+def _white_errors(robot, shape, rng, arcs):
+    """Return {s: (3,) m} the prior's white error at each arc length (zeros without one)."""
+    noise = robot.model_uncertainty.point_noise
+    if not noise:  # no draw: the cases of a file without it stay as they were
+        return {s: np.zeros(3) for s in arcs}
+    return {s: rng.normal(0.0, white_sigma(noise, s, shape.s[-1]), 3) for s in arcs}
 
 
 def _truth(robot, lengths, force, moment, offset):

@@ -131,6 +131,21 @@ def test_simulated_truth_each_sensor_helps_and_the_ellipsoid_is_honest(drift):
         assert 0.90 <= row['coverage'] <= 0.98, row
 
 
+def test_simulated_truth_draws_the_white_error_the_file_states():
+    """The truth has the file's ``point_noise`` too: the model alone's ellipsoid holds 90-98 %.
+
+    Without it drawn (before) the same cases held 98.7 %: the covariance had an error the
+    truth did not. Tracked rows are not asserted: they hold 100 % here (the published
+    covariance leaves out the share of a reading's white error the update follows, large in a
+    cold case; open, doc/state_estimation.md).
+    """
+    robot = load_robot(SENSOR_ROBOT)
+    robot = robot.with_model_uncertainty(dataclasses.replace(robot.model_uncertainty,
+                                                             point_noise=1e-3))
+    alone = simulated_truth(robot, 300, seed=36)[0]
+    assert 0.90 <= alone['coverage'] <= 0.98, alone
+
+
 def test_truth_with_disk_masses_the_file_leaves_out():
     """Physics the estimator does not have: 10 g per guide disk under gravity, bent robots."""
     document = _document()
