@@ -264,15 +264,14 @@ class Goals:
         self.service = node.create_client(GetPlan, 'tip_goal')
         self.action = None
         if use_actions:
-            from rclpy.action import ActionClient
-
+            from continuum_statics.nodes.action_client import HandoverActionClient
             from continuum_statics.nodes.qos import ACTION_SERVICE_QOS
             from continuum_statics_interfaces.action import MoveTip
             self.MoveTip = MoveTip
-            self.action = ActionClient(node, MoveTip, 'move_tip',
-                                       goal_service_qos_profile=ACTION_SERVICE_QOS,
-                                       result_service_qos_profile=ACTION_SERVICE_QOS,
-                                       cancel_service_qos_profile=ACTION_SERVICE_QOS)
+            self.action = HandoverActionClient(
+                node, MoveTip, 'move_tip', goal_service_qos_profile=ACTION_SERVICE_QOS,
+                result_service_qos_profile=ACTION_SERVICE_QOS,
+                cancel_service_qos_profile=ACTION_SERVICE_QOS)
         self.GetPlan = GetPlan
         self.records = []
 

@@ -201,10 +201,10 @@ rclpy = pytest.importorskip('rclpy')
 from diagnostic_msgs.msg import DiagnosticArray  # noqa: E402
 from geometry_msgs.msg import PoseStamped, TwistStamped  # noqa: E402
 from nav_msgs.srv import GetPlan  # noqa: E402
-from rclpy.action import ActionClient  # noqa: E402
 from rclpy.qos import qos_profile_sensor_data  # noqa: E402
 from sensor_msgs.msg import JointState  # noqa: E402
 
+from continuum_statics.nodes.action_client import HandoverActionClient  # noqa: E402
 from continuum_statics.nodes.cable_driver_node import CableDriverNode  # noqa: E402
 from continuum_statics.nodes.qos import ACTION_SERVICE_QOS  # noqa: E402
 from continuum_statics.nodes.statics_node import StaticsNode  # noqa: E402
@@ -250,9 +250,10 @@ class Robot:
 
 def action_client(node):
     """Return a move_tip client for bursts: its services as deep as the server's."""
-    return ActionClient(node, MoveTip, 'move_tip', goal_service_qos_profile=ACTION_SERVICE_QOS,
-                        result_service_qos_profile=ACTION_SERVICE_QOS,
-                        cancel_service_qos_profile=ACTION_SERVICE_QOS)
+    return HandoverActionClient(node, MoveTip, 'move_tip',
+                                goal_service_qos_profile=ACTION_SERVICE_QOS,
+                                result_service_qos_profile=ACTION_SERVICE_QOS,
+                                cancel_service_qos_profile=ACTION_SERVICE_QOS)
 
 
 def accepted_goals(action, position, timeout=60.0):
@@ -275,7 +276,7 @@ def accepted_goals(action, position, timeout=60.0):
 
 
 def send_goal(action, position, tolerance=1e-3):
-    """Send a move_tip goal from ``action`` (an ActionClient); return its handle's future."""
+    """Send a move_tip goal from ``action`` (a HandoverActionClient); return its future."""
     goal = MoveTip.Goal(tolerance=float(tolerance))
     goal.target.header.frame_id = 'base_link'
     p = goal.target.pose.position

@@ -14,11 +14,11 @@ import pytest
 
 rclpy = pytest.importorskip('rclpy')
 from geometry_msgs.msg import PoseStamped  # noqa: E402
-from rclpy.action import ActionClient  # noqa: E402
 from sensor_msgs.msg import JointState  # noqa: E402
 
 from continuum_statics import load_robot  # noqa: E402
 from continuum_statics.core.description.obstacles import Obstacle  # noqa: E402
+from continuum_statics.nodes.action_client import HandoverActionClient  # noqa: E402
 from continuum_statics.nodes.cable_driver_node import CableDriverNode  # noqa: E402
 from continuum_statics.nodes.obstacle_messages import obstacles_msg  # noqa: E402
 from continuum_statics.nodes.statics_node import StaticsNode  # noqa: E402
@@ -38,7 +38,7 @@ class Client:
         self.node = harness.client()
         self.tip = Collector(self.node, PoseStamped, 'tip_pose', LATCHED)
         self.commands = Collector(self.node, JointState, 'cable_commands', RELIABLE)
-        self.action = ActionClient(self.node, MoveTip, 'move_tip')
+        self.action = HandoverActionClient(self.node, MoveTip, 'move_tip')
         assert self.action.wait_for_server(timeout_sec=10.0)
         wait_until(lambda: self.tip.last is not None, 10.0, 'the first tip pose')
         self.feedback = []

@@ -241,8 +241,7 @@ def test_move_tip_feedback_and_status_are_recorded_and_read_back(harness, tmp_pa
 
     Before: 'not recording .../move_tip/_action/feedback: no message definition installed'.
     """
-    from rclpy.action import ActionClient
-
+    from continuum_statics.nodes.action_client import HandoverActionClient
     from continuum_statics.nodes.cable_driver_node import CableDriverNode
     from continuum_statics.nodes.statics_node import StaticsNode
     from continuum_statics.nodes.tip_controller_node import TipControllerNode
@@ -253,7 +252,7 @@ def test_move_tip_feedback_and_status_are_recorded_and_read_back(harness, tmp_pa
     harness.add(CableDriverNode)
     harness.add(TipControllerNode, max_cable_speed=0.01)  # a ramp long enough to record
     node = harness.client()
-    action = ActionClient(node, MoveTip, 'move_tip')
+    action = HandoverActionClient(node, MoveTip, 'move_tip')
     assert action.wait_for_server(timeout_sec=10.0)
     namespace = harness.namespace.strip('/')
     feedback_topic = '/%s/move_tip/_action/feedback' % namespace
