@@ -290,12 +290,22 @@ class TipControl:
         self.problems.reject(kind, reason)
 
     # -- goals -------------------------------------------------------------------------------
-    async def start_goal(self, position, tolerance, source, direction=None) -> Goal:
+    def goal_arrived(self) -> int:
+        """Take a goal's place in the hand-over as its request arrives; return its ticket.
+
+        For a request whose :meth:`start_goal` runs later (an action's execute, scheduled
+        after its acceptance is sent): twists that arrived in between overtake it.
+        """
+        return self.handover.take('a newer goal')
+
+    async def start_goal(self, position, tolerance, source, direction=None,
+                         ticket=None) -> Goal:
         """Solve the goal and make it the active one; ValueError says why it is rejected.
 
         Returns the running :class:`Goal` (the same goal again attaches to it); a goal that
         teleoperation or a newer goal overtook while it was being solved comes back finished
         (``Outcome.PREEMPTED``, 'pre-empted ... before it started'): the later arrival wins.
+        ``ticket``: the request's :meth:`goal_arrived` (default: it arrives now).
         """
         robot, params = self.robot, self.params
         if not self.cable_names:
@@ -307,7 +317,8 @@ class TipControl:
             raise ValueError('the tip goal (%.4g, %.4g, %.4g) m is unreachable: %.3g m from '
                              'the base along an axis, the rod is %.3g m long'
                              % (*position, reach, robot.length))
-        ticket = self.handover.take('a newer goal')
+        if ticket is None:
+            ticket = self.goal_arrived()
         # Right after start-up, or while a driver or statics restarts, the state may be missing
         # or old for a moment: wait up to state_wait for fresh state before answering.
         await self.wait_until(

@@ -74,10 +74,12 @@ class MoveTipServer:
                  in_flight=None):
         self.control = control
         self.in_flight = in_flight or InFlight()
+        self._tickets = {}  # goal id: its hand-over ticket, from acceptance to execute
         self.base_frame_id = base_frame_id
         self.action_type = action_type
         self.server = AnsweringActionServer(node, action_type, 'move_tip', self._counted,
                                             goal_callback=self._on_goal,
+                                            handle_accepted_callback=self._on_accepted,
                                             cancel_callback=lambda _: CancelResponse.ACCEPT,
                                             callback_group=callback_group,
                                             goal_service_qos_profile=ACTION_SERVICE_QOS,
@@ -100,6 +102,12 @@ class MoveTipServer:
                                    '(%g, %g, %g), tolerance %g' % values)
         return GoalResponse.REJECT
 
+    def _on_accepted(self, handle):
+        # its place in the hand-over now, as the request arrives: execute runs later (under a
+        # CPU hog after the twists that followed the goal, and then overtook them)
+        self._tickets[bytes(handle.goal_id.uuid)] = self.control.goal_arrived()
+        handle.execute()
+
     @staticmethod
     def _direction(request):
         if not request.use_direction:
@@ -112,14 +120,15 @@ class MoveTipServer:
 
     async def _execute(self, handle):
         control, frame = self.control, self.base_frame_id
-        request = handle.request
+        request, ticket = handle.request, self._tickets.pop(bytes(handle.goal_id.uuid), None)
         result = self.action_type.Result()
         result.backbone.header.frame_id = frame
         result.error = UNKNOWN
         try:
             goal = await control.start_goal(goal_position(request.target, frame),
                                             control.checked_tolerance(request.tolerance),
-                                            'move_tip action', self._direction(request))
+                                            'move_tip action', self._direction(request),
+                                            ticket)
         except ValueError as error:
             control.goal_rejected(error)
             result.message = 'rejected: %s' % error

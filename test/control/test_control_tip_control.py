@@ -139,6 +139,23 @@ def test_a_goal_overtaken_while_it_is_solved_comes_back_preempted_and_never_runs
     assert control.run.goal is None and not timer.running
 
 
+def test_a_goal_that_arrived_before_a_twist_is_overtaken_by_it_when_it_starts_later():
+    """The move_tip action's execute runs after the acceptance is sent; its place is its arrival.
+
+    Under a CPU hog the twists that followed a goal were handled before its execute, which then
+    took the newest ticket and ran after the operator's dead-man stop (a ros-tier run).
+    """
+    control, _, timer = make()
+    feed(control, ROBOT.straight_cable_lengths)
+    ticket = control.goal_arrived()  # the goal request is accepted
+    control.handover.take('teleoperation (tip_twist)')  # a twist sent after it
+    goal = asyncio.run(control.start_goal(np.asarray(TARGET), 1e-3, 'test', None, ticket))
+    assert goal.outcome is Outcome.PREEMPTED and 'before it started' in goal.reason
+    assert 'teleoperation' in goal.reason and control.run.goal is None and not timer.running
+    goal = start(control, TARGET)  # arriving as it starts, after the twist: it runs
+    assert control.run.goal is goal and goal.outcome is None
+
+
 def test_without_cable_states_a_goal_waits_state_wait_then_is_rejected():
     control, clock, _ = make(state_wait=2.0)
     before = clock.now
