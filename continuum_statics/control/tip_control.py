@@ -294,9 +294,23 @@ class TipControl:
         """Take a goal's place in the hand-over as its request arrives; return its ticket.
 
         For a request whose :meth:`start_goal` runs later (an action's execute, scheduled
-        after its acceptance is sent): twists that arrived in between overtake it.
+        after its acceptance is sent): twists that arrived in between overtake it. Only for a
+        goal :meth:`check_goal` passed: a rejected one must not overtake anything.
         """
         return self.handover.take('a newer goal')
+
+    def check_goal(self, position) -> None:
+        """Raise ValueError when no robot state could make ``position`` (m) a goal."""
+        robot = self.robot
+        if not self.cable_names:
+            raise ValueError('robot has no cables: %r is a passive rod, nothing to move'
+                             % robot.name)
+        # the infinity norm: no overflow for a goal at 1e308 m
+        reach = float(np.max(np.abs(position - robot.base_position)))
+        if reach > robot.length:
+            raise ValueError('the tip goal (%.4g, %.4g, %.4g) m is unreachable: %.3g m from '
+                             'the base along an axis, the rod is %.3g m long'
+                             % (*position, reach, robot.length))
 
     async def start_goal(self, position, tolerance, source, direction=None,
                          ticket=None) -> Goal:
@@ -307,16 +321,8 @@ class TipControl:
         (``Outcome.PREEMPTED``, 'pre-empted ... before it started'): the later arrival wins.
         ``ticket``: the request's :meth:`goal_arrived` (default: it arrives now).
         """
-        robot, params = self.robot, self.params
-        if not self.cable_names:
-            raise ValueError('robot has no cables: %r is a passive rod, nothing to move'
-                             % robot.name)
-        # the infinity norm: no overflow for a goal at 1e308 m
-        reach = float(np.max(np.abs(position - robot.base_position)))
-        if reach > robot.length:
-            raise ValueError('the tip goal (%.4g, %.4g, %.4g) m is unreachable: %.3g m from '
-                             'the base along an axis, the rod is %.3g m long'
-                             % (*position, reach, robot.length))
+        params = self.params
+        self.check_goal(position)
         if ticket is None:
             ticket = self.goal_arrived()
         # Right after start-up, or while a driver or statics restarts, the state may be missing

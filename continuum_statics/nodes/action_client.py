@@ -15,6 +15,7 @@ executor's take of the responses holds too, so a response is taken only after it
 registered, and it returns the future it registered. Use it where ``rclpy.action.ActionClient``
 is used.
 """
+from contextlib import nullcontext
 import threading
 
 from rclpy.action import ActionClient
@@ -44,10 +45,9 @@ class HandoverActionClient(ActionClient):
         request = self._action_type.Impl.SendGoalService.Request()
         request.goal_id = self._generate_random_uuid() if goal_uuid is None else goal_uuid
         request.goal = goal
-        if feedback_callback is not None:  # before the goal: its first feedback has a home
-            self._feedback_callbacks[bytes(request.goal_id.uuid)] = feedback_callback
         future = Future()
-        with self._handover:
+        # Kilted's client sends under its own lock too (Jazzy's has none)
+        with self._handover, getattr(self, '_lock', nullcontext()):
             sequence_number = self._client_handle.send_goal_request(request)
             if sequence_number in self._pending_goal_requests:
                 raise RuntimeError('Sequence (%d) conflicts with pending goal request'
@@ -56,6 +56,8 @@ class HandoverActionClient(ActionClient):
             self._goal_sequence_number_to_goal_id[sequence_number] = request.goal_id
             future.add_done_callback(self._remove_pending_goal_request)
             self.add_future(future)  # so the executor is aware
+            if feedback_callback is not None:  # before any feedback can be taken
+                self._feedback_callbacks[bytes(request.goal_id.uuid)] = feedback_callback
         return future
 
     def _get_result_async(self, goal_handle):

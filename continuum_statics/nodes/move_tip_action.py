@@ -104,8 +104,17 @@ class MoveTipServer:
 
     def _on_accepted(self, handle):
         # its place in the hand-over now, as the request arrives: execute runs later (under a
-        # CPU hog after the twists that followed the goal, and then overtook them)
-        self._tickets[bytes(handle.goal_id.uuid)] = self.control.goal_arrived()
+        # CPU hog after the twists that followed the goal, and then overtook them); a goal that
+        # execute will reject takes none (it must not overtake a valid one)
+        request = handle.request
+        try:
+            self.control.check_goal(goal_position(request.target, self.base_frame_id))
+            self.control.checked_tolerance(request.tolerance)
+            self._direction(request)
+        except ValueError:
+            pass  # execute rejects it with the reason
+        else:
+            self._tickets[bytes(handle.goal_id.uuid)] = self.control.goal_arrived()
         handle.execute()
 
     @staticmethod

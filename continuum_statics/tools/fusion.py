@@ -107,13 +107,14 @@ def simulated_truth(robot, cases, seed=0):
                 offset['xyz'.index(name[-1])] += value
         truth = _truth(robot, lengths - cable, force, moment, offset)
         white = _white_errors(robot, truth, rng, [*s_table, *(x.s for x in robot.sensors)])
+        white = {_arc(s): error for s, error in white.items()}
         readings = {}
         for sensor in robot.sensors:
             point, rotation = _pose_at(truth, sensor)
             readings[sensor.name] = SensorReading(
-                point + white[sensor.s] + rng.normal(0.0, sensor.position_sigma, 3),
+                point + white[_arc(sensor.s)] + rng.normal(0.0, sensor.position_sigma, 3),
                 rotation if sensor.kind == 'pose' else None)
-        truth_table = _at(truth, s_table) + np.array([white[s] for s in s_table])
+        truth_table = _at(truth, s_table) + np.array([white[_arc(s)] for s in s_table])
         for count in counts:
             used = {sensor.name: readings[sensor.name] for sensor in robot.sensors[:count]}
             estimate = robot.estimate_shape(lengths, exact=True, sensors=used)
@@ -133,6 +134,11 @@ def _white_errors(robot, shape, rng, arcs):
     if not noise:  # no draw: the cases of a file without it stay as they were
         return {s: np.zeros(3) for s in arcs}
     return {s: rng.normal(0.0, white_sigma(noise, s, shape.s[-1]), 3) for s in arcs}
+
+
+def _arc(s):
+    """Return arc length ``s`` (m) as a key: to the nanometre (0.75 L and 0.225 are one point)."""
+    return round(float(s), 9)
 
 
 def _truth(robot, lengths, force, moment, offset):
