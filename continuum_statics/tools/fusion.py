@@ -107,7 +107,6 @@ def simulated_truth(robot, cases, seed=0):
                 offset['xyz'.index(name[-1])] += value
         truth = _truth(robot, lengths - cable, force, moment, offset)
         white = _white_errors(robot, truth, rng, [*s_table, *(x.s for x in robot.sensors)])
-        white = {_arc(s): error for s, error in white.items()}
         readings = {}
         for sensor in robot.sensors:
             point, rotation = _pose_at(truth, sensor)
@@ -129,11 +128,14 @@ def simulated_truth(robot, cases, seed=0):
 
 
 def _white_errors(robot, shape, rng, arcs):
-    """Return {s: (3,) m} the prior's white error at each arc length (zeros without one)."""
+    """Return {:func:`_arc` (s): (3,) m} the prior's white error at each arc length s.
+
+    Zeros without one; one draw per point (0.75 L and a sensor at 0.225 m are one point).
+    """
     noise = robot.model_uncertainty.point_noise
     if not noise:  # no draw: the cases of a file without it stay as they were
-        return {s: np.zeros(3) for s in arcs}
-    return {s: rng.normal(0.0, white_sigma(noise, s, shape.s[-1]), 3) for s in arcs}
+        return {_arc(s): np.zeros(3) for s in arcs}
+    return {_arc(s): rng.normal(0.0, white_sigma(noise, s, shape.s[-1]), 3) for s in arcs}
 
 
 def _arc(s):
