@@ -169,6 +169,9 @@ class Unmodelled:
         (:func:`_moving`)
     :ivar point_noise: m, the model's error at the tip that no load explains (white), the robot
         file's ``model_uncertainty.point_noise`` (:meth:`point_variance`)
+    :ivar load_reference: (j,) the tip load taken when its variance was last at its prior (the
+        first reading fused, a renewal), or None: the drift guard judges its change since then
+        with the model's error (:func:`_update`)
     """
 
     names: tuple
@@ -180,6 +183,7 @@ class Unmodelled:
     pending: tuple = ()
     still: tuple = None
     point_noise: float = 0.0
+    load_reference: np.ndarray = None
 
     @property
     def correction(self):
@@ -299,16 +303,15 @@ def propagate(robot, carried, stamp):
         return Unmodelled(names, np.zeros(len(names)), prior, stamp, load_basis=basis,
                           point_noise=floor)
     if stamp is None or carried.stamp is None:
-        return Unmodelled(names, carried.mean, carried.covariance,
-                          carried.stamp if stamp is None else stamp, carried.origin, basis,
-                          carried.pending, carried.still, floor)
+        return dataclasses.replace(carried, stamp=carried.stamp if stamp is None else stamp,
+                                   load_basis=basis, point_noise=floor)
     # an older stamp is not a step back in time
     mean, covariance = decayed(carried.mean, carried.covariance, prior,
                                max(stamp - carried.stamp, 0.0),
                                robot.model_uncertainty.correlation_time, _drift_time(robot),
                                load_size(robot))
-    return Unmodelled(names, mean, covariance, stamp, carried.origin, basis, carried.pending,
-                      carried.still, floor)
+    return dataclasses.replace(carried, mean=mean, covariance=covariance, stamp=stamp,
+                               load_basis=basis, point_noise=floor)
 
 
 def _moved_variance(robot, elapsed):
@@ -829,15 +832,23 @@ def _update(robot, shape, sensitivity, prior, readings, stamp, history=(), tensi
         return prior, verdicts
     mean, covariance = fused(mean, covariance, np.vstack(rows), np.concatenate(residuals),
                              _block_diagonal(noises))
+    # the tip load a reading took while its variance was at its prior (a first reading, a new
+    # load) is the load's reference; its change since then is judged with the model's error
+    reference = prior.load_reference
+    if j and (renewed or reference is None):
+        reference = mean[:j].copy()
     # a fault slower than the gate: the correction readings add up to over calls is judged too
     # (a first correction, from nothing carried, is the gate's alone)
-    beyond = np.any(prior.mean[j:]) and _beyond_the_prior(  # on the posterior's correction
-        robot, used, mean if prior.origin is None else mean - prior.origin)
+    correction = mean if prior.origin is None else mean - prior.origin
+    if j:  # a load held is no licence: a drifting tracker walked it 15 mm at 0.5 mm/s, unnamed
+        correction = np.concatenate([mean[:j] - reference, correction[j:]])
+    beyond = np.any(prior.mean[j:]) and _beyond_the_prior(robot, used, correction)
     if beyond:
         for name in beyond:
             verdicts[name] = SensorVerdict(False, verdicts[name].chi2, beyond[name])
         return prior, verdicts
-    return dataclasses.replace(prior, mean=mean, covariance=covariance), verdicts
+    return dataclasses.replace(prior, mean=mean, covariance=covariance,
+                               load_reference=reference), verdicts
 
 
 def _agrees(pending, value, noise, stamp):
@@ -861,29 +872,31 @@ def _rms(values):
     return float(np.sqrt(np.mean(np.square(values))))
 
 
-def _beyond_the_prior(robot, used, mean):
+def _beyond_the_prior(robot, used, correction):
     """Return {name: reason} of the used readings whose correction lies beyond the prior.
 
     The gate judges a reading against an estimate the same sensor already moved, so a sensor
     drifting slower than one gate walks the correction anywhere (1 mm/s: 45 mm in 45 s, every
     reading used). The correction the estimate now applies at each sensor, G m, is judged
-    against what the model's uncertainty allows there (G P0 G^T): beyond CORRECTION_SIGMAS
-    along its direction, the readings are set aside and the correction kept where it was.
-    The model's error alone is judged (the tip load's part of ``mean`` is left out: a load may
-    be anything its prior allows). ``used``: {name: H} of the used readings, the rows each is
+    against what the model's uncertainty allows there (G P0 G^T, the load's rows left out):
+    beyond CORRECTION_SIGMAS along its direction, the readings are set aside and the
+    correction kept where it was.
+    ``correction``: (k,) the model's error and the tip load's change since its reference
+    (a new load is the gate's and the renewal's to judge; a load that keeps moving after it is
+    judged here, against the model's error alone: a tip tracker cannot tell a slowly growing
+    load from a drifting tracker). ``used``: {name: H} of the used readings, the rows each is
     judged on: a sensor's position at its point on the current shape, the tensions' (N).
     """
     p0 = _prior(robot)[1].copy()
     j = load_size(robot)
-    mean = np.concatenate([np.zeros(j), mean[j:]])
     p0[:j, :] = p0[:, :j] = 0.0
     beyond = {}
     for name, jac in used.items():
-        correction = jac @ mean
-        size = float(np.linalg.norm(correction))
+        at = jac @ correction
+        size = float(np.linalg.norm(at))
         if size == 0.0:
             continue
-        direction = correction / size
+        direction = at / size
         allowed = math.sqrt(max(float(direction @ jac @ p0 @ jac.T @ direction), 0.0))
         if size > CORRECTION_SIGMAS * allowed:
             tensions = name == TENSIONS
