@@ -162,11 +162,16 @@ def fit(robot, sequences, tracker_noise, patterns=None):
         return total
 
     options = {'xatol': 1e-3, 'fatol': 1e-2, 'maxiter': 120 * len(prior)}
-    every = minimize(negative_log_likelihood, prior, method='Nelder-Mead', options=options)
-    alone = minimize(lambda y: negative_log_likelihood(offset_only(y)), prior[offset],
-                     method='Nelder-Mead', options=options)
-    best = every.x if every.fun <= alone.fun else offset_only(alone.x)
-    found = min(every.fun, alone.fun)
+
+    def searched(replays):  # (every group's x, the offset alone's x) fitted on ``replays``
+        every = minimize(lambda x: negative_log_likelihood(x, replays=replays), prior,
+                         method='Nelder-Mead', options=options)
+        alone = minimize(lambda y: negative_log_likelihood(offset_only(y), replays=replays),
+                         prior[offset], method='Nelder-Mead', options=options)
+        return (every.x, every.fun), (offset_only(alone.x), alone.fun)
+
+    fitted = searched(occluded)
+    best, found = fitted[_kept_model(fitted, occluded, searched, negative_log_likelihood)]
 
     def with_drift(y):  # the offset's sigma and tau refitted beside the drift: they compete
         x = best.copy()
@@ -189,6 +194,23 @@ def fit(robot, sequences, tracker_noise, patterns=None):
         negative_log_likelihood, best, (sigma, time) if kept else None,
         [(t, r, c, [np.ones(len(t), bool)]) for t, r, c in sequences], tracker_noise)
     return sigmas, math.exp(best[-1])
+
+
+def _kept_model(fitted, replays, searched, negative_log_likelihood):
+    """Return 0 to keep every group, 1 to keep the offset alone (``fitted``: their (x, NLL)).
+
+    With one sequence, the likelier on it. With folds, the one whose sigmas, fitted on the
+    other folds, predict each fold's occluded rows best (summed over the folds): the five
+    parameters of every group always fit the rows they were fitted on at least as well as the
+    offset's two, so the rows that choose are rows the sigmas did not see.
+    """
+    if len(replays) < 2:
+        return 0 if fitted[0][1] <= fitted[1][1] else 1
+    held_out = np.zeros(2)
+    for f in range(len(replays)):
+        others = searched(replays[:f] + replays[f + 1:])
+        held_out += [negative_log_likelihood(x, replays=replays[f:f + 1]) for x, _ in others]
+    return 0 if held_out[0] <= held_out[1] else 1
 
 
 def _point_noise(negative_log_likelihood, x, drift, every_row, tracker_noise):

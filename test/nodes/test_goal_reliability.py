@@ -89,6 +89,30 @@ def test_a_tracker_reading_is_compared_with_the_model_tip_of_its_own_time():
                                                 model_tips, 0.5, True)[3]
 
 
+def test_a_model_tip_that_lags_the_tracker_is_compared_with_the_reading_of_its_time():
+    # normal use under load (benchmarks.soak --normal-use): statics' newest tip_pose 0.3 s
+    # behind the tracker while the tip moves 0.1 m/s; before, the newest reading was compared
+    # with it (30.6 and 50.7 mm) and an honest tracker set aside twice in ten minutes
+    source = TipSource(disagreement_bound(ROBOT.length, 0.0))
+    readings = [TipSample(np.array([0.1 * t + 5e-4, 0.0, 0.3]), int(t * 1e9), t + 0.005)
+                for t in np.arange(0.0, 1.0, 0.01)]
+    model_tips = [TipSample(np.array([0.1 * t, 0.0, 0.3]), int(t * 1e9), t + 0.3)
+                  for t in np.arange(0.0, 0.7, 0.05)]
+    tip, _, name, warning = source.judged(1.0, readings[-1], readings, model_tips[-1],
+                                          model_tips, 0.5, True)
+    assert tip is readings[-1] and name == 'tip_pose_measured' and not warning
+    # a tracker frozen since 0.3 s: at the model's time it is 35 mm away
+    frozen = [TipSample(r.position if r.stamp_ns <= 0.3e9 else readings[30].position,
+                        r.stamp_ns, r.received) for r in readings]
+    assert 'tracker set aside' in source.judged(1.0, frozen[-1], frozen, model_tips[-1],
+                                                model_tips, 0.5, True)[3]
+    # nothing of one time to compare (the model 2 s behind, the tracker's history 1 s): trusted
+    source.reset()
+    late = [TipSample(m.position, m.stamp_ns - int(2e9), m.received) for m in model_tips]
+    assert source.judged(1.0, frozen[-1], frozen[-50:], late[-1], late, 0.5,
+                         True)[2] == 'tip_pose_measured'
+
+
 def straight_run_to_a_goal(settings):
     """Return (run, goal, start): a GoalRun from the straight robot towards a bent goal."""
     run = GoalRun(ROBOT, settings)
