@@ -14,7 +14,8 @@ and occluded on others (:data:`OCCLUSION_PATTERNS`: what a lab's tracker does), 
 group and tau maximise the likelihood of what the filter predicts on the occluded rows (error
 and covariance both: too small a covariance is penalised as much as too large). The fit starts
 from the file's prior and from the offset alone (the last-residual baseline is that model with
-every other group at zero) and keeps the likelier. sigma_y, the tracker's noise, is given (the
+every other group at zero) and keeps the one that predicts best the folds its sigmas were not
+fitted on. sigma_y, the tracker's noise, is given (the
 robot file's tip sensor, else :data:`TRACKER_NOISE`). Only the calibration run is used:
 held-out runs judge the result.
 
@@ -126,8 +127,9 @@ def fit(robot, sequences, tracker_noise, patterns=None):
     (default :data:`OCCLUSION_PATTERNS`): the sum over the rows the tracker does not see of
     log N(e_i; H_i mean_i, H_i P_i H_i^T + sigma_y^2 I), maximised (Nelder-Mead) over log sigma
     per group and log tau, and over the offset's sigma and tau alone (the other groups at
-    :data:`SWITCHED_OFF` of their prior: the last-residual baseline's model); the likelier is
-    kept. The rows it sees update the unmodelled loads, as on the robot.
+    :data:`SWITCHED_OFF` of their prior: the last-residual baseline's model); which is kept is
+    decided on folds the sigmas were not fitted on (:func:`_kept_model`). The rows it sees
+    update the unmodelled loads, as on the robot.
     """
     groups = _group_index(robot)
     if robot.model_uncertainty.drift > 0.0:
