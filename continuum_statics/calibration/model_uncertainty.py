@@ -14,8 +14,7 @@ and occluded on others (:data:`OCCLUSION_PATTERNS`: what a lab's tracker does), 
 group and tau maximise the likelihood of what the filter predicts on the occluded rows (error
 and covariance both: too small a covariance is penalised as much as too large). The fit starts
 from the file's prior and from the offset alone (the last-residual baseline is that model with
-every other group at zero) and keeps the one that predicts best the folds its sigmas were not
-fitted on. sigma_y, the tracker's noise, is given (the
+every other group at zero) and keeps the likelier. sigma_y, the tracker's noise, is given (the
 robot file's tip sensor, else :data:`TRACKER_NOISE`). Only the calibration run is used:
 held-out runs judge the result.
 
@@ -127,9 +126,8 @@ def fit(robot, sequences, tracker_noise, patterns=None):
     (default :data:`OCCLUSION_PATTERNS`): the sum over the rows the tracker does not see of
     log N(e_i; H_i mean_i, H_i P_i H_i^T + sigma_y^2 I), maximised (Nelder-Mead) over log sigma
     per group and log tau, and over the offset's sigma and tau alone (the other groups at
-    :data:`SWITCHED_OFF` of their prior: the last-residual baseline's model); which is kept is
-    decided on folds the sigmas were not fitted on (:func:`_kept_model`). The rows it sees
-    update the unmodelled loads, as on the robot.
+    :data:`SWITCHED_OFF` of their prior: the last-residual baseline's model); the likelier is
+    kept. The rows it sees update the unmodelled loads, as on the robot.
     """
     groups = _group_index(robot)
     if robot.model_uncertainty.drift > 0.0:
@@ -164,16 +162,11 @@ def fit(robot, sequences, tracker_noise, patterns=None):
         return total
 
     options = {'xatol': 1e-3, 'fatol': 1e-2, 'maxiter': 120 * len(prior)}
-
-    def searched(replays):  # (every group's x, the offset alone's x) fitted on ``replays``
-        every = minimize(lambda x: negative_log_likelihood(x, replays=replays), prior,
-                         method='Nelder-Mead', options=options)
-        alone = minimize(lambda y: negative_log_likelihood(offset_only(y), replays=replays),
-                         prior[offset], method='Nelder-Mead', options=options)
-        return (every.x, every.fun), (offset_only(alone.x), alone.fun)
-
-    fitted = searched(occluded)
-    best, found = fitted[_kept_model(fitted, occluded, searched, negative_log_likelihood)]
+    every = minimize(negative_log_likelihood, prior, method='Nelder-Mead', options=options)
+    alone = minimize(lambda y: negative_log_likelihood(offset_only(y)), prior[offset],
+                     method='Nelder-Mead', options=options)
+    best = every.x if every.fun <= alone.fun else offset_only(alone.x)
+    found = min(every.fun, alone.fun)
 
     def with_drift(y):  # the offset's sigma and tau refitted beside the drift: they compete
         x = best.copy()
@@ -196,23 +189,6 @@ def fit(robot, sequences, tracker_noise, patterns=None):
         negative_log_likelihood, best, (sigma, time) if kept else None,
         [(t, r, c, [np.ones(len(t), bool)]) for t, r, c in sequences], tracker_noise)
     return sigmas, math.exp(best[-1])
-
-
-def _kept_model(fitted, replays, searched, negative_log_likelihood):
-    """Return 0 to keep every group, 1 to keep the offset alone (``fitted``: their (x, NLL)).
-
-    With one sequence, the likelier on it. With folds, the one whose sigmas, fitted on the
-    other folds, predict each fold's occluded rows best (summed over the folds): the five
-    parameters of every group always fit the rows they were fitted on at least as well as the
-    offset's two, so the rows that choose are rows the sigmas did not see.
-    """
-    if len(replays) < 2:
-        return 0 if fitted[0][1] <= fitted[1][1] else 1
-    held_out = np.zeros(2)
-    for f in range(len(replays)):
-        others = searched(replays[:f] + replays[f + 1:])
-        held_out += [negative_log_likelihood(x, replays=replays[f:f + 1]) for x, _ in others]
-    return 0 if held_out[0] <= held_out[1] else 1
 
 
 def _point_noise(negative_log_likelihood, x, drift, every_row, tracker_noise):
