@@ -19,6 +19,8 @@ exit code at each SIGINT, log lines naming a failed callback, a traceback or ERR
 ``tip_pose`` values, bringup's RSS, the tracker's readings statics set aside and which tip
 tip_controller judged goals on (its /diagnostics).
 """
+import bisect
+import collections
 import math
 import os
 import re
@@ -40,6 +42,8 @@ ANSWER_TIMEOUT = 60.0  # s
 NORMAL, CANCEL, PREEMPT = 'normal', 'cancel', 'preempt'
 #: The goal sent half a second before the restart's SIGINT.
 AT_SIGINT = 'at-sigint'
+#: chi-square of 3 degrees of freedom at 95 %: a position error inside its 95 % ellipsoid.
+NEES_95 = 7.815
 #: GoalStatus values of a result: succeeded, canceled, aborted.
 STATUS_NAMES = {4: 'succeeded', 5: 'canceled', 6: 'aborted'}
 
@@ -89,7 +93,7 @@ class Truth:
     """The newest ``sim/tip_pose_true`` (best effort: sensor-data QoS) and ``tip_pose`` checks."""
 
     def __init__(self, node, sensor=None):
-        from geometry_msgs.msg import PoseStamped
+        from geometry_msgs.msg import PoseStamped, PoseWithCovarianceStamped
         from rclpy.qos import qos_profile_sensor_data
 
         from continuum_statics.nodes.qos import LATCHED_QOS
@@ -102,12 +106,16 @@ class Truth:
         self.gaps = []  # (monotonic s, m): tip_pose's distance from the newest true tip
         self.tips = []  # (wall s, x, y, z) of each tip_pose
         self.accepted = []  # (wall s, x, y, z) of each tracker reading statics passed on
+        self.true_history = collections.deque(maxlen=4096)  # (stamp s, xyz) of the true tip
+        self.matched = []  # (m, NEES, true tip speed m/s) of each tip_pose_covariance
         if sensor is not None:
             node.create_subscription(PoseStamped, 'sensors/%s/accepted' % sensor,
                                      self._on_accepted, qos_profile_sensor_data)
         node.create_subscription(PoseStamped, 'sim/tip_pose_true', self._on_true,
                                  qos_profile_sensor_data)
         node.create_subscription(PoseStamped, 'tip_pose', self._on_tip, LATCHED_QOS)
+        node.create_subscription(PoseWithCovarianceStamped, 'tip_pose_covariance',
+                                 self._on_covariance, LATCHED_QOS)
 
     @staticmethod
     def _values(pose):
@@ -122,6 +130,32 @@ class Truth:
                 self.true_nonfinite += 1
                 return
             self.true_tip = (values[:3], msg.header.stamp, time.monotonic())
+            self.true_history.append((_seconds(msg.header.stamp), values[:3]))
+
+    def _on_covariance(self, msg):
+        """Compare the estimate with the true tip of its stamp (the driver's clock for both)."""
+        p = msg.pose.pose.position
+        with self.lock:
+            history = tuple(self.true_history)
+        when = _seconds(msg.header.stamp)
+        at = bisect.bisect_left(history, when, key=lambda sample: sample[0])
+        candidates = [i for i in (at - 1, at) if 0 <= i < len(history)]
+        if not candidates:
+            return
+        nearest = min(candidates, key=lambda i: abs(history[i][0] - when))
+        if abs(history[nearest][0] - when) > 0.005:
+            return
+        error = np.array([p.x, p.y, p.z]) - history[nearest][1]
+        covariance = np.array(msg.pose.covariance).reshape(6, 6)[:3, :3]
+        a, b = history[max(nearest - 5, 0)], history[min(nearest + 5, len(history) - 1)]
+        speed = (float(np.linalg.norm(b[1] - a[1]) / (b[0] - a[0])) if b[0] > a[0]
+                 else float('nan'))
+        try:
+            nees = float(error @ np.linalg.solve(covariance, error))
+        except np.linalg.LinAlgError:
+            nees = float('nan')
+        with self.lock:
+            self.matched.append((float(np.linalg.norm(error)), nees, speed))
 
     def _on_accepted(self, msg):
         p = msg.pose.position
@@ -146,6 +180,10 @@ class Truth:
             if self.true_tip is None or time.monotonic() - self.true_tip[2] > max_age:
                 return None
             return self.true_tip[0].copy(), self.true_tip[1]
+
+
+def _seconds(stamp):
+    return stamp.sec + 1e-9 * stamp.nanosec
 
 
 class Tracker:
@@ -551,6 +589,7 @@ def normal_use_soak(robot_file, minutes, period, rate, tolerance, seed, dynamics
     figures['tip'] = (truth.tip_count, truth.tip_nonfinite)
     figures['true_tip'] = (truth.true_count, truth.true_nonfinite)
     figures['gaps'] = np.array(truth.gaps).reshape(-1, 2)
+    figures['matched'] = np.array(truth.matched).reshape(-1, 3)
     figures['tips'] = np.array(truth.tips).reshape(-1, 4)
     figures['accepted'] = np.array(truth.accepted).reshape(-1, 4)
     figures['tracker'] = tracking
@@ -703,6 +742,17 @@ def report(f):
               '%.2f mm, max %.2f mm; %.1f %% of them beyond 10 mm, %.2f %% beyond 30 mm' % (
                   1e3 * np.median(gaps), 1e3 * np.percentile(gaps, 99), 1e3 * np.max(gaps),
                   100.0 * np.mean(gaps > 0.01), 100.0 * np.mean(gaps > 0.03)))
+    matched = f['matched']
+    for name, rows in (('at rest (true tip < 5 mm/s)', matched[:, 2] < 5e-3),
+                       ('moving', matched[:, 2] >= 5e-3)):
+        if np.any(rows):
+            errors, nees = matched[rows, 0], matched[rows, 1]
+            print('tip_pose_covariance against the true tip of its stamp, %s: %d, error median '
+                  '%.2f mm, p99 %.2f mm, max %.2f mm; 95 %% ellipsoid holds %.1f %%, NEES median '
+                  '%.2f (2.37 when honest)' % (
+                      name, np.sum(rows), 1e3 * np.median(errors),
+                      1e3 * np.percentile(errors, 99), 1e3 * np.max(errors),
+                      100.0 * np.mean(nees <= NEES_95), np.nanmedian(nees)))
     print('bringup RSS: ' + '; '.join(
         'run %d %.1f MB after its first goal, %.1f MB at its end (%+.1f MB)' % (
             i + 1, run['rss_start'], run['rss_end'], run['rss_end'] - run['rss_start'])
