@@ -63,10 +63,11 @@ class TipSource:
 def matched(measured, measured_tips, model, model_tips, window=MATCH_WINDOW):
     """Return (tracker sample, model tip) of one time, the latest both streams have, or None.
 
-    The newest of the two streams is matched to the other's newest sample: a tracker reading
-    to the model tip of its time, or, while statics lags behind the tracker (its newest
-    ``tip_pose`` 0.3 s old while the tip moves 0.1 m/s: 30 mm), the model's newest tip to the
-    tracker's reading of its time. None when no pair lies within ``window`` s.
+    The older of the two streams' newest samples is matched with the other stream's sample of
+    its time: the newest reading with the model tip of its time, or, while statics lags behind
+    the tracker (its newest ``tip_pose`` 0.3 s old while the tip moves 0.1 m/s: 30 mm), the
+    model's newest tip with the tracker's reading of its time. None when no pair lies within
+    ``window`` s.
     """
     stamped = bool(measured.stamp_ns and model.stamp_ns)
     if _time(model, stamped) < _time(measured, stamped):
