@@ -31,6 +31,7 @@ import time
 
 import numpy as np
 
+from continuum_statics.core.estimation.gates import chi2_quantile
 from continuum_statics.core.statics.workspace import reachable_tips
 from continuum_statics.tools.processes import stop
 
@@ -42,8 +43,8 @@ ANSWER_TIMEOUT = 60.0  # s
 NORMAL, CANCEL, PREEMPT = 'normal', 'cancel', 'preempt'
 #: The goal sent half a second before the restart's SIGINT.
 AT_SIGINT = 'at-sigint'
-#: chi-square of 3 degrees of freedom at 95 %: a position error inside its 95 % ellipsoid.
-NEES_95 = 7.815
+#: A position error inside its 95 % ellipsoid: chi-square, 3 degrees of freedom, 95 %.
+NEES_95 = chi2_quantile(0.95, 3)
 #: GoalStatus values of a result: succeeded, canceled, aborted.
 STATUS_NAMES = {4: 'succeeded', 5: 'canceled', 6: 'aborted'}
 
