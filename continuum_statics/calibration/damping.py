@@ -20,8 +20,6 @@ from scipy.optimize import minimize_scalar
 
 from continuum_statics.core.robot import Robot
 
-#: Euler-Bernoulli's first cantilever root (omega_1 = 1.875^2 sqrt(E I / rho A L^4))
-FIRST_ROOT = 1.875104
 #: the damping ratios the search spans on the first mode
 ZETA_RANGE = (1e-4, 2.0)
 
@@ -36,12 +34,6 @@ class DampingFit:
     rms_after: float
     evaluations: int
     samples: int
-
-
-def first_mode(robot):
-    """Euler-Bernoulli's first bending angular frequency of the rod (rad/s)."""
-    rod = robot.description.rod
-    return FIRST_ROOT ** 2 * math.sqrt(robot.c[0] / (rod.mass_per_length * robot.length ** 4))
 
 
 def with_damping(robot, bending):
@@ -81,7 +73,7 @@ def fit_damping(robot, run):
     if len(run) < 10:
         raise ValueError('%s: %d samples; a step or release needs its swing sampled'
                          % (run.source, len(run)))
-    omega, ei = first_mode(robot), robot.c[0]
+    omega, ei = robot.description.rod.first_mode, robot.c[0]
 
     def rms(log_b):
         model = simulated_displacements(with_damping(robot, math.exp(log_b)), run)

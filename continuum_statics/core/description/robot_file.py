@@ -22,6 +22,8 @@ from continuum_statics.core.description.tendons import TENDON_KEYS, Tendons
 #: Plausible backbone materials: Young's modulus (Pa) and density (kg/m^3).
 YOUNGS_RANGE = (1e5, 1e13)
 MAX_DENSITY = 1e5  # above any metal: an effective density may lump the disks onto the backbone
+#: Euler-Bernoulli's first cantilever root (omega_1 = 1.875^2 sqrt(E I / rho A L^4))
+FIRST_ROOT = 1.875104
 #: Most integration steps over the rod a robot file may ask for.
 MAX_STEPS = 2000
 
@@ -88,6 +90,25 @@ class Rod:
     def mass_per_length(self):
         """Rho A (kg/m)."""
         return self.density * self.area
+
+    @property
+    def first_mode(self):
+        """Euler-Bernoulli's first bending angular frequency as a cantilever (rad/s).
+
+        omega_1 = 1.875^2 sqrt(E I / (rho A L^4)), the rod alone (disks and a payload lower
+        it); inf for a massless rod.
+        """
+        if self.mass_per_length <= 0.0:
+            return math.inf
+        return FIRST_ROOT ** 2 * math.sqrt(self.bending_stiffness[0]
+                                          / (self.mass_per_length * self.length ** 4))
+
+    @property
+    def first_mode_damping(self):
+        """The first mode's damping ratio zeta = B omega_1 / (2 E I) (0 without damping)."""
+        if not self.bending_damping or math.isinf(self.first_mode):
+            return 0.0
+        return self.bending_damping * self.first_mode / (2.0 * self.bending_stiffness[0])
 
 
 @dataclass(frozen=True)

@@ -167,7 +167,7 @@ class ShapeEstimate:
             return None
         tip = np.concatenate([self.sensitivity.positions[-1], self.sensitivity.angles[-1]])
         covariance = tip @ self.unmodelled.covariance @ tip.T
-        covariance[:3, :3] += self.unmodelled.point_noise ** 2 * np.eye(3)
+        covariance[:3, :3] += self.unmodelled.tip_variance * np.eye(3)
         return covariance
 
     @property

@@ -30,6 +30,20 @@ of standard deviation point_noise s / L at arc length s, added to each point's c
 to a sensor's noise at its point (R_k + F(s_k)), never part of the state (the nugget of
 kriging, a Gaussian process's white-noise term).
 
+A rod in motion lags its equilibrium, which is all the model computes. A lightly damped first
+bending mode (omega_1, zeta: the robot file's ``rod.damping``) driven by an equilibrium whose tip
+starts moving at speed v swings about it with amplitude v / omega_1 (the ramp response of a
+second-order system; a steady ramp leaves 2 zeta v / omega_1), and the swing decays as
+exp(-zeta omega_1 t) once the equilibrium stops. The estimate carries that amplitude
+(``Unmodelled.swing``: the larger of the model tip's speed while the cables move over omega_1
+and the last amplitude decayed, :func:`_swung`) and adds it to the white error at the tip as
+the smallest sphere whose 95 % ellipsoid holds a swing of that amplitude at every phase and in
+every direction: variance swing^2 / chi2_3(0.95) on each axis, s / L of it along the rod (its
+direction and phase are not tracked: the stamps of a 30 Hz estimate are a third of a 10 Hz
+swing's period apart). An upper bound: the rod's tendons stiffen it above the bare rod's
+omega_1, and motors that speed up smoothly excite less than a step in speed. A file without the
+rod's damping has none.
+
 With the robot file's ``load_model`` the tip load is part of the state too, ahead of the
 unmodelled loads: the parameters p of its :class:`~continuum_statics.core.estimation.
 load_estimation.LoadModel` (a payload's mass, a force along a direction, a force, a wrench; w =
@@ -137,6 +151,8 @@ LOAD_SETTLE = 1.0
 PENDING_SECONDS = 1.0
 #: s of the model's estimates kept for late readings (an EM tracker's latency is 10-50 ms).
 HISTORY_SECONDS = 0.1
+#: chi2_3(0.95): a swing of amplitude A lies on the 95 % ellipsoid of variance A^2 / it
+SWING_SPREAD = gates.chi2_quantile(0.95, 3)
 #: ... and at most this many of them (a 1 kHz node: the last 0.1 s).
 HISTORY_LENGTH = 128
 #: Unmodelled-load groups, in the order of d: name, size (None: one per cable), unit.
@@ -164,14 +180,16 @@ class Unmodelled:
     :ivar pending: ((sensor name, (position (3,) m, stamp s)), ...) of readings the gate set
         aside that a new tip load may explain: the next reading of that sensor that agrees
         renews the load (:func:`_update`)
-    :ivar still: (cable lengths (n,) m, stamp s) where the cables last moved: while they move
-        and LOAD_SETTLE s after, no new tip load is taken and contact does not begin
-        (:func:`_moving`)
+    :ivar still: (cable lengths (n,) m, stamp s[, the model's tip (3,) m]) where the cables
+        last moved: while they move and LOAD_SETTLE s after, no new tip load is taken and
+        contact does not begin (:func:`_moving`); the tip times the swing (:func:`_swung`)
     :ivar point_noise: m, the model's error at the tip that no load explains (white), the robot
         file's ``model_uncertainty.point_noise`` (:meth:`point_variance`)
     :ivar load_reference: (j,) the tip load taken when its variance was last at its prior (the
         first reading fused, a renewal), or None: the drift guard judges its change since then
         with the model's error (:func:`_update`)
+    :ivar swing: m, the amplitude of the rod's swing about the model's equilibrium at the tip
+        (module doc, :func:`_swung`)
     """
 
     names: tuple
@@ -184,6 +202,7 @@ class Unmodelled:
     still: tuple = None
     point_noise: float = 0.0
     load_reference: np.ndarray = None
+    swing: float = 0.0
 
     @property
     def correction(self):
@@ -210,15 +229,24 @@ class Unmodelled:
         """(k,) standard deviations."""
         return np.sqrt(np.diag(self.covariance))
 
+    @property
+    def tip_variance(self):
+        """The variance (m^2, each axis) of the model's white error at the tip.
+
+        :attr:`point_noise` squared plus the swing's, swing^2 / chi2_3(0.95) (module doc).
+        """
+        return self.point_noise ** 2 + self.swing ** 2 / SWING_SPREAD
+
     def point_variance(self, shape, s):
         """Return the variance (m^2, each axis) of the model's white error at arc lengths ``s``.
 
-        :attr:`point_noise` at the tip, growing as s / L from the clamped base (zero there):
-        the error of a rod bent by what the model misses grows along it.
+        :attr:`tip_variance` at the tip, growing as (s / L)^2 from the clamped base (zero
+        there): the error of a rod bent by what the model misses grows along it.
         """
-        if not self.point_noise:  # most files: no array work per reading
+        tip = self.tip_variance
+        if not tip:  # most files at rest: no array work per reading
             return 0.0 if np.ndim(s) == 0 else np.zeros(len(s))
-        return white_sigma(self.point_noise, s, shape.s[-1]) ** 2
+        return white_sigma(math.sqrt(tip), s, shape.s[-1]) ** 2
 
     def as_dict(self):
         """{name: (mean, sigma)} for reports."""
@@ -412,14 +440,15 @@ def estimate_state(robot, lengths, tip_force, tip_moment, tensions, sensors, sta
     readings = _readings(robot, sensors)
     prior = propagate(robot, getattr(previous, 'unmodelled', None), stamp)
     j = load_size(robot)
-    if j:
-        prior = _moving(prior, lengths, stamp, tracking)
+    anchor = prior.still  # where the cables last moved before this call
+    prior = _moving(prior, lengths, stamp, tracking)
     carried = getattr(previous, 'sensitivity', None)
     if j and (prior.origin is None or not _within_linear_range(prior, j)):
         # the model solved at the tip load estimated so far (module doc); kept while the load
         # stays within its columns' linear range (the same tip load: a warm solve's work)
         prior = _solved_at(prior, prior.mean, j)
     bounded = tracking is not None and bool(tracking.max_model_runs)
+    swing, since = prior.swing, getattr(getattr(previous, 'unmodelled', None), 'stamp', None)
     for _ in range((BOUNDED_LOAD_ITERATIONS if bounded else LOAD_ITERATIONS) if j else 1):
         if j:
             wrench = robot.load_model.basis @ prior.origin[:j]
@@ -435,6 +464,7 @@ def estimate_state(robot, lengths, tip_force, tip_moment, tensions, sensors, sta
             return dataclasses.replace(model, unmodelled=prior, sensors=verdicts)
         sensitivity = _sensitivity(robot, model, lengths, force, moment, tensions, carried,
                                    prior, tracking)
+        prior = _swung(robot, prior, swing, since, anchor, model.shape.tip_position)
         history = _history(getattr(previous, 'history', ()), stamp, model.shape, sensitivity,
                            prior.origin)
         posterior, verdicts = _update(
@@ -478,6 +508,37 @@ def _moving(prior, lengths, stamp, tracking):
     if np.max(np.abs(lengths - prior.still[0])) > threshold:
         return dataclasses.replace(prior, still=(lengths.copy(), stamp))
     return prior
+
+
+def _swung(robot, prior, swing, since, anchor, tip):
+    """Return ``prior`` with its swing (module doc) at its stamp and the model's ``tip`` (3,) m.
+
+    ``swing`` (m) was the amplitude at ``since`` (s, the last call); it decays by
+    exp(-zeta omega_1 dt). When the cables moved this call (:func:`_moving`: beyond their
+    noise since they last moved, at ``anchor``) the model tip's speed since then over omega_1
+    may raise it; the tip is kept with the anchor for the next. Between two such calls the
+    speed is not judged: the model tip of a still robot moves with the encoders' noise alone
+    (0.3 mm in a 1 ms step is 0.3 m/s). A motion's first call after a rest is judged over the
+    time since the call before plus 1 / omega_1 (a motion the rod cannot follow is a step,
+    whose swing is the step itself), the next ones over their own time. 0 without the rod's
+    damping in the robot file.
+    """
+    rod = robot.description.rod
+    zeta = rod.first_mode_damping
+    if not zeta:
+        return prior
+    omega = rod.first_mode
+    stamp, still = prior.stamp, prior.still
+    later = stamp is not None and since is not None and stamp > since
+    if later:
+        swing *= math.exp(-zeta * omega * (stamp - since))
+    if still is not None and (still[1] == stamp or len(still) == 2):
+        if later and anchor is not None and len(anchor) > 2 and stamp > anchor[1]:
+            elapsed = min(stamp - anchor[1], stamp - since + 1.0 / omega)
+            speed = float(np.linalg.norm(tip - anchor[2])) / elapsed
+            swing = max(swing, speed / omega)
+        still = still[:2] + (np.array(tip, dtype=float),)
+    return dataclasses.replace(prior, swing=swing, still=still)
 
 
 def cables_settling(state):

@@ -1,0 +1,134 @@
+"""A rod in motion swings about the equilibrium the model computes: that swing in the covariance.
+
+Truth: the rod's own dynamics (:class:`~continuum_statics.core.dynamics.rod_dynamics.
+RodDynamics`, Till et al. 2019: another formulation, in time) driven by motors that move from
+goal to goal; the estimate is the quasi-static fused one at 50 Hz, a tip tracker seen on half
+of its calls, as statics gives it. The swing's amplitude v / omega_1 is a second-order
+system's answer to a velocity step (state_estimation's module doc).
+"""
+import math
+
+from conftest import REPO
+import numpy as np
+import pytest
+import yaml
+
+from continuum_statics import load_robot
+from continuum_statics.core.description.sensors import SensorReading
+from continuum_statics.core.estimation.gates import chi2_quantile
+
+DYNAMIC_ROBOT = REPO / 'config' / 'tendon_robot_dynamic.yaml'
+#: the model uncertainty of config/tendon_robot_sensors.yaml (this robot's, without the coil)
+UNCERTAINTY = {'tip_force': 0.05, 'section_moment': 0.005, 'cable_length': 3.0e-4,
+               'base_position': 5.0e-4, 'correlation_time': 10.0}
+TRACKER_NOISE = 3e-4  # m
+MOTOR_SPEED = 0.02  # m/s
+ESTIMATE_PERIOD = 0.02  # s
+MOVING = 5e-3  # m/s of the true tip: moving
+
+
+def tracked_robot(tmp_path, damping=True):
+    data = yaml.safe_load(DYNAMIC_ROBOT.read_text())
+    data['model_uncertainty'] = UNCERTAINTY
+    data['sensors'] = [{'name': 'tip_tracker', 'at': 'tip', 'kind': 'position',
+                        'noise': {'position': TRACKER_NOISE}}]
+    if not damping:  # the same rod, its damping not described: no swing
+        del data['rod']['damping']
+    path = tmp_path / ('tracked.yaml' if damping else 'undamped.yaml')
+    path.write_text(yaml.safe_dump(data))
+    return load_robot(path)
+
+
+def goals_in_motion(truth, estimator, seed=0, moves=8):
+    """Return (true tip speed m/s, NEES of the tip) of each estimate while motors move.
+
+    ``truth`` drives the rod in motion; ``estimator`` (same rod, what the estimate knows)
+    estimates from noisy motor lengths every ESTIMATE_PERIOD.
+    """
+    rng = np.random.default_rng(seed)
+    home = np.full(4, 0.3)
+    rod = truth.dynamics()
+    state = rod.start(lengths=home)
+    lengths, time, last, estimate = home.copy(), 0.0, 0.0, None
+    true_before = state.tip_position.copy()
+    speeds, nees = [], []
+    for _ in range(moves):
+        pull = rng.uniform(-0.004, 0.004, 2)
+        target = home + np.array([pull[0], pull[1], -pull[0], -pull[1]])
+        rest = 0.6  # s at the goal before the next
+        while rest > 0.0:
+            lengths = lengths + np.clip(target - lengths, -MOTOR_SPEED * rod.dt,
+                                        MOTOR_SPEED * rod.dt)
+            state = rod.step(lengths=lengths)
+            time += rod.dt
+            if np.allclose(lengths, target):
+                rest -= rod.dt
+            if time - last < ESTIMATE_PERIOD - 1e-9:
+                continue
+            last, true = time, state.tip_position
+            seen = rng.random() < 0.5
+            sensors = {'tip_tracker': SensorReading(
+                position=true + rng.normal(0.0, TRACKER_NOISE, 3), stamp=time)} if seen else None
+            estimate = estimator.estimate_shape(lengths + rng.normal(0.0, 1e-5, 4),
+                                                warm_start=estimate, stamp=time, sensors=sensors)
+            error = true - estimate.shape.tip_position
+            nees.append(float(error @ np.linalg.solve(estimate.tip_covariance[:3, :3], error)))
+            speeds.append(float(np.linalg.norm(true - true_before)) / ESTIMATE_PERIOD)
+            true_before = true.copy()
+    return np.array(speeds), np.array(nees)
+
+
+def test_the_first_mode_is_euler_bernoullis_with_the_damping_ratio_of_the_file():
+    rod = load_robot(DYNAMIC_ROBOT).description.rod
+    # the file's comment: 9.3 Hz, 5 % of critical
+    assert rod.first_mode / (2.0 * math.pi) == pytest.approx(9.3, abs=0.05)
+    assert rod.first_mode_damping == pytest.approx(0.05, abs=0.002)
+    assert load_robot(REPO / 'config' / 'tendon_robot_sensors.yaml').description.rod \
+        .first_mode_damping == 0.0
+
+
+def test_the_tip_covariance_holds_the_moving_rod_it_left_out_before(tmp_path):
+    """The moving rows' 95 % ellipsoid: 70-73 % without the swing, at least 85 % with it.
+
+    An upper bound on the swing (module doc): it holds 99.7 % here (too large by the 99 %
+    a covariance is allowed), where the rod's tendons raise its first mode from the bare rod's
+    9.3 Hz to 13.7 Hz.
+    """
+    robot = tracked_robot(tmp_path)
+    bound = chi2_quantile(0.95, 3)
+    speeds, nees = goals_in_motion(robot, robot)
+    moving = speeds >= MOVING
+    assert moving.sum() > 200
+    held = np.mean(nees[moving] <= bound)
+    assert held >= 0.85, held
+    # the same motion, the file without the rod's damping: the swing is left out, and the
+    # quasi-static estimate's ellipsoid misses the moving rod (the truth still swings)
+    speeds, nees = goals_in_motion(robot, tracked_robot(tmp_path, damping=False))
+    assert np.mean(nees[speeds >= MOVING] <= bound) < 0.8
+
+
+def test_the_swing_decays_at_the_first_modes_rate_once_the_cables_stop(tmp_path):
+    robot = tracked_robot(tmp_path)
+    rod = robot.description.rod
+    lengths = np.full(4, 0.3)
+    estimate = robot.estimate_shape(lengths, stamp=0.0)
+    assert estimate.unmodelled.swing == 0.0
+    # a 1 mm pull after a rest, within 20 ms: judged over 20 ms plus 1 / omega_1 (a step
+    # the rod cannot follow), then the next 1 mm in 20 ms over those 20 ms
+    omega = rod.first_mode
+    pull = np.array([1e-3, 0.0, -1e-3, 0.0])
+    first = robot.estimate_shape(lengths, warm_start=estimate, stamp=1.0)
+    started = robot.estimate_shape(lengths + pull, warm_start=first, stamp=1.02)
+    moved = robot.estimate_shape(lengths + 2.0 * pull, warm_start=started, stamp=1.04)
+    tips = [e.history[-1][1].tip_position for e in (first, started, moved)]  # the model's
+    step = np.linalg.norm(tips[1] - tips[0])
+    assert step > 1e-3  # m: a 30 cm lever on a 1 cm hole
+    assert started.unmodelled.swing == pytest.approx(step / (0.02 + 1.0 / omega) / omega,
+                                                     rel=1e-6)
+    swing = moved.unmodelled.swing
+    assert swing == pytest.approx(np.linalg.norm(tips[2] - tips[1]) / 0.02 / omega, rel=1e-6)
+    still = robot.estimate_shape(lengths + 2.0 * pull, warm_start=moved, stamp=1.34)
+    assert still.unmodelled.swing == pytest.approx(
+        swing * math.exp(-rod.first_mode_damping * rod.first_mode * 0.3), rel=1e-9)
+    # the tip's variance carries it: swing^2 / chi2_3(0.95) on each axis
+    assert still.tip_covariance[0, 0] > still.unmodelled.swing ** 2 / chi2_quantile(0.95, 3)
