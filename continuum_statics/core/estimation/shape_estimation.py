@@ -157,8 +157,11 @@ class ShapeEstimate:
             return None
         g = self.sensitivity.positions
         floor = self.unmodelled.point_variance(self.shape, self.shape.s)
-        return ((g @ self.unmodelled.covariance) @ g.transpose(0, 2, 1)
-                + floor[:, None, None] * np.eye(3))
+        covariance = ((g @ self.unmodelled.covariance) @ g.transpose(0, 2, 1)
+                      + floor[:, None, None] * np.eye(3))
+        if self.unmodelled.tip_white is not None:  # a reading at the tip saw its white error
+            covariance[-1] += self.unmodelled.tip_white[1] - floor[-1] * np.eye(3)
+        return covariance
 
     @functools.cached_property
     def tip_covariance(self):
@@ -167,7 +170,9 @@ class ShapeEstimate:
             return None
         tip = np.concatenate([self.sensitivity.positions[-1], self.sensitivity.angles[-1]])
         covariance = tip @ self.unmodelled.covariance @ tip.T
-        covariance[:3, :3] += self.unmodelled.tip_variance * np.eye(3)
+        white = self.unmodelled.tip_white
+        covariance[:3, :3] += (self.unmodelled.tip_variance * np.eye(3) if white is None
+                               else white[1])
         return covariance
 
     @property

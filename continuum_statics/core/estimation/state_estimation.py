@@ -27,8 +27,10 @@ between nearby rows) and handed over to the slowly varying loads as it fades.
 
 What none of these makes, a shape error new with each configuration, is ``point_noise``: white,
 of standard deviation point_noise s / L at arc length s, added to each point's covariance and
-to a sensor's noise at its point (R_k + F(s_k)), never part of the state (the nugget of
-kriging, a Gaussian process's white-noise term).
+to a sensor's noise at its point (R_k + F(s_k)), never carried from one stamp to the next (the
+nugget of kriging, a Gaussian process's white-noise term). A reading at the tip of this very
+stamp has seen the tip's own white error: the tip is then estimated with the state augmented by
+it (:func:`_tip_white`).
 
 A rod in motion lags its equilibrium, which is all the model computes. A lightly damped first
 bending mode (omega_1, zeta: the robot file's ``rod.damping``) driven by an equilibrium whose tip
@@ -190,6 +192,8 @@ class Unmodelled:
         with the model's error (:func:`_update`)
     :ivar swing: m, the amplitude of the rod's swing about the model's equilibrium at the tip
         (module doc, :func:`_swung`)
+    :ivar tip_white: (mean (3,) m, covariance (3, 3) m^2) of the tip's white error after a
+        reading at the tip at this stamp (:func:`_tip_white`), or None: N(0, tip_variance)
     """
 
     names: tuple
@@ -203,6 +207,7 @@ class Unmodelled:
     point_noise: float = 0.0
     load_reference: np.ndarray = None
     swing: float = 0.0
+    tip_white: tuple = None
 
     @property
     def correction(self):
@@ -332,14 +337,14 @@ def propagate(robot, carried, stamp):
                           point_noise=floor)
     if stamp is None or carried.stamp is None:
         return dataclasses.replace(carried, stamp=carried.stamp if stamp is None else stamp,
-                                   load_basis=basis, point_noise=floor)
+                                   load_basis=basis, point_noise=floor, tip_white=None)
     # an older stamp is not a step back in time
     mean, covariance = decayed(carried.mean, carried.covariance, prior,
                                max(stamp - carried.stamp, 0.0),
                                robot.model_uncertainty.correlation_time, _drift_time(robot),
                                load_size(robot))
     return dataclasses.replace(carried, mean=mean, covariance=covariance, stamp=stamp,
-                               load_basis=basis, point_noise=floor)
+                               load_basis=basis, point_noise=floor, tip_white=None)
 
 
 def _moved_variance(robot, elapsed):
@@ -441,7 +446,8 @@ def estimate_state(robot, lengths, tip_force, tip_moment, tensions, sensors, sta
     prior = propagate(robot, getattr(previous, 'unmodelled', None), stamp)
     j = load_size(robot)
     anchor = prior.still  # where the cables last moved before this call
-    prior = _moving(prior, lengths, stamp, tracking)
+    if j or robot.description.rod.first_mode_damping:  # a load to hold, a swing to time
+        prior = _moving(prior, lengths, stamp, tracking)
     carried = getattr(previous, 'sensitivity', None)
     if j and (prior.origin is None or not _within_linear_range(prior, j)):
         # the model solved at the tip load estimated so far (module doc); kept while the load
@@ -480,7 +486,7 @@ def estimate_state(robot, lengths, tip_force, tip_moment, tensions, sensors, sta
         # the end; a bounded call keeps them (a chord iteration: the model itself is solved at
         # the new load each time), so a node's call stays bounded
         carried = sensitivity
-    shape = _corrected(model.shape, sensitivity, posterior.correction)
+    shape = _corrected(model.shape, sensitivity, posterior.correction, posterior.tip_white)
     tensions_verdict = verdicts.pop(TENSIONS, None)
     return dataclasses.replace(model, shape=shape, unmodelled=posterior, sensors=verdicts,
                                tensions_verdict=tensions_verdict, sensitivity=sensitivity,
@@ -846,13 +852,14 @@ def _update(robot, shape, sensitivity, prior, readings, stamp, history=(), tensi
     j = load_size(robot)
     renewed, pending, changed = False, dict(prior.pending), False
     moving = bool(j) and cables_settling(prior)
-    verdicts, rows, residuals, noises, used = {}, [], [], [], {}
+    verdicts, rows, residuals, noises, used, at_tip = {}, [], [], [], {}, []
     measurements = [(sensor.name, sensor, _sensor_measurement(
-        robot, shape, sensitivity, prior, sensor, reading, stamp, history))
+        robot, shape, sensitivity, prior, sensor, reading, stamp, history),
+        sensor.at_tip and (reading.stamp is None or stamp is None or reading.stamp == stamp))
         for sensor, reading in readings.items()]
     if tensions is not None:
-        measurements.append((TENSIONS, None, tensions))
-    for name, sensor, (value, innovation, jac, noise, judged) in measurements:
+        measurements.append((TENSIONS, None, tensions, False))
+    for name, sensor, (value, innovation, jac, noise, judged), here in measurements:
         spread = jac @ covariance @ jac.T + noise
         chi2 = float(innovation @ _solve(spread, innovation))
         gate = gates.gate(len(innovation), gates.SENSOR_GATE_PROBABILITY)
@@ -887,10 +894,13 @@ def _update(robot, shape, sensitivity, prior, readings, stamp, history=(), tensi
         residuals.append(innovation)
         noises.append(noise)
         used[name] = judged
+        at_tip.append(here)
     if changed:
         prior = dataclasses.replace(prior, pending=tuple(pending.items()))
     if not rows:
         return prior, verdicts
+    white = _tip_white(prior, sensitivity, covariance, rows, np.concatenate(residuals),
+                       _block_diagonal(noises), at_tip)
     mean, covariance = fused(mean, covariance, np.vstack(rows), np.concatenate(residuals),
                              _block_diagonal(noises))
     # the tip load a reading took while its variance was at its prior (a first reading, a new
@@ -909,7 +919,34 @@ def _update(robot, shape, sensitivity, prior, readings, stamp, history=(), tensi
             verdicts[name] = SensorVerdict(False, verdicts[name].chi2, beyond[name])
         return prior, verdicts
     return dataclasses.replace(prior, mean=mean, covariance=covariance,
-                               load_reference=reference), verdicts
+                               load_reference=reference, tip_white=white), verdicts
+
+
+def _tip_white(prior, sensitivity, covariance, rows, innovation, noise, at_tip):
+    """Return (mean (3,) m, covariance (3, 3) m^2) of the tip's white error after the update.
+
+    A reading at the tip of this very configuration (``at_tip``: per used reading) carries the
+    tip's own white error w (variance W on each axis, :attr:`Unmodelled.tip_variance`), which
+    its noise already counts; the tip, g d + w, is then estimated with the state augmented by
+    w (Kalman's update on [d; w], H = [H_d, E]): its mean moves by W E^T S^-1 nu, and its
+    covariance is g P+ g^T plus the returned one, W - (a + b) S^-1 (a + b)^T + a S^-1 a^T with
+    a = g P H^T, b = W E^T. Before (W whole) a tracked row's ellipsoid held 100 %. None without
+    such a reading or white error. ``covariance``: P before the update; ``rows``: the used H
+    blocks; ``noise``: their R, W in it.
+    """
+    variance = prior.tip_variance
+    if not variance or not any(at_tip):
+        return None
+    select = np.vstack([np.eye(len(block), 3) if here else np.zeros((len(block), 3))
+                        for block, here in zip(rows, at_tip)])
+    jac = np.vstack(rows)
+    spread = jac @ covariance @ jac.T + noise
+    seen = sensitivity.positions[-1] @ covariance @ jac.T  # a: the loads' share
+    white = variance * select.T  # b: the white error's share
+    both = seen + white
+    solved = np.linalg.solve(spread, np.column_stack([both.T, seen.T, innovation]))
+    change = variance * np.eye(3) - both @ solved[:, :3] + seen @ solved[:, 3:6]
+    return white @ solved[:, 6], 0.5 * (change + change.T)
 
 
 def _agrees(pending, value, noise, stamp):
@@ -980,10 +1017,15 @@ def _block_diagonal(blocks):
     return out
 
 
-def _corrected(shape, sensitivity, mean):
-    """Return ``shape`` moved by the unmodelled loads ``mean`` (first order; same solver state)."""
+def _corrected(shape, sensitivity, mean, tip_white=None):
+    """Return ``shape`` moved by the unmodelled loads ``mean`` (first order; same solver state).
+
+    ``tip_white``: :attr:`Unmodelled.tip_white`, whose mean moves the tip's point alone.
+    """
     states = shape.states.copy()
     move_states(states, sensitivity.positions, sensitivity.angles, mean)
+    if tip_white is not None:
+        states[-1, POSITION_AT:POSITION_AT + 3] += tip_white[0]
     return type(shape)(shape.s, states, shape.u0, shape.tip_force, shape.c, shape.d,
                        shape.state, shape.fixed_tensions)
 
@@ -1013,8 +1055,11 @@ def point_covariance(estimate, sensor):
     """
     _, jac, _ = _sensor_rows(estimate.shape, estimate.sensitivity, sensor)
     jac = jac[:3]
-    floor = estimate.unmodelled.point_variance(estimate.shape, sensor.s)
-    return jac @ estimate.unmodelled.covariance @ jac.T + floor * np.eye(3)
+    unmodelled = estimate.unmodelled
+    if sensor.at_tip and unmodelled.tip_white is not None:
+        return jac @ unmodelled.covariance @ jac.T + unmodelled.tip_white[1]
+    floor = unmodelled.point_variance(estimate.shape, sensor.s)
+    return jac @ unmodelled.covariance @ jac.T + floor * np.eye(3)
 
 
 def white_sigma(point_noise, s, length):
