@@ -626,12 +626,43 @@ def test_a_reading_at_the_tip_updates_the_tips_white_error_as_an_augmented_state
                                tip @ covariance @ tip.T, rtol=1e-6, atol=1e-14)
     np.testing.assert_allclose(fused_estimate.position_covariance[-1],
                                tip @ covariance @ tip.T, rtol=1e-6, atol=1e-14)
+    # the tip's pose: its rotation moves with d alone, and its correlation with the position
+    # carries the white error's share too
+    pose = np.vstack([tip, np.hstack([fused_estimate.sensitivity.angles[-1], np.zeros((3, 3))])])
+    np.testing.assert_allclose(fused_estimate.tip_covariance, pose @ covariance @ pose.T,
+                               rtol=1e-6, atol=1e-14)
     # a reading of another stamp (another configuration's white error): the whole variance
     later = robot.estimate_shape(lengths, exact=True, stamp=1.0, sensors={
         tracker.name: SensorReading(reading, stamp=0.99)})
     assert later.unmodelled.tip_white is None
     assert np.trace(later.tip_covariance[:3, :3]) > 2.0 * np.trace(
         fused_estimate.tip_covariance[:3, :3])
+
+
+def test_two_tip_sensors_with_a_white_error_give_covariances_a_covariance_can_be():
+    """A second tip sensor (a marker 8 mm off the tip) read at the same stamp as the tracker.
+
+    Before, both were taken to share one white error while their noise counted two: the tip's
+    covariance had an eigenvalue of -5.4e-7 m^2 (point_noise 1 mm), -2.4e-5 at 5 mm.
+    """
+    document = _document()
+    document['sensors'].append({'name': 'marker', 'at': 'tip', 'offset': [0.0, 0.008, 0.0],
+                                'kind': 'position', 'noise': {'position': 5e-4}})
+    for white in (1e-3, 5e-3):
+        document['model_uncertainty'] = dict(document['model_uncertainty'], point_noise=white)
+        robot = Robot(parse_robot_description(document))
+        lengths = _pulled(robot)
+        cold = robot.estimate_shape(lengths, exact=True, stamp=1.0)
+        shape = cold.shape
+        readings = {sensor.name: SensorReading(
+            shape.tip_position + shape.tip_rotation @ sensor.offset + [1e-3, 2e-3, 0.0],
+            stamp=1.0) for sensor in robot.sensors if sensor.at_tip}
+        estimate = robot.estimate_shape(lengths, exact=True, stamp=1.0, sensors=readings)
+        assert all(verdict.used for verdict in estimate.sensors.values())
+        scale = np.trace(estimate.tip_covariance[:3, :3])
+        for matrix in (estimate.tip_covariance, estimate.position_covariance[-1],
+                       *(point_covariance(estimate, sensor) for sensor in robot.sensors)):
+            assert np.linalg.eigvalsh(matrix)[0] > -1e-9 * scale, matrix
 
 
 def test_calibrate_recovers_a_known_hidden_drift():

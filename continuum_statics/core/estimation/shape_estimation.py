@@ -160,7 +160,7 @@ class ShapeEstimate:
         covariance = ((g @ self.unmodelled.covariance) @ g.transpose(0, 2, 1)
                       + floor[:, None, None] * np.eye(3))
         if self.unmodelled.tip_white is not None:  # a reading at the tip saw its white error
-            covariance[-1] += self.unmodelled.tip_white[1] - floor[-1] * np.eye(3)
+            covariance[-1] += self.unmodelled.tip_white[1][:3, :3] - floor[-1] * np.eye(3)
         return covariance
 
     @functools.cached_property
@@ -171,8 +171,10 @@ class ShapeEstimate:
         tip = np.concatenate([self.sensitivity.positions[-1], self.sensitivity.angles[-1]])
         covariance = tip @ self.unmodelled.covariance @ tip.T
         white = self.unmodelled.tip_white
-        covariance[:3, :3] += (self.unmodelled.tip_variance * np.eye(3) if white is None
-                               else white[1])
+        if white is None:
+            covariance[:3, :3] += self.unmodelled.tip_variance * np.eye(3)
+        else:
+            covariance += white[1]
         return covariance
 
     @property

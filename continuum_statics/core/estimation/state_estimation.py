@@ -192,7 +192,7 @@ class Unmodelled:
         with the model's error (:func:`_update`)
     :ivar swing: m, the amplitude of the rod's swing about the model's equilibrium at the tip
         (module doc, :func:`_swung`)
-    :ivar tip_white: (mean (3,) m, covariance (3, 3) m^2) of the tip's white error after a
+    :ivar tip_white: (mean (3,) m, covariance (6, 6)) of the tip's white error's share after a
         reading at the tip at this stamp (:func:`_tip_white`), or None: N(0, tip_variance)
     """
 
@@ -622,6 +622,8 @@ def stale_columns(robot, estimate):
     if sensitivity is None or not len(sensitivity.tips):
         return False
     tip = estimate.shape.tip_position - sensitivity.positions[-1] @ estimate.unmodelled.correction
+    if estimate.unmodelled.tip_white is not None:  # the tip's white error moved it too
+        tip = tip - estimate.unmodelled.tip_white[0]
     moved = _moved_since(robot, sensitivity.tips, tip)
     return bool(np.max(moved) > REFRESH_DISTANCE * robot.length)
 
@@ -894,7 +896,9 @@ def _update(robot, shape, sensitivity, prior, readings, stamp, history=(), tensi
         residuals.append(innovation)
         noises.append(noise)
         used[name] = judged
-        at_tip.append(here)
+        # the first tip reading of this stamp: a second one's white error is another draw
+        # in the noise it was judged with (the same w in both would need their cross term)
+        at_tip.append(here and not any(at_tip))
     if changed:
         prior = dataclasses.replace(prior, pending=tuple(pending.items()))
     if not rows:
@@ -923,16 +927,17 @@ def _update(robot, shape, sensitivity, prior, readings, stamp, history=(), tensi
 
 
 def _tip_white(prior, sensitivity, covariance, rows, innovation, noise, at_tip):
-    """Return (mean (3,) m, covariance (3, 3) m^2) of the tip's white error after the update.
+    """Return (mean (3,) m, covariance (6, 6)) of the tip's white error's share after the update.
 
-    A reading at the tip of this very configuration (``at_tip``: per used reading) carries the
-    tip's own white error w (variance W on each axis, :attr:`Unmodelled.tip_variance`), which
-    its noise already counts; the tip, g d + w, is then estimated with the state augmented by
-    w (Kalman's update on [d; w], H = [H_d, E]): its mean moves by W E^T S^-1 nu, and its
-    covariance is g P+ g^T plus the returned one, W - (a + b) S^-1 (a + b)^T + a S^-1 a^T with
-    a = g P H^T, b = W E^T. Before (W whole) a tracked row's ellipsoid held 100 %. None without
-    such a reading or white error. ``covariance``: P before the update; ``rows``: the used H
-    blocks; ``noise``: their R, W in it.
+    A reading at the tip of this very configuration (``at_tip``: per used reading, the first
+    such) carries the tip's own white error w (variance W on each axis,
+    :attr:`Unmodelled.tip_variance`), which its noise already counts; the tip's pose,
+    T d + [w; 0] with T = [G_r; G_theta] at the tip, is then estimated with the state augmented
+    by w (Kalman's update on [d; w], H = [H_d, E]): its position moves by W E^T S^-1 nu, and its
+    covariance is T P+ T^T plus the returned one, diag(W I, 0) - (a + b) S^-1 (a + b)^T
+    + a S^-1 a^T with a = T P H^T, b = [W E^T; 0]. Before (W whole) a tracked row's ellipsoid
+    held 100 %. None without such a reading or white error. ``covariance``: P before the
+    update; ``rows``: the used H blocks; ``noise``: their R, W in it.
     """
     variance = prior.tip_variance
     if not variance or not any(at_tip):
@@ -941,12 +946,15 @@ def _tip_white(prior, sensitivity, covariance, rows, innovation, noise, at_tip):
                         for block, here in zip(rows, at_tip)])
     jac = np.vstack(rows)
     spread = jac @ covariance @ jac.T + noise
-    seen = sensitivity.positions[-1] @ covariance @ jac.T  # a: the loads' share
-    white = variance * select.T  # b: the white error's share
+    tip = np.vstack([sensitivity.positions[-1], sensitivity.angles[-1]])
+    seen = tip @ covariance @ jac.T  # a: the loads' share
+    white = np.zeros_like(seen)
+    white[:3] = variance * select.T  # b: the white error's share (it moves no angle)
     both = seen + white
     solved = np.linalg.solve(spread, np.column_stack([both.T, seen.T, innovation]))
-    change = variance * np.eye(3) - both @ solved[:, :3] + seen @ solved[:, 3:6]
-    return white @ solved[:, 6], 0.5 * (change + change.T)
+    change = -both @ solved[:, :6] + seen @ solved[:, 6:12]
+    change[:3, :3] += variance * np.eye(3)
+    return white[:3] @ solved[:, 12], 0.5 * (change + change.T)
 
 
 def _agrees(pending, value, noise, stamp):
@@ -1053,11 +1061,14 @@ def point_covariance(estimate, sensor):
 
     The model's part only: add ``sensor.position_sigma ** 2`` to compare with a reading.
     """
-    _, jac, _ = _sensor_rows(estimate.shape, estimate.sensitivity, sensor)
+    _, jac, rotation = _sensor_rows(estimate.shape, estimate.sensitivity, sensor)
     jac = jac[:3]
     unmodelled = estimate.unmodelled
     if sensor.at_tip and unmodelled.tip_white is not None:
-        return jac @ unmodelled.covariance @ jac.T + unmodelled.tip_white[1]
+        arm = rotation @ sensor.offset  # d(R o) = -[R o]x theta, as in _sensor_rows
+        rows = np.hstack([np.eye(3), [[0.0, arm[2], -arm[1]], [-arm[2], 0.0, arm[0]],
+                                      [arm[1], -arm[0], 0.0]]])
+        return jac @ unmodelled.covariance @ jac.T + rows @ unmodelled.tip_white[1] @ rows.T
     floor = unmodelled.point_variance(estimate.shape, sensor.s)
     return jac @ unmodelled.covariance @ jac.T + floor * np.eye(3)
 
