@@ -106,11 +106,12 @@ def test_the_bare_rods_first_mode_is_below_the_rods_in_motion_with_its_tendons(t
 
 
 def test_the_tip_covariance_holds_the_moving_rod_it_left_out_before(tmp_path):
-    """The moving rows' 95 % ellipsoid: 70-73 % without the swing, at least 85 % with it.
+    """The moving rows' 95 % ellipsoid: 70-73 % without the swing, 85-99 % with it (97.0 %).
 
-    An upper bound on the swing (module doc): it holds 99.7 % here (too large by the 99 %
-    a covariance is allowed), where the rod's tendons raise its first mode from the bare rod's
-    9.3 Hz to 13.7 Hz.
+    An upper bound on the swing (module doc): the rod's tendons raise its first mode from the
+    bare rod's 9.3 Hz to 13.7 Hz. The tracker's readings carry the estimate's stamp here, so a
+    seen row's tip also updates its white error (state_estimation._tip_white): before that it
+    held 99.7 %.
     """
     robot = tracked_robot(tmp_path)
     bound = chi2_quantile(0.95, 3)
@@ -118,7 +119,7 @@ def test_the_tip_covariance_holds_the_moving_rod_it_left_out_before(tmp_path):
     moving = speeds >= MOVING
     assert moving.sum() > 200
     held = np.mean(nees[moving] <= bound)
-    assert held >= 0.85, held
+    assert 0.85 <= held <= 0.99, held
     # the same motion, the file without the rod's damping: the swing is left out, and the
     # quasi-static estimate's ellipsoid misses the moving rod (the truth still swings)
     speeds, nees = goals_in_motion(robot, tracked_robot(tmp_path, damping=False))
