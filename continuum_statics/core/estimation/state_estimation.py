@@ -903,10 +903,9 @@ def _update(robot, shape, sensitivity, prior, readings, stamp, history=(), tensi
         prior = dataclasses.replace(prior, pending=tuple(pending.items()))
     if not rows:
         return prior, verdicts
-    white = _tip_white(prior, sensitivity, covariance, rows, np.concatenate(residuals),
-                       _block_diagonal(noises), at_tip)
-    mean, covariance = fused(mean, covariance, np.vstack(rows), np.concatenate(residuals),
-                             _block_diagonal(noises))
+    innovation, noise = np.concatenate(residuals), _block_diagonal(noises)
+    white = _tip_white(prior, sensitivity, covariance, rows, innovation, noise, at_tip)
+    mean, covariance = fused(mean, covariance, np.vstack(rows), innovation, noise)
     # the tip load a reading took while its variance was at its prior (a first reading, a new
     # load) is the load's reference; its change since then is judged with the model's error
     reference = prior.load_reference
