@@ -687,7 +687,11 @@ def test_calibrate_recovers_a_known_hidden_drift():
 
 
 def test_an_older_reading_counts_for_less():
-    """Fused by stamp: a reading taken 5 s before the estimate's stamp moves it less."""
+    """Fused by stamp: a reading taken 5 s before the estimate's stamp moves it less.
+
+    The estimate of 5 s before is the model of its time (a client at 0.2 Hz); without it the
+    reading is set aside (no shape of its time).
+    """
     robot = load_robot(SENSOR_ROBOT)
     lengths = _pulled(robot)
     model = robot.estimate_shape(lengths, exact=True)
@@ -695,11 +699,17 @@ def test_an_older_reading_counts_for_less():
     seen = tip + np.array([0.002, 0.0, 0.0])
     fresh = robot.estimate_shape(lengths, exact=True, stamp=10.0, sensors={
         'tip_tracker': SensorReading(seen, stamp=10.0)})
-    old = robot.estimate_shape(lengths, exact=True, stamp=10.0, sensors={
+    before = robot.estimate_shape(lengths, exact=True, stamp=5.0)
+    old = robot.estimate_shape(lengths, exact=True, stamp=10.0, warm_start=before, sensors={
         'tip_tracker': SensorReading(seen, stamp=5.0)})
     moved = [e.shape.tip_position[0] - model.shape.tip_position[0] for e in (fresh, old)]
     assert 0.0 < moved[1] < moved[0]
     assert np.trace(old.tip_covariance[:3, :3]) > np.trace(fresh.tip_covariance[:3, :3])
+    alone = robot.estimate_shape(lengths, exact=True, stamp=10.0, sensors={
+        'tip_tracker': SensorReading(seen, stamp=5.0)})
+    assert not alone.sensors['tip_tracker'].used
+    assert 'no shape of its time' in alone.sensors['tip_tracker'].reason
+    assert np.allclose(alone.shape.tip_position, model.shape.tip_position, atol=1e-9)
 
 
 @pytest.mark.parametrize('name', ['tendon_robot_sensors.yaml',

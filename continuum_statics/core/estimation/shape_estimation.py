@@ -129,7 +129,7 @@ class ShapeEstimate:
         next call
     :ivar history: the model's recent estimates ((stamp s, model shape, sensitivity), oldest
         first, :data:`state_estimation.HISTORY_SECONDS`): a late reading is compared with the
-        model of its own stamp
+        model of its own stamp, or set aside when none is kept
     """
 
     shape: Shape

@@ -151,11 +151,14 @@ LOAD_MOTION = 5e-5
 LOAD_SETTLE = 1.0
 #: A reading held as a possible new tip load expires after this many s.
 PENDING_SECONDS = 1.0
-#: s of the model's estimates kept for late readings (an EM tracker's latency is 10-50 ms).
-HISTORY_SECONDS = 0.1
+#: s of the model's estimates kept for late readings (an EM tracker's latency is 10-50 ms, a
+#: camera's up to a few hundred); a reading older than every kept estimate is set aside.
+HISTORY_SECONDS = 0.5
+#: ... one every this many s at most (the newest always): a 1 kHz node keeps ~100, not 500.
+HISTORY_SPACING = 0.005
 #: chi2_3(0.95): a swing of amplitude A lies on the 95 % ellipsoid of variance A^2 / it
 SWING_SPREAD = gates.chi2_quantile(0.95, 3)
-#: ... and at most this many of them (a 1 kHz node: the last 0.1 s).
+#: ... and at most this many of them.
 HISTORY_LENGTH = 128
 #: Unmodelled-load groups, in the order of d: name, size (None: one per cable), unit.
 #: The tip load's parameters (the file's load_model) come first, before these.
@@ -569,7 +572,10 @@ def _within_linear_range(state, j):
 def _history(carried, stamp, shape, sensitivity, origin=None):
     """Return the model's estimates of the last HISTORY_SECONDS up to this one (oldest first).
 
-    Each entry: (stamp, shape, sensitivity, the state it was solved at). Without a stamp
+    The oldest kept is the newest at least HISTORY_SECONDS old, so the two kept around any
+    stamp of that span bracket it (a client at 1 Hz keeps the one before); the newest before
+    this one goes when it is within HISTORY_SPACING of the one before it. Each entry:
+    (stamp, shape, sensitivity, the state it was solved at). Without a stamp
     there is no history; a stamp before the newest kept (a replay started again, a clock
     reset) starts it again.
     """
@@ -577,8 +583,10 @@ def _history(carried, stamp, shape, sensitivity, origin=None):
         return ()
     if carried and carried[-1][0] > stamp:
         carried = ()
+    if len(carried) > 1 and carried[-1][0] - carried[-2][0] < HISTORY_SPACING:
+        carried = carried[:-1]
     first = 0
-    while first < len(carried) and carried[first][0] < stamp - HISTORY_SECONDS:
+    while first + 1 < len(carried) and carried[first + 1][0] <= stamp - HISTORY_SECONDS:
         first += 1  # usually one a call: the history moves on with the stamps
     first = max(first, len(carried) - HISTORY_LENGTH + 1)
     return carried[first:] + ((stamp, shape, sensitivity, origin),)
@@ -587,14 +595,19 @@ def _history(carried, stamp, shape, sensitivity, origin=None):
 def _rows_at(history, stamp, sensor, shape, sensitivity, origin=None):
     """Return ``sensor``'s (prediction, H, rotation, shift) of the model at ``stamp`` (d = 0).
 
-    Interpolated between the kept estimates that bracket ``stamp`` (the oldest kept for an
-    older one); the current estimate when ``stamp`` is None, not before it or nothing is kept.
+    Interpolated between the kept estimates that bracket ``stamp``; the current estimate when
+    ``stamp`` (or the estimate's) is None or not before it. None for a stamp before every kept
+    estimate: no model of its time (a tracker's reading 30 ms older than the first estimate,
+    taken while the rod moved, was once compared with the model 17 mm away from it, fused, and
+    then every honest reading was set aside for the 17 mm it had put in the estimate).
     ``shift`` (rows of H) brings a kept estimate solved at another state (a tip load since
     relinearised) to the current ``origin``: H_k (origin - origin_k), zero without a load;
     None when the rows are the current estimate's.
     """
-    if stamp is None or len(history) < 2 or stamp >= history[-1][0]:
+    if stamp is None or not history or stamp >= history[-1][0]:
         return (*_sensor_rows(shape, sensitivity, sensor), None)
+    if stamp < history[0][0]:
+        return None
     after = max(bisect.bisect_left(history, stamp, key=lambda moment: moment[0]), 1)
     (t0, shape0, sens0, origin0), (t1, shape1, sens1, origin1) = (history[after - 1],
                                                                   history[after])
@@ -796,12 +809,15 @@ _PLACEMENTS = {}
 def _sensor_measurement(robot, shape, sensitivity, prior, sensor, reading, stamp, history):
     """Return (value, innovation, H, noise, judged) of a sensor's reading against the state.
 
-    The reading is predicted by the model of its own stamp (``history``, :func:`_rows_at`);
+    The reading is predicted by the model of its own stamp (``history``, :func:`_rows_at`;
+    None when no model of its time is kept);
     ``value`` is its position, which a later reading must agree with (:func:`_agrees`);
     ``judged`` the position rows at its point on the current shape (:func:`_beyond_the_prior`).
     """
-    predicted, jac, rotation, shift = _rows_at(history, reading.stamp, sensor, shape,
-                                               sensitivity, prior.origin)
+    rows = _rows_at(history, reading.stamp, sensor, shape, sensitivity, prior.origin)
+    if rows is None:
+        return None
+    predicted, jac, rotation, shift = rows
     judged = jac[:3] if shift is None else _sensor_rows(shape, sensitivity, sensor)[1][:3]
     shift = np.zeros(len(jac)) if shift is None else shift
     moved = prior.correction  # what the model's shape does not have yet
@@ -861,7 +877,13 @@ def _update(robot, shape, sensitivity, prior, readings, stamp, history=(), tensi
         for sensor, reading in readings.items()]
     if tensions is not None:
         measurements.append((TENSIONS, None, tensions, False))
-    for name, sensor, (value, innovation, jac, noise, judged), here in measurements:
+    for name, sensor, measurement, here in measurements:
+        if measurement is None:
+            verdicts[name] = SensorVerdict(False, math.inf, (
+                'stamped %.3g s before this estimate, before the oldest model it keeps: no '
+                'shape of its time to compare it with' % (stamp - readings[sensor].stamp)))
+            continue
+        value, innovation, jac, noise, judged = measurement
         spread = jac @ covariance @ jac.T + noise
         chi2 = float(innovation @ _solve(spread, innovation))
         gate = gates.gate(len(innovation), gates.SENSOR_GATE_PROBABILITY)
