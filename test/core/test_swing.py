@@ -17,6 +17,11 @@ import yaml
 from continuum_statics import load_robot
 from continuum_statics.core.description.sensors import SensorReading
 from continuum_statics.core.estimation.gates import chi2_quantile
+from continuum_statics.core.estimation.state_estimation import (
+    HISTORY_LENGTH,
+    HISTORY_SECONDS,
+    HISTORY_SPACING,
+)
 
 DYNAMIC_ROBOT = REPO / 'config' / 'tendon_robot_dynamic.yaml'
 #: the model uncertainty of config/tendon_robot_sensors.yaml (this robot's, without the coil)
@@ -137,19 +142,35 @@ def test_a_late_reading_is_compared_with_the_model_of_its_time_or_set_aside(tmp_
     """A tracker 30 ms late, estimates at 20 Hz (statics on a loaded computer): still honest.
 
     The first estimate keeps no model of the reading's time: it was compared with the model
-    17 mm away (the rod had moved since), fused, and every honest reading after it was set
-    aside for the 17 mm it put in the estimate (moving rows 82.5 %, error up to 19.6 mm; now
-    97.1 %, 4.5 mm); later ones lie between two kept models (a 20 Hz estimate keeps the one
-    HISTORY_SECONDS before).
+    ~16 mm away (the rod had moved since), fused, and honest readings after it were set aside
+    for the error it put in the estimate (moving rows 83.2 %, 89 of 107; now 98.1 %); later
+    ones lie between two kept models (a 20 Hz estimate keeps the one HISTORY_SECONDS before).
+    Only the lower bound here: one row of 107 is 0.9 % (the upper one is the test above's).
     """
     robot = tracked_robot(tmp_path)
     speeds, nees, verdicts = goals_in_motion(robot, robot, period=0.05, latency=0.03)
     moving = speeds >= MOVING
-    assert 0.85 <= np.mean(nees[moving] <= chi2_quantile(0.95, 3)) <= 0.99
+    assert np.mean(nees[moving] <= chi2_quantile(0.95, 3)) >= 0.85
     judged = [verdict for verdict in verdicts if verdict is not None]
     first = judged[0]
     assert verdicts[0] is first and not first.used and 'no shape of its time' in first.reason
     assert all(verdict.used for verdict in judged[1:])
+
+
+def test_the_history_keeps_half_a_second_of_models_five_ms_apart(tmp_path):
+    """At 1 kHz the estimate keeps ~100 models: the oldest at least HISTORY_SECONDS old."""
+    robot = tracked_robot(tmp_path)
+    lengths, estimate = np.full(4, 0.3), None
+    for k in range(1200):
+        estimate = robot.estimate_shape(lengths, warm_start=estimate, stamp=k * 1e-3)
+    stamps = np.array([moment[0] for moment in estimate.history])
+    assert stamps[-1] - stamps[0] >= HISTORY_SECONDS
+    assert stamps[-1] - stamps[1] < HISTORY_SECONDS  # the one before the span, no more
+    assert np.all(np.diff(stamps[:-1]) >= HISTORY_SPACING - 1e-9)
+    assert len(stamps) < HISTORY_LENGTH
+    again = robot.estimate_shape(lengths, warm_start=estimate, stamp=stamps[-1])
+    assert [moment[0] for moment in again.history] == list(stamps)  # this stamp's, renewed
+    assert again.history[-1][1] is not estimate.history[-1][1]
 
 
 def test_the_swing_decays_at_the_first_modes_rate_once_the_cables_stop(tmp_path):

@@ -91,8 +91,10 @@ moved more than :data:`REFRESH_DISTANCE`. The covariances are computed when read
 
 A reading stamped before the estimate (an EM tracker's 30 ms latency, an optical tracker's
 frames arriving after the encoders') is compared with the model of its own stamp: the estimate
-keeps the model's shapes and load columns of the last :data:`HISTORY_SECONDS`, and the
-prediction and H of a late reading are interpolated between the two that bracket its stamp.
+keeps the model's shapes and load columns of the last :data:`HISTORY_SECONDS` (and the newest
+before them), and the prediction and H of a late reading are interpolated between the two that
+bracket its stamp. A reading stamped before every kept estimate (the first estimate's, or one
+older than that span) has no model of its time and is set aside.
 The unmodelled loads themselves change slowly (their correlation time), so the update applies
 to them now.
 """
@@ -574,16 +576,18 @@ def _history(carried, stamp, shape, sensitivity, origin=None):
 
     The oldest kept is the newest at least HISTORY_SECONDS old, so the two kept around any
     stamp of that span bracket it (a client at 1 Hz keeps the one before); the newest before
-    this one goes when it is within HISTORY_SPACING of the one before it. Each entry:
-    (stamp, shape, sensitivity, the state it was solved at). Without a stamp
-    there is no history; a stamp before the newest kept (a replay started again, a clock
-    reset) starts it again.
+    this one goes when it is within HISTORY_SPACING of the one before it, and one of this very
+    stamp (estimated again) gives way. Each entry: (stamp, shape, sensitivity, the state it was
+    solved at). Without a stamp there is no history; a stamp before the newest kept (a replay
+    started again, a clock reset) starts it again.
     """
     if stamp is None:
         return ()
     if carried and carried[-1][0] > stamp:
         carried = ()
-    if len(carried) > 1 and carried[-1][0] - carried[-2][0] < HISTORY_SPACING:
+    if carried and carried[-1][0] == stamp:
+        carried = carried[:-1]  # this stamp estimated again (refined): the new one stands
+    if len(carried) > 1 and carried[-1][0] - carried[-2][0] < HISTORY_SPACING - 1e-9:
         carried = carried[:-1]
     first = 0
     while first + 1 < len(carried) and carried[first + 1][0] <= stamp - HISTORY_SECONDS:
@@ -879,9 +883,11 @@ def _update(robot, shape, sensitivity, prior, readings, stamp, history=(), tensi
         measurements.append((TENSIONS, None, tensions, False))
     for name, sensor, measurement, here in measurements:
         if measurement is None:
+            age = stamp - readings[sensor].stamp
             verdicts[name] = SensorVerdict(False, math.inf, (
                 'stamped %.3g s before this estimate, before the oldest model it keeps: no '
-                'shape of its time to compare it with' % (stamp - readings[sensor].stamp)))
+                'shape of its time to compare it with%s' % (age, '; is its clock synchronised?'
+                                                             if age > HISTORY_SECONDS else '')))
             continue
         value, innovation, jac, noise, judged = measurement
         spread = jac @ covariance @ jac.T + noise
