@@ -158,10 +158,10 @@ PENDING_SECONDS = 1.0
 HISTORY_SECONDS = 0.5
 #: ... one every this many s at most (the newest always): a 1 kHz node keeps ~100, not 500.
 HISTORY_SPACING = 0.005
-#: chi2_3(0.95): a swing of amplitude A lies on the 95 % ellipsoid of variance A^2 / it
-SWING_SPREAD = gates.chi2_quantile(0.95, 3)
 #: ... and at most this many of them.
 HISTORY_LENGTH = 128
+#: chi2_3(0.95): a swing of amplitude A lies on the 95 % ellipsoid of variance A^2 / it
+SWING_SPREAD = gates.chi2_quantile(0.95, 3)
 #: Unmodelled-load groups, in the order of d: name, size (None: one per cable), unit.
 #: The tip load's parameters (the file's load_model) come first, before these.
 GROUPS = (('tip_force', 3, 'N'), ('section_moment', 3, 'N m'), ('cable_length', None, 'm'),
