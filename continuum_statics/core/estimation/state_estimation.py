@@ -784,13 +784,19 @@ def _sensor_rows(shape, sensitivity, sensor):
     arm = rotation @ sensor.offset
     point = (1.0 - w) * shape.positions[lower] + w * shape.positions[upper] + arm
     angles = sensitivity.angles[near]
-    # d(R o) = theta x (R o) = -[R o]x theta (the skew product: np.cross costs ~50 us here)
-    skew = np.array([[0.0, arm[2], -arm[1]], [-arm[2], 0.0, arm[0]], [arm[1], -arm[0], 0.0]])
     jac = ((1.0 - w) * sensitivity.positions[lower] + w * sensitivity.positions[upper]
-           + skew @ angles)
+           + _lever(arm) @ angles)
     if sensor.kind != 'pose':
         return point, jac, rotation
     return point, np.vstack([jac, angles]), rotation
+
+
+def _lever(arm):
+    """Return -[arm]x (3, 3): d(R o) = theta x (R o) = -[R o]x theta for arm = R o.
+
+    Written out: np.cross costs ~50 us here.
+    """
+    return np.array([[0.0, arm[2], -arm[1]], [-arm[2], 0.0, arm[0]], [arm[1], -arm[0], 0.0]])
 
 
 def _placement(s, sensor):
@@ -1092,9 +1098,7 @@ def point_covariance(estimate, sensor):
     jac = jac[:3]
     unmodelled = estimate.unmodelled
     if sensor.at_tip and unmodelled.tip_white is not None:
-        arm = rotation @ sensor.offset  # d(R o) = -[R o]x theta, as in _sensor_rows
-        rows = np.hstack([np.eye(3), [[0.0, arm[2], -arm[1]], [-arm[2], 0.0, arm[0]],
-                                      [arm[1], -arm[0], 0.0]]])
+        rows = np.hstack([np.eye(3), _lever(rotation @ sensor.offset)])
         return jac @ unmodelled.covariance @ jac.T + rows @ unmodelled.tip_white[1] @ rows.T
     floor = unmodelled.point_variance(estimate.shape, sensor.s)
     return jac @ unmodelled.covariance @ jac.T + floor * np.eye(3)
