@@ -18,6 +18,10 @@ SENSOR_GATE_PROBABILITY = 1e-6
 #: measurements whose noise is as stated are set aside once in a thousand; a faulty one (a wrong
 #: unit, a tracker the tensions contradict) is off by orders of magnitude more.
 LOAD_GATE_PROBABILITY = 1e-3
+#: A reading at rest this unlikely under the estimate, with a tip load to estimate, is held back
+#: one reading as a possible new load (the next, as far off and agreeing, decides): one honest
+#: reading in a thousand waits for the next.
+HOLD_PROBABILITY = 1e-3
 #: The probability inside 3 sigma of a Gaussian: an estimate inside it is noise about zero.
 THREE_SIGMA = 0.9973
 

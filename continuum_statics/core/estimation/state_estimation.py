@@ -54,7 +54,9 @@ error: it is held, mean and variance, while the readings agree with it (a payloa
 stays while the model's error follows the motion, and only that persistence tells the two apart
 to a tip tracker: both move its point the same way; a load that changes as fast as the model's
 error left a 20 g payload's sigma at 46 of its 50 g prior after 60 s of readings). A reading
-the gate sets aside is held; when the same sensor's next reading agrees with it (a new load
+the gate sets aside is held (at rest, one beyond the hold gate too,
+:data:`~continuum_statics.core.estimation.gates.HOLD_PROBABILITY`); when the same sensor's
+next reading, as far off, agrees with it (a new load
 moves every reading from then on, an outlier one) and a new load explains it (the load's
 variance back at its prior: a payload taken, a contact made), the load starts again from
 there, and the reading is used; the load's columns are derivatives at the load estimated so
@@ -932,14 +934,17 @@ def _update(robot, shape, sensitivity, prior, readings, stamp, history=(), tensi
         chi2 = float(innovation @ _solve(spread, innovation))
         gate = gates.gate(len(innovation), gates.SENSOR_GATE_PROBABILITY)
         renewing, held = False, ''
-        if (not chi2 <= gate and j and not renewed and not moving
-                and name not in prior.suspects):
-            # a new tip load (a payload taken, a contact made) moves every reading from then
-            # on, an outlier one: a reading set aside is held, and the next of that sensor
-            # that agrees with it decides, if a new load explains it (the load's variance back
-            # at its prior, around the load so far); not a sensor the drift guard set aside
-            # (a drifting tracker's jump once took a 140 g payload)
-            if _agrees(pending.get(name), value, noise[:len(value), :len(value)], stamp):
+        if (not chi2 <= gates.gate(len(innovation), gates.HOLD_PROBABILITY) and j
+                and not renewed and not moving and name not in prior.suspects):
+            # a new tip load (a payload hung or taken, a contact made) moves every reading
+            # from then on, a noisy one alone: a reading at rest this far off is held, and the
+            # next of that sensor, as far off and agreeing with it, decides if a new load
+            # explains it (the load's variance back at its prior, around the load so far).
+            # Held back even when the gate would pass it: used, it put a 50 g payload into
+            # the model's error, and the next reading agreed with the estimate. Not a sensor
+            # the drift guard set aside (a drifting tracker's jump once took a 140 g payload)
+            agrees = _agrees(pending.get(name), value, noise[:len(value), :len(value)], stamp)
+            if agrees:
                 candidate = covariance.copy()
                 candidate[:j, :] = candidate[:, :j] = 0.0
                 candidate[:j, :j] = _prior(robot)[1][:j, :j]
@@ -947,14 +952,18 @@ def _update(robot, shape, sensitivity, prior, readings, stamp, history=(), tensi
                 if again <= gate:
                     covariance, chi2, renewed = candidate, again, True
                     renewing = True
-            if not renewing:
+            if not renewing and not (agrees and chi2 <= gate):  # else the gate's to judge
                 pending[name], changed = (value, stamp), True
                 held = '; held: a new tip load if the next reading agrees'
+                if chi2 <= gate:
+                    verdicts[name] = SensorVerdict(False, chi2, (
+                        'held back one reading at rest: innovation chi2 %.1f (%s from the '
+                        'estimate)%s' % (chi2, _offset(innovation, sensor), held)))
+                    continue
         if not chi2 <= gate:
             verdicts[name] = SensorVerdict(False, chi2, (
                 'innovation chi2 %.1f above the gate %.1f (%s from the estimate)%s'
-                % (chi2, gate, '%.1f mm' % (1e3 * float(np.linalg.norm(innovation[:3])))
-                   if sensor is not None else '%.3g N RMS' % _rms(innovation), held)))
+                % (chi2, gate, _offset(innovation, sensor), held)))
             continue
         changed = pending.pop(name, None) is not None or changed
         verdicts[name] = SensorVerdict(
@@ -1045,6 +1054,13 @@ def _agrees(pending, value, noise, stamp):
 
 def _rms(values):
     return float(np.sqrt(np.mean(np.square(values))))
+
+
+def _offset(innovation, sensor):
+    """Return how far a reading is from the estimate, in words (a sensor's mm, tensions' N)."""
+    if sensor is None:
+        return '%.3g N RMS' % _rms(innovation)
+    return '%.1f mm' % (1e3 * float(np.linalg.norm(innovation[:3])))
 
 
 def _beyond_the_prior(robot, used, correction):
