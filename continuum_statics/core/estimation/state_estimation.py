@@ -940,7 +940,7 @@ def _update(robot, shape, sensitivity, prior, readings, stamp, history=(), tensi
             # from then on, a noisy one alone: a reading at rest this far off is held, and the
             # next of that sensor, as far off and agreeing with it, decides if a new load
             # explains it (the load's variance back at its prior, around the load so far).
-            # Held back even when the gate would pass it: used, it put a 50 g payload into
+            # Held back even when the gate would pass it: used, it put a 30 g payload into
             # the model's error, and the next reading agreed with the estimate. Not a sensor
             # the drift guard set aside (a drifting tracker's jump once took a 140 g payload)
             agrees = _agrees(pending.get(name), value, noise[:len(value), :len(value)], stamp)
