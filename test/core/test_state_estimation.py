@@ -240,38 +240,6 @@ def test_a_file_whose_model_uncertainty_is_all_zero_names_each_reading_it_cannot
     assert not verdict.used and 'no model_uncertainty to correct' in verdict.reason
 
 
-def test_the_model_is_solved_under_the_tip_force_it_estimated():
-    """The backbone where no sensor is follows a tip force the tracker sees.
-
-    Truth: the file's robot under a tip force its prior allows (0.3 N against 0.2 N sigma,
-    0.6 E I / L^2), a tracker at the tip every 50 ms at rest. After 2 s the backbone's middle is
-    the truth's within 0.05 mm, the tip within 0.3 mm: the model solved under the force
-    estimated so far (an extended Kalman filter). A first-order correction about zero force
-    left them 0.35 and 0.83 mm off (2 sigma of the middle's own).
-    """
-    document = _document()
-    document['model_uncertainty'] = {'tip_force': 0.2, 'section_moment': 0.0,
-                                     'cable_length': 0.0, 'base_position': 0.0,
-                                     'correlation_time': 1000.0}
-    robot = Robot(parse_robot_description(document, str(SENSOR_ROBOT)))
-    lengths = _pulled(robot)
-    truth = robot.estimate_shape(lengths, tip_force=(0.3, 0.0, -0.15), exact=True).shape
-    sensor = robot.sensors[0]
-    tip = truth.tip_position + truth.tip_rotation @ sensor.offset
-    rng = np.random.default_rng(0)
-    estimate = None
-    for k in range(40):
-        reading = SensorReading(tip + rng.normal(0.0, sensor.position_sigma, 3), stamp=0.05 * k)
-        estimate = robot.estimate_shape(lengths, warm_start=estimate, stamp=0.05 * k,
-                                        sensors={sensor.name: reading})
-
-    def middle(shape):
-        return np.array([np.interp(robot.length / 2, shape.s, shape.positions[:, axis])
-                         for axis in range(3)])
-    assert np.linalg.norm(middle(estimate.shape) - middle(truth)) < 5e-5
-    assert np.linalg.norm(estimate.shape.tip_position - truth.tip_position) < 3e-4
-
-
 def test_a_correction_fades_with_the_correlation_time():
     """Ornstein-Uhlenbeck: the mean decays as exp(-t / tau), the variance grows back to P0."""
     robot = load_robot(SENSOR_ROBOT)

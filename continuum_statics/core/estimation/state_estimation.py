@@ -59,26 +59,25 @@ the gate sets aside is held (at rest, one beyond the hold gate too,
 next reading, as far off, agrees with it (a new load
 moves every reading from then on, an outlier one) and a new load explains it (the load's
 variance back at its prior: a payload taken, a contact made), the load starts again from
-there, and the reading is used; the load's columns are derivatives at the load estimated so
-far (:data:`LOAD_COLUMN_STEP`). Each reading is judged once and counted once, for the shape, the
-model's error and the load together.
+there, and the reading is used. The model is solved at
+the load estimated so far (the tip load the caller gives plus B p), and the load's columns are
+derivatives there (:data:`LOAD_COLUMN_STEP`): the first-order correction below is about that
+point, ``Unmodelled.origin``, so a load far from zero is not a linearisation far from the
+estimate. Each reading is judged once and counted once, for the shape, the model's error and
+the load together.
 
-The model is solved under the loads at the tip estimated so far, d0 (``Unmodelled.origin``:
-the tip load's parameters p and the unmodelled tip force and moment, added to the tip load the
-caller gives; an extended Kalman filter's linearisation point, not zero), and the shape under d
-is, to first order about it,
+The shape under d is, to first order about the model's estimate (d = 0),
 
-    r(s; d) = r(s; d0) + G_r(s) (d - d0),  theta(s; d) = G_theta(s) (d - d0)   (a small
-    rotation of R(s; d0))
+    r(s; d) = r(s) + G_r(s) d,  theta(s; d) = G_theta(s) d   (a small rotation of R(s))
 
-A cable's length error and the offsets stay first order about zero: solved at corrected lengths,
-a cable that did not move would look moved and turn its friction, and an offset is exact. Before
-(every load first order about zero) a tracker on truth with physics the file lacks
-(``benchmarks/bench_mismatch.py``: a tip force of 0.49 N sigma calibrated) held the tip's 95 %
-ellipsoid on 89.2 % of the held-out rows (0.47 mm), with an EM coil beside it 72.7 %
-(0.64 mm); now 97.5 % (0.37 mm) and 85.2 % (0.54 mm); on the real v6 run's held-out rows the
-occluded tip's error fell on every pattern (3.02 / 4.85 / 7.87 / 11.93 / 12.25 mm to 2.98 /
-4.71 / 7.69 / 11.60 / 11.93, doc/state_estimation.md).
+Solving the model under the unmodelled tip force and moment estimated so far (an extended
+Kalman filter's linearisation point) was tried: on truth with physics the file lacks
+(``benchmarks/bench_mismatch.py``, its calibrated tip force 0.49 N sigma) the tracker's rows
+held 97.5 % instead of 89.2 % (tip 0.37 mm instead of 0.47), with an EM coil 85.2 % instead
+of 72.7 %, and v6's held-out occluded rows came 2-4 % closer; but in a node's bounded call at
+1 kHz on the v6 file (``benchmarks/bench_fusion.py``'s motion, readings of the model's own
+shape) 46 of 188 tracker and 27 of 60 coil readings were set aside (2 and 0 without), so it
+is not kept.
 
 G's columns are the central differences of the estimator itself over each load's prior (its
 inputs moved: lengths - d_L, tip load + d_f, d_m; :data:`COLUMN_STEP`). A sensor at arc length
@@ -182,10 +181,6 @@ GROUPS = (('tip_force', 3, 'N'), ('section_moment', 3, 'N m'), ('cable_length', 
 _RIGID = ('base_position', 'drift')
 #: ... and the drift's rate, which moves no point now.
 _IDLE = ('drift_rate',)
-#: The loads at the tip: the model is solved under their estimate, the rest is a first-order
-#: correction about it (a cable's length error too: solved at corrected lengths, a cable that
-#: did not move would look moved and turn its friction).
-_AT_THE_TIP = ('tip_load', 'tip_force', 'section_moment')
 
 
 @dataclass(frozen=True, eq=False)
@@ -196,9 +191,8 @@ class Unmodelled:
     :ivar mean: (k,) N, N m or m
     :ivar covariance: (k, k)
     :ivar stamp: s, or None
-    :ivar origin: (k,) the state the model was solved at (the loads at the tip estimated so
-        far: the unmodelled tip force and moment, and a tip load estimated earlier, kept while
-        the load stays within LOAD_LINEAR sigma of it; zero elsewhere), or None: zero
+    :ivar origin: (k,) the state the model was solved at (a tip load estimated earlier, kept
+        while the load stays within LOAD_LINEAR sigma of it; zero elsewhere), or None: zero
     :ivar load_basis: (6, j) B of the file's load model (its parameters are the first j
         entries), or None
     :ivar pending: ((sensor name, (position (3,) m, stamp s)), ...) of readings the gate set
@@ -474,18 +468,18 @@ def estimate_state(robot, lengths, tip_force, tip_moment, tensions, sensors, sta
     if j or robot.description.rod.first_mode_damping:  # a load to hold, a swing to time
         prior = _moving(prior, lengths, stamp, tracking)
     carried = getattr(previous, 'sensitivity', None)
-    # the model solved under the loads at the tip estimated so far (module doc); the tip load
-    # kept while it stays within its columns' linear range (the same tip load: a warm solve's
-    # work)
-    prior = _solved_at(robot, prior, prior.origin[:j] if (
-        j and prior.origin is not None and _within_linear_range(prior, j)) else None)
+    if j and (prior.origin is None or not _within_linear_range(prior, j)):
+        # the model solved at the tip load estimated so far (module doc); kept while the load
+        # stays within its columns' linear range (the same tip load: a warm solve's work)
+        prior = _solved_at(prior, prior.mean, j)
     bounded = tracking is not None and bool(tracking.max_model_runs)
     swing, since = prior.swing, getattr(getattr(previous, 'unmodelled', None), 'stamp', None)
     for _ in range((BOUNDED_LOAD_ITERATIONS if bounded else LOAD_ITERATIONS) if j else 1):
-        force, moment = tip_force, tip_moment
-        if len(prior.mean):
-            force, moment, _ = split_loads(robot, prior.origin)
-            force, moment = np.add(tip_force, force), np.add(tip_moment, moment)
+        if j:
+            wrench = robot.load_model.basis @ prior.origin[:j]
+            force, moment = tip_force + wrench[:3], tip_moment + wrench[3:]
+        else:
+            force, moment = tip_force, tip_moment
         model = shape_estimation.estimate_shape(robot, lengths, force, moment, tensions, start,
                                                 jacobians, previous, tracking)
         if not len(prior.mean):
@@ -506,7 +500,7 @@ def estimate_state(robot, lengths, tip_force, tip_moment, tensions, sensors, sta
         # the load moved beyond the linear range of its columns: solve the model there and
         # update again from the same prior (an iterated Kalman update: Gauss-Newton on the
         # maximum a posteriori load; Bell & Cathey 1993)
-        prior = _solved_at(robot, prior, posterior.mean[:j])
+        prior = _solved_at(prior, posterior.mean, j)
         # the columns are made again where the tip moved far (REFRESH_DISTANCE) when solved to
         # the end; a bounded call keeps them (a chord iteration: the model itself is solved at
         # the new load each time), so a node's call stays bounded
@@ -578,25 +572,11 @@ def cables_settling(state):
             and state.stamp - state.still[1] < LOAD_SETTLE)
 
 
-def _solved_at(robot, prior, load=None):
-    """Return ``prior`` with its origin, where the model is solved, at its loads at the tip.
-
-    The mean's tip load, unmodelled tip force and moment (zero elsewhere), the tip load
-    ``load`` (j,) instead of the mean's when given.
-    """
-    origin = prior.mean * _tip_loads(robot)
-    if load is not None:
-        origin[:len(load)] = load
+def _solved_at(prior, mean, j):
+    """Return ``prior`` with its origin at the tip load of ``mean`` (zero elsewhere)."""
+    origin = np.zeros(len(mean))
+    origin[:j] = mean[:j]
     return dataclasses.replace(prior, origin=origin)
-
-
-@functools.lru_cache(maxsize=64)
-def _tip_loads(robot):
-    """Return (k,) 1.0 for the state's loads at the tip (the model is solved under them)."""
-    names, _ = prior_scales(robot)
-    at_tip = np.array([name.split('.')[0] in _AT_THE_TIP for name in names], float)
-    at_tip.setflags(write=False)
-    return at_tip
 
 
 def _within_linear_range(state, j):
@@ -942,7 +922,8 @@ def _update(robot, shape, sensitivity, prior, readings, stamp, history=(), tensi
             # explains it (the load's variance back at its prior, around the load so far).
             # Held back even when the gate would pass it: used, it put a 30 g payload into
             # the model's error, and the next reading agreed with the estimate. Not a sensor
-            # the drift guard set aside (a drifting tracker's jump once took a 140 g payload)
+            # the drift guard set aside (with the model solved under the estimated tip force,
+            # module doc, a drifting tracker's jump once took a 140 g payload)
             agrees = _agrees(pending.get(name), value, noise[:len(value), :len(value)], stamp)
             if agrees:
                 candidate = covariance.copy()
@@ -990,9 +971,9 @@ def _update(robot, shape, sensitivity, prior, readings, stamp, history=(), tensi
         reference = mean[:j].copy()
     # a fault slower than the gate: the correction readings add up to over calls is judged too
     # (a first correction, from nothing carried, is the gate's alone)
-    correction = mean
+    correction = mean if prior.origin is None else mean - prior.origin
     if j:  # a load held is no licence: a drifting tracker walked it 15 mm at 0.5 mm/s, unnamed
-        correction = np.concatenate([mean[:j] - reference, mean[j:]])
+        correction = np.concatenate([mean[:j] - reference, correction[j:]])
     beyond = np.any(prior.mean[j:]) and _beyond_the_prior(robot, used, correction)
     if beyond:
         for name in beyond:
