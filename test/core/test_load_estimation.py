@@ -322,7 +322,7 @@ def test_a_payload_hung_or_taken_at_rest_after_a_motion_is_weighed():
     # The motion taught the held load (0 +- 5.7 g here). 30 g moves the tracked tip 4.1 mm: its
     # first reading was set aside by the gate (chi2 39.5) and held, its second came in inside
     # it (29.9 against 30.7) and went into the model's error, the load staying at 0.6 g;
-    # taking the payload off then renewed the load at -31.1 g (over DDS the drift guard went on
+    # taking the payload off then renewed the load at -32.6 g (over DDS the drift guard went on
     # to blame the honest tracker for good). Now a reading at rest beyond the hold gate (16.3)
     # waits for the next, and two agreeing ones renew the load. The tracker's readings are the
     # truth's (noise-free): the step's readings land where they land, every run
