@@ -70,21 +70,12 @@ The shape under d is, to first order about the model's estimate (d = 0),
 
     r(s; d) = r(s) + G_r(s) d,  theta(s; d) = G_theta(s) d   (a small rotation of R(s))
 
-Solving the model under the unmodelled tip force and moment estimated so far (an extended
-Kalman filter's linearisation point) was tried: on truth with physics the file lacks
-(``benchmarks/bench_mismatch.py``, its calibrated tip force 0.49 N sigma) the tracker's rows
-held 97.5 % instead of 89.2 % (tip 0.37 mm instead of 0.47), with an EM coil 85.2 % instead
-of 72.7 %, and v6's held-out occluded rows came 2-4 % closer; but in a node's bounded call at
-1 kHz on the v6 file (``benchmarks/bench_fusion.py``'s motion, readings of the model's own
-shape) 46 of 188 tracker and 27 of 60 coil readings were set aside (2 and 0 without), so it
-is not kept.
-
-G's columns are the central differences of the estimator itself over each load's prior (its
-inputs moved: lengths - d_L, tip load + d_f, d_m; :data:`COLUMN_STEP`). A sensor at arc length
-s_k with offset o_k in the rod's frame reads y_k = r(s_k) + R(s_k) o_k (and R(s_k) for a pose
-sensor) plus noise R_k = diag(sigma^2). The maximum a posteriori d of the linearised problem,
-and its covariance, are the Kalman update (the Gauss-Newton step of Rucker & Webster's
-probabilistic estimator, IEEE T-RO 2011, on these unknowns):
+with G's columns the central differences of the estimator itself over each load's prior (its inputs
+moved: lengths - d_L, tip load + d_f, d_m; :data:`COLUMN_STEP`). A sensor at arc length s_k with
+offset o_k in the rod's frame reads y_k = r(s_k) + R(s_k) o_k (and R(s_k) for a pose sensor) plus
+noise R_k = diag(sigma^2). The maximum a posteriori d of the linearised problem, and its
+covariance, are the Kalman update (the Gauss-Newton step of Rucker & Webster's probabilistic
+estimator, IEEE T-RO 2011, on these unknowns):
 
     S = H P H^T + R,  K = P H^T S^-1,  mean+ = mean + K nu,  P+ = (I - K H) P
 
@@ -923,7 +914,7 @@ def _update(robot, shape, sensitivity, prior, readings, stamp, history=(), tensi
             # Held back even when the gate would pass it: used, it put a 30 g payload into
             # the model's error, and the next reading agreed with the estimate. Not a sensor
             # the drift guard set aside (with the model solved under the estimated tip force,
-            # module doc, a drifting tracker's jump once took a 140 g payload)
+            # doc/state_estimation.md, a drifting tracker's jump once took a 140 g payload)
             agrees = _agrees(pending.get(name), value, noise[:len(value), :len(value)], stamp)
             if agrees:
                 candidate = covariance.copy()
