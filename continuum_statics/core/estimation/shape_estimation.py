@@ -374,7 +374,12 @@ def _tracked(job):
         TrackStart(job.start, carry.jac, carry.con_jac, carry.damping,
                    carry.values if known else _NO_VALUES, carry.states,
                    carry.age if same_load else max(carry.age, 1)),
-        TrackLimits(robot.solver.estimate_tolerance, robot.length, TRACK_ITERATIONS,
+        # a node's call to NOISE_FRACTION of its encoders' noise, as the tendon model's: most
+        # second Gauss-Newton steps predicted less, and cost one IVP plus up to three failed
+        # chord corrections (tendon_robot at 1 kHz: 2.8 IVPs a call on average)
+        TrackLimits(max(robot.solver.estimate_tolerance,
+                        tracking.length_tolerance() if job.bounded else 0.0),
+                    robot.length, TRACK_ITERATIONS,
                     robot.probe_runs, tracking.max_model_runs if job.bounded else _UNBOUNDED,
                     SECANT_FRACTION if job.bounded else 0.0))
     job.runs += tracked.runs
