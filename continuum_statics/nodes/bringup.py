@@ -18,8 +18,6 @@ import argparse
 import os
 import sys
 
-from continuum_statics.config_paths import share_dir
-
 USAGE_EPILOG = ('Arguments after --ros-args go to ROS, e.g. --ros-args --params-file '
                 'config/continuum_robot.params.yaml -r cable_states:=measured_lengths')
 
@@ -42,14 +40,6 @@ def parse_args(argv):
                         help='also run tip_load_estimator: auto = when the robot file has a '
                         'tendon model (default: %(default)s)')
     return parser.parse_args(argv), ros_args
-
-
-def use_fast_discovery_profile():
-    """Point Fast DDS at the shipped quick-discovery profile unless the user chose one."""
-    if 'FASTDDS_DEFAULT_PROFILES_FILE' not in os.environ:
-        profile = share_dir() / 'config' / 'fastdds_fast_discovery.xml'
-        if profile.is_file():
-            os.environ['FASTDDS_DEFAULT_PROFILES_FILE'] = str(profile)
 
 
 def wants_load_estimator(choice, robot=None):
@@ -109,7 +99,6 @@ def main(argv=None):
     if options.robot is not None and not os.path.isfile(options.robot):
         print('bringup: robot file %r does not exist' % options.robot, file=sys.stderr)
         return 2
-    use_fast_discovery_profile()
     from continuum_statics.nodes.node_runner import run_nodes
     factories = node_factories(options.robot, options.driver, options.namespace.strip() or '/',
                                wants_load_estimator(options.load_estimator, options.robot))

@@ -19,7 +19,6 @@ from dataclasses import dataclass
 import math
 
 import numpy as np
-from scipy.spatial.transform import Rotation
 
 from continuum_statics.core.description.inputs import mapping
 
@@ -167,6 +166,9 @@ def obstacle_from(name, kind, shape, entry, where):
     if np.any(size <= 0.0) or np.any(size > MAX_SIZE):
         raise ValueError('%s: sizes must be in (0, %g] m, got %s' % (field, MAX_SIZE,
                                                                       size.tolist()))
+    # imported here: scipy's import is ~0.5 s of a node's start, most robots have no obstacles
+    from scipy.spatial.transform import Rotation
+
     rotation = Rotation.from_quat(quaternion).as_matrix()  # scalar last: [x, y, z, w]
     return Obstacle(name, kind, tuple(float(v) for v in size), position, rotation, frame_id)
 

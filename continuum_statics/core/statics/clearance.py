@@ -19,7 +19,6 @@ would pass closest ("... 2.1 mm from obstacle 'shelf' at s = 0.210 m").
 import math
 
 import numpy as np
-from scipy.optimize import minimize
 
 from continuum_statics.core.description.layout import MOMENT_AT, POSITION, ROTATION_AT
 from continuum_statics.core.statics import bvp, contact
@@ -282,6 +281,8 @@ class _Program:
             {'type': 'ineq', 'fun': lambda x: self._evaluate(x)[2],
              'jac': lambda x: self._evaluate(x)[3]},
         ]
+        from scipy.optimize import minimize  # here: its import is ~0.5 s of a node's start
+
         try:
             result = minimize(objective, x0, jac=True, method='SLSQP', constraints=constraints,
                               options={'maxiter': 100, 'ftol': 1e-12})

@@ -1,0 +1,36 @@
+"""A node starts without the heavy scipy subpackages (a restarted statics serves sooner).
+
+``scipy.stats`` alone took 0.5-1.2 s of a node's start (the chi-square gates), ``scipy.spatial``
+and ``scipy.optimize`` ~0.5 s more; the gates compute their quantiles themselves, and obstacles
+and clearance goals import scipy where they use it (numba takes LAPACK from scipy.linalg).
+"""
+import subprocess
+import sys
+
+from conftest import REPO
+import pytest
+
+pytestmark = pytest.mark.ros  # a process of its own: the modules a node's start imports
+
+HEAVY = ('scipy.stats', 'scipy.optimize', 'scipy.spatial')
+
+SCRIPT = """
+import sys
+import continuum_statics.nodes.statics_node
+import continuum_statics.nodes.tip_controller_node
+import continuum_statics.nodes.tip_load_estimator_node
+import continuum_statics.nodes.cable_driver_node
+from continuum_statics import load_robot
+from continuum_statics.config_paths import config_file
+from continuum_statics.core.warmup import warm_up
+robot = load_robot(config_file('tendon_robot_payload.yaml'))
+warm_up(robot)  # the estimator's paths, gates included
+estimate = robot.estimate_shape(robot.straight_cable_lengths, stamp=0.0)
+print(' '.join(sorted(name for name in sys.modules if name.startswith(%r))))
+""" % (HEAVY,)
+
+
+def test_the_nodes_and_their_warm_up_import_no_heavy_scipy_subpackage():
+    result = subprocess.run([sys.executable, '-c', SCRIPT], cwd=REPO, capture_output=True,
+                            text=True, timeout=300, check=True)
+    assert result.stdout.strip() == ''
