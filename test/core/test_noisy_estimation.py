@@ -28,6 +28,14 @@ def robot_with(name, model):
     return Robot(dataclasses.replace(base.description, cable_model=model))
 
 
+def noisy_start(robot, sigma, samples, seed):
+    """Return (sigma, the widest hole radius, noisy lengths of a motion, the first estimate)."""
+    exact = motion(robot, samples, seed=seed)
+    measured = exact + np.random.default_rng(seed + 1).normal(0.0, sigma, exact.shape)
+    arm = np.max(np.linalg.norm(robot.cable_offsets, axis=1))
+    return sigma, arm, measured, robot.estimate_shape(measured[0])
+
+
 @pytest.mark.parametrize('name,model', CASES)
 def test_every_call_of_a_noisy_sequence_stays_in_budget_finite_and_flagged(name, model):
     robot = robot_with(name, model)
@@ -92,12 +100,8 @@ def test_the_estimate_on_noisy_lengths_is_the_least_squares_fit(name, model):
 @pytest.mark.parametrize('model', ['point_moment', 'distributed'])
 def test_the_tendon_model_solves_each_measurement_to_a_tenth_of_the_noise(model):
     robot = robot_with('three_section_robot_real_tendons.yaml', model)
-    sigma = 50e-6
-    exact = motion(robot, 40, seed=6)
-    measured = exact + np.random.default_rng(7).normal(0.0, sigma, exact.shape)
-    arm = np.max(np.linalg.norm(robot.cable_offsets, axis=1))
+    sigma, arm, measured, previous = noisy_start(robot, 50e-6, 40, seed=6)
     noisy = Tracking(length_noise=sigma)
-    previous = robot.estimate_shape(measured[0])
     steps = {'noise': [], 'exact': []}
     for lengths in measured[1:]:
         estimate = robot.estimate_shape(lengths, warm_start=previous, tracking=noisy)
@@ -124,12 +128,8 @@ def test_a_nodes_least_squares_fit_stops_at_a_tenth_of_the_noise(name, model):
     call, now 1.02); here 1 a call, against 1.7-2.3 at a noise-free encoder's tolerance.
     """
     robot = robot_with(name, model)
-    sigma = 10e-6
-    exact = motion(robot, 60, seed=8)
-    measured = exact + np.random.default_rng(9).normal(0.0, sigma, exact.shape)
-    arm = np.max(np.linalg.norm(robot.cable_offsets, axis=1))
+    sigma, arm, measured, previous = noisy_start(robot, 10e-6, 60, seed=8)
     noisy = Tracking(length_noise=sigma)
-    previous = robot.estimate_shape(measured[0])
     runs = {'noise': 0, 'exact': 0}
     for lengths in measured[1:]:
         estimate = robot.estimate_shape(lengths, warm_start=previous, tracking=noisy)
