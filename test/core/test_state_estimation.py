@@ -742,3 +742,39 @@ def test_the_friction_state_moves_the_tip_far_less_than_the_covariance_allows(na
         shares.append(moves[-1] / math.sqrt(np.linalg.eigvalsh(covariance)[0]))
     assert max(moves) > 1e-5  # friction is there to move it
     assert max(shares) < 0.1, shares
+
+
+def test_a_nodes_fresh_column_of_a_small_cable_step_is_a_full_solves():
+    """A node's bounded call remakes a load column now and then (one in COLUMN_EVERY calls).
+
+    Its bounded solves stop at 1 % of the misfit or a tenth of the encoders' noise (1 um here);
+    an ideal cable's column steps 1e-3 of its sigma (0.3 um), so its two solves go to the end:
+    bounded, both sides stopped where they started and the column came out zero (e745b54).
+    """
+    from reference_motion import motion
+
+    from continuum_statics.core.estimation.shape_estimation import Tracking
+
+    document = _document(REPO / 'config' / 'tendon_robot.yaml')
+    document['model_uncertainty'] = {'tip_force': 0.05, 'section_moment': 0.005,
+                                     'cable_length': 3e-4, 'base_position': 5e-4,
+                                     'correlation_time': 10.0}
+    robot = Robot(parse_robot_description(document, 'test'))
+    noise = 10e-6
+    lengths = motion(robot, 2000, seed=5)
+    lengths = lengths + np.random.default_rng(6).normal(0.0, noise, lengths.shape)
+    tracking = Tracking(length_noise=noise, motion_threshold=3 * noise)
+    # every column made at a bent pose the motion never comes back to: each is remade in turn
+    estimate = robot.estimate_shape(_pulled(robot, 0.01), stamp=0.0)
+    first = estimate.sensitivity.tips.copy()
+    for k, each in enumerate(lengths[1:], 1):
+        estimate = robot.estimate_shape(each, warm_start=estimate, tracking=tracking,
+                                        stamp=k * 1e-3)
+    cables = [j for j, name in enumerate(estimate.unmodelled.names)
+              if name.startswith('cable_length')]
+    remade = [j for j in cables if not np.array_equal(estimate.sensitivity.tips[j], first[j])]
+    assert remade  # the motion moved the tip far enough for some to be made again
+    full = robot.estimate_shape(lengths[-1], exact=True).sensitivity.positions[-1]
+    for j in remade:  # made up to a few mm of tip travel before: the size, not the digits
+        size = np.linalg.norm(estimate.sensitivity.positions[-1][:, j])
+        assert size == pytest.approx(np.linalg.norm(full[:, j]), rel=0.2)
