@@ -38,12 +38,20 @@ def test_the_nodes_and_their_warm_up_import_no_heavy_scipy_subpackage():
 
 def test_every_node_command_takes_the_quick_discovery_profile_unless_one_is_set(monkeypatch):
     """A node restarted alone (not by bringup) found its peers 0.9-2.0 s later without it."""
-    from continuum_statics.nodes.node_runner import use_fast_discovery_profile
+    from continuum_statics.nodes import node_runner
 
+    class Started(Exception):
+        """rclpy.init reached: where the profile must already be set."""
+
+    def init(**_):
+        raise Started(os.environ.get('FASTDDS_DEFAULT_PROFILES_FILE'))
+
+    monkeypatch.setattr(node_runner.rclpy, 'init', init)
     monkeypatch.delenv('FASTDDS_DEFAULT_PROFILES_FILE', raising=False)
-    use_fast_discovery_profile()
-    assert os.environ['FASTDDS_DEFAULT_PROFILES_FILE'].endswith('fastdds_fast_discovery.xml')
-    assert os.path.isfile(os.environ['FASTDDS_DEFAULT_PROFILES_FILE'])
+    with pytest.raises(Started) as started:
+        node_runner.run_nodes([])
+    profile = started.value.args[0]
+    assert profile.endswith('fastdds_fast_discovery.xml') and os.path.isfile(profile)
     monkeypatch.setenv('FASTDDS_DEFAULT_PROFILES_FILE', '/a/users/own.xml')
-    use_fast_discovery_profile()
-    assert os.environ['FASTDDS_DEFAULT_PROFILES_FILE'] == '/a/users/own.xml'
+    with pytest.raises(Started, match='/a/users/own.xml'):
+        node_runner.run_nodes([])

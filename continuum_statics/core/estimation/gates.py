@@ -36,9 +36,9 @@ def chi2_quantile(probability, dof):
     Cached: a gate is asked at every estimate.
     """
     a, probability = 0.5 * int(dof), float(probability)
-    if not 0.0 < probability < 1.0 or a <= 0.0:
-        raise ValueError('chi2_quantile needs 0 < probability < 1 and dof >= 1, got %r, %r'
-                         % (probability, dof))
+    if not 1e-12 <= probability <= 1.0 - 1e-12 or a <= 0.0:
+        raise ValueError('chi2_quantile needs 1e-12 <= probability <= 1 - 1e-12 and dof >= 1, '
+                         'got %r, %r' % (probability, dof))
     upper = probability > 0.5  # solve on the smaller tail: log Q(a, y) = log(1 - p)
     target = math.log1p(-probability) if upper else math.log(probability)
     low, high = 0.0, max(2.0 * a, 1.0)
@@ -47,15 +47,16 @@ def chi2_quantile(probability, dof):
         low, high = high, 2.0 * high
     y = 0.5 * (low + high)
     for _ in range(200):
-        value = _log_tail(a, y, upper) - target
+        log_tail = _log_tail(a, y, upper)
+        value = log_tail - target
         if (value > 0.0) == upper:
             low = y
         else:
             high = y
-        # d log P / dy = density / P; d log Q / dy = -density / Q
-        density = math.exp((a - 1.0) * math.log(y) - y - math.lgamma(a))
-        slope = density / math.exp(_log_tail(a, y, upper)) * (-1.0 if upper else 1.0)
-        step = y - value / slope if slope else math.nan
+        step = math.nan
+        if math.isfinite(log_tail):  # d log P / dy = density / P; d log Q / dy = -density / Q
+            slope = math.exp((a - 1.0) * math.log(y) - y - math.lgamma(a) - log_tail)
+            step = y + value / slope if upper else y - value / slope
         y_next = step if low < step < high else 0.5 * (low + high)
         if abs(y_next - y) <= 1e-13 * y:
             return 2.0 * y_next
@@ -66,7 +67,8 @@ def chi2_quantile(probability, dof):
 def _log_tail(a, y, upper):
     """Return log Q(a, y) (``upper``) or log P(a, y) of the regularised incomplete gamma."""
     p, q = _gamma_p(a, y)
-    return math.log(q) if upper else math.log(p)
+    tail = q if upper else p
+    return math.log(tail) if tail > 0.0 else -math.inf  # far beyond the root: underflow
 
 
 def _gamma_p(a, y):

@@ -432,13 +432,16 @@ def _evolved(record, **changes):
     """Return a copy of a frozen dataclass ``record`` with ``changes`` (``dataclasses.replace``).
 
     Without its per-field work: three records a call at 1 kHz took ~35 us of ~300 (these
-    records have no ``__post_init__``).
+    records have no ``__post_init__``). The fields alone are copied: a cached property (a
+    :class:`ShapeEstimate`'s covariances) is computed again for the copy.
     """
-    unknown = changes.keys() - record.__dataclass_fields__.keys()
+    fields = record.__dataclass_fields__
+    unknown = changes.keys() - fields.keys()
     if unknown:
         raise TypeError('%s has no field %s' % (type(record).__name__, ', '.join(unknown)))
     copy = object.__new__(type(record))
-    copy.__dict__.update(record.__dict__)
+    copy.__dict__.update((name, value) for name, value in record.__dict__.items()
+                         if name in fields)
     copy.__dict__.update(changes)
     return copy
 
@@ -738,14 +741,16 @@ def _sensitivity(robot, model, lengths, tip_force, tip_moment, tensions, carried
                 positions[:, 'xyz'.index(names[j][-1]), j] = 1.0
             continue
         step = np.zeros(size)
-        small = names[j].startswith('cable_length') and robot.tendons.is_ideal
+        ideal = names[j].startswith('cable_length') and robot.tendons.is_ideal
         step[j] = sigma[j] * (LOAD_COLUMN_STEP if group == 'tip_load'
-                              else COLUMN_STEP if small else 1.0)
+                              else COLUMN_STEP if ideal else 1.0)
         # central differences from the estimate's state: an unfinished estimate's error cancels
-        # (every column at once, the first time: solved to the end). An ideal cable's small
-        # step is solved to the end too: a node's bound stops at 1 % of the misfit or a tenth
-        # of the encoders' noise, and at sigma 0.3 mm the step is 0.3 um, so both sides stopped
-        # where they started (a zero column since the bounded refresh came in)
+        # (every column at once, the first time: solved to the end). A step of a thousandth of
+        # a sigma (the tip load's, an ideal cable's) to the end too: a node's bound stops at a
+        # tenth of the encoders' noise or 1 % of the misfit, about such a step's effect (the
+        # payload's mass column came out 170 % off; an ideal cable's of sigma 0.3 mm, a 0.3 um
+        # step, zero: both sides stopped where they started)
+        small = group == 'tip_load' or ideal
         bound = None if fresh or not bounded or small else tracking
         up, down = (_moved(robot, model, lengths, tip_force, tip_moment, tensions, sign * step,
                            bound) for sign in (1.0, -1.0))
