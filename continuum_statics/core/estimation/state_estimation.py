@@ -346,14 +346,14 @@ def propagate(robot, carried, stamp):
                           point_noise=floor)
     if stamp is None or carried.stamp is None:
         return _evolved(carried, stamp=carried.stamp if stamp is None else stamp,
-                                   load_basis=basis, point_noise=floor, tip_white=None)
+                        load_basis=basis, point_noise=floor, tip_white=None)
     # an older stamp is not a step back in time
     mean, covariance = decayed(carried.mean, carried.covariance, prior,
                                max(stamp - carried.stamp, 0.0),
                                robot.model_uncertainty.correlation_time, _drift_time(robot),
                                load_size(robot))
     return _evolved(carried, mean=mean, covariance=covariance, stamp=stamp,
-                               load_basis=basis, point_noise=floor, tip_white=None)
+                    load_basis=basis, point_noise=floor, tip_white=None)
 
 
 def _moved_variance(robot, elapsed):
@@ -518,8 +518,8 @@ def estimate_state(robot, lengths, tip_force, tip_moment, tensions, sensors, sta
     shape = _corrected(model.shape, sensitivity, posterior.correction, posterior.tip_white)
     tensions_verdict = verdicts.pop(TENSIONS, None)
     return _evolved(model, shape=shape, unmodelled=posterior, sensors=verdicts,
-                               tensions_verdict=tensions_verdict, sensitivity=sensitivity,
-                               history=history)
+                    tensions_verdict=tensions_verdict, sensitivity=sensitivity,
+                    history=history)
 
 
 def _moving(prior, lengths, stamp, tracking):
@@ -995,10 +995,10 @@ def _update(robot, shape, sensitivity, prior, readings, stamp, history=(), tensi
         for name in beyond:
             verdicts[name] = SensorVerdict(False, verdicts[name].chi2, beyond[name])
         return _evolved(prior, suspects=tuple(sorted(set(prior.suspects)
-                                                                | set(beyond)))), verdicts
+                                                     | set(beyond)))), verdicts
     return _evolved(prior, mean=mean, covariance=covariance,
-                               load_reference=reference, tip_white=white, suspects=tuple(
-                                   name for name in prior.suspects if name not in used)), verdicts
+                    load_reference=reference, tip_white=white, suspects=tuple(
+                        name for name in prior.suspects if name not in used)), verdicts
 
 
 def _tip_white(prior, sensitivity, covariance, rows, innovation, noise, at_tip):
