@@ -75,8 +75,9 @@ class Tracking:
         warn threshold: at least 3 sigma of its encoders)
     :ivar motion_threshold: free-length change (m) that counts as a cable's motion, which sets
         its friction direction (3 sigma of its encoders: noise is not motion)
-    :ivar length_noise: the encoders' sigma (m): the tendon model solves each measurement's
-        cable lengths to :data:`NOISE_FRACTION` of it (or ``solver.estimate_tolerance``)
+    :ivar length_noise: the encoders' sigma (m): the tendon model and the least squares solve
+        each measurement's cable lengths to :data:`NOISE_FRACTION` of it (or
+        ``solver.estimate_tolerance``)
     """
 
     max_model_runs: int = TRACK_RUNS
@@ -85,7 +86,7 @@ class Tracking:
     length_noise: float = 0.0
 
     def length_tolerance(self):
-        """Cable-length tolerance (m) of one measurement's tendon-model solve.
+        """Cable-length tolerance (m) of one measurement's solve (tendon model, least squares).
 
         ``solve_lengths`` raises it to the robot's ``solver.estimate_tolerance``.
         """
