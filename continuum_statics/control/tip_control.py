@@ -212,8 +212,12 @@ class TipControl:
         return status[0]
 
     def current_tip_load(self) -> np.ndarray:
-        """Return the tip wrench (6,) in force: zero without one, or after its timeout."""
-        return current_load(self._load, self.clock(), self.params['tip_wrench_timeout'])
+        """Return the tip wrench (6,) in force: zero without one, or after its timeout.
+
+        An estimated load (``tip_wrench_source: estimate``) is kept after it, as statics does.
+        """
+        return current_load(self._load, self.clock(), self.params['tip_wrench_timeout'],
+                            self.params['tip_wrench_source'] == 'estimate')
 
     def missing_state(self) -> str:
         """Return which state has never arrived, or '' when both have."""

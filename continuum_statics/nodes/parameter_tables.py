@@ -99,8 +99,9 @@ def statics_parameters():
         ParamSpec('covariance_rate', 50.0, 'tip_pose_covariance and backbone_estimate (robot '
                   'files with model_uncertainty) at most this often, Hz (0: with every '
                   'estimate)', 0.0, 10000.0, read_only=True),
-        ParamSpec('tip_wrench_timeout', TIP_WRENCH_TIMEOUT, 'a tip_wrench estimate older than '
-                  'this is replaced by zero, s (0: never expires)', 0.0, 3600.0),
+        ParamSpec('tip_wrench_timeout', TIP_WRENCH_TIMEOUT, 'a tip_wrench older than this is '
+                  'replaced by zero (a tip_wrench_estimate is kept, with a warning), s (0: '
+                  'never expires)', 0.0, 3600.0),
         ParamSpec('tip_wrench_source', 'topic', 'where the tip load comes from: topic '
                   '(tip_wrench, a force sensor or your estimator) or estimate '
                   '(tip_wrench_estimate, from the tip_load_estimator node; a robot file with '
@@ -185,8 +186,9 @@ def tip_controller_parameters():
                   'this namespace: its /diagnostics status tells when it refuses commands '
                   '(goals then wait, fail or are rejected, naming the reason)',
                   read_only=True),
-        ParamSpec('tip_wrench_timeout', TIP_WRENCH_TIMEOUT, 'a tip_wrench estimate older than '
-                  'this is replaced by zero, s (0: never expires)', 0.0, 3600.0),
+        ParamSpec('tip_wrench_timeout', TIP_WRENCH_TIMEOUT, 'a tip_wrench older than this is '
+                  'replaced by zero (a tip_wrench_estimate is kept, with a warning), s (0: '
+                  'never expires)', 0.0, 3600.0),
         ParamSpec('tip_wrench_source', 'topic', 'where the tip load comes from: topic '
                   '(tip_wrench, a force sensor or your estimator) or estimate '
                   '(tip_wrench_estimate, from the tip_load_estimator node)', read_only=True,

@@ -148,8 +148,9 @@ class StaticsNode(RunnerHooks, Node):
                 measurement_queue_qos(self._params['input_queue_depth']), raw=True,
                 max_lag=self._params['max_input_lag'], fallback_qos=LATEST_SENSOR_QOS)
             self._intake.start()
-        self.create_subscription(WrenchStamped, tip_wrench_topic(self._params, self.robot),
-                                 self._on_tip_wrench, LATEST_SENSOR_QOS)
+        self._load_topic = tip_wrench_topic(self._params, self.robot)
+        self.create_subscription(WrenchStamped, self._load_topic, self._on_tip_wrench,
+                                 LATEST_SENSOR_QOS)
         self._markers.set_rate(self._params['marker_rate'])
         self._passive_load = None
         if self._passive:
@@ -181,18 +182,19 @@ class StaticsNode(RunnerHooks, Node):
         self._load = TipLoad(load, time.monotonic())
         if self._wrench_expired:
             self._wrench_expired = False
-            self.get_logger().info('tip_wrench received again')
+            self.get_logger().info('%s received again' % self._load_topic)
         if self._passive:
             self._solve_passive(msg.header.stamp)
 
     def _current_tip_load(self, now):
-        timeout = self._params['tip_wrench_timeout']
+        timeout, hold = self._params['tip_wrench_timeout'], self._load_topic != 'tip_wrench'
         if self._load is not None and self._load.expired(now, timeout) and \
                 not self._wrench_expired:
             self._wrench_expired = True
-            self.get_logger().warning(
-                'tip_wrench estimate is older than %.3g s: using zero tip load' % timeout)
-        return current_load(self._load, now, timeout)
+            self.get_logger().warning('%s is older than %.3g s: %s' % (
+                self._load_topic, timeout, 'its last load kept (the estimator is late or '
+                'stopped)' if hold else 'using zero tip load'))
+        return current_load(self._load, now, timeout, hold)
 
     def _thresholds(self):
         """Return the residual thresholds (m) with the encoders' noise floor."""
@@ -310,8 +312,6 @@ class StaticsNode(RunnerHooks, Node):
         if self._passive:
             self._solve_passive(None)  # a tip load that expired: back to the unloaded shape
             self._republish_tf()
-        else:
-            self._current_tip_load(now)  # expire a stale tip load while no measurement comes
         thresholds, intake = self._thresholds(), self._input
         level, message, values = self.health.report(
             thresholds.warn, thresholds.drop, 0 if intake is None else max(intake.lost, 0),
@@ -319,7 +319,7 @@ class StaticsNode(RunnerHooks, Node):
         values['max_tension_n'] = self._tension_limit()
         values.update(self._stamps.values())
         values.update(load_values(
-            current_load(self._load, now, self._params['tip_wrench_timeout']),
+            self._current_tip_load(now),  # expires a stale tip load while no measurement comes
             math.inf if self._load is None else now - self._load.received, self._wrench_expired,
             *tip_wrench_limits(self.robot, self._params)))
         if self._tip_position is not None:

@@ -24,6 +24,7 @@ PARAMS = dict(max_cable_speed=0.02, settle_time=0.2, settled_cable_error=1e-6,
               max_corrections=10, tip_average_time=1.0, max_state_age=0.5, min_tension=0.0,
               tracker_max_disagreement=0.0, max_tip_speed=0.05, max_tip_rate=0.5,
               twist_timeout=0.5, goal_timeout=10.0, state_wait=3.0, tip_wrench_timeout=1.0,
+              tip_wrench_source='topic',
               stop_on_contact=False, use_measured_tip=True, goal_orientation='ignore',
               default_tolerance=1e-3, control_rate=50.0, clearance=None)
 DT = 1.0 / PARAMS['control_rate']
@@ -298,6 +299,19 @@ def test_backbone_after_waits_for_the_backbone_of_the_reached_tip():
     assert clock.now == pytest.approx(before + 0.5)
     control.on_backbone(10, b'new')
     assert asyncio.run(control.backbone_after(10)) == b'new'
+
+
+@pytest.mark.parametrize('source', ['topic', 'estimate'])
+def test_a_tip_wrench_expires_to_zero_and_an_estimated_load_is_kept(source):
+    """tip_wrench_timeout: zero load after it, but an estimate's load stays (statics' rule)."""
+    control, clock, _ = make(tip_wrench_source=source)
+    load = np.array([0.12, -0.08, 0.0, 0.0, 0.0, 0.0])
+    control.on_tip_wrench(load)
+    clock.now += 0.9
+    np.testing.assert_array_equal(control.current_tip_load(), load)
+    clock.now += 0.2  # past tip_wrench_timeout (1 s)
+    np.testing.assert_array_equal(control.current_tip_load(),
+                                  np.zeros(6) if source == 'topic' else load)
 
 
 def test_shutdown_ends_the_running_goal():

@@ -50,8 +50,9 @@ class Rig:
         self.markers = Collector(client, MarkerArray, 'backbone_markers', LATCHED)
         self.diagnostics = Collector(client, DiagnosticArray, '/diagnostics', 10)
         self.states = client.create_publisher(JointState, 'cable_states', qos_profile_sensor_data)
-        self.wrench = client.create_publisher(WrenchStamped, 'tip_wrench',
-                                              qos_profile_sensor_data)
+        self.wrench = client.create_publisher(
+            WrenchStamped, 'tip_wrench_estimate' if overrides.get('tip_wrench_source')
+            == 'estimate' else 'tip_wrench', qos_profile_sensor_data)
         self.stamp = 100
 
     def measurement(self, lengths, names=None):
@@ -153,8 +154,14 @@ def test_bad_measurements_are_rejected_and_the_last_good_state_stays(harness):
     assert all(all_finite_path(path) for path in rig.backbone.messages)
 
 
-def test_tip_wrench_bends_the_backbone_and_expires(harness):
-    rig = Rig(harness, tip_wrench_timeout=0.5)
+@pytest.mark.parametrize('source', ['topic', 'estimate'])
+def test_tip_wrench_bends_the_backbone_and_expires(harness, source):
+    """A tip_wrench expires to zero load; a tip_wrench_estimate is kept with a warning.
+
+    Before: statics fell to zero load when one estimate took over 3 s (a slow machine); the
+    model tip moved 10 mm and a goal was judged "reached" there, 10.3 mm from the true tip.
+    """
+    rig = Rig(harness, tip_wrench_timeout=0.5, tip_wrench_source=source)
     straight = ROBOT.straight_cable_lengths
     unloaded = pose_xyz(rig.feed(straight).poses[-1].pose)
     for bad, reason in [((math.nan, 0.0, 0.0), 'non-finite'), ((0.1, 0.0, 0.0), 'frame')]:
@@ -174,7 +181,8 @@ def test_tip_wrench_bends_the_backbone_and_expires(harness):
     assert loaded[0] - unloaded[0] > 1e-3, 'a 0.2 N side load moves the tip'
     wait_until(lambda: rig.values().get('tip_wrench_expired') == 'True', 5.0,
                'the tip load estimate to expire')
-    np.testing.assert_allclose(pose_xyz(rig.feed(straight).poses[-1].pose), unloaded, atol=1e-6)
+    after = pose_xyz(rig.feed(straight).poses[-1].pose)
+    np.testing.assert_allclose(after, unloaded if source == 'topic' else loaded, atol=1e-6)
 
 
 INVALID_PARAMETERS = [
