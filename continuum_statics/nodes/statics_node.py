@@ -108,7 +108,8 @@ class StaticsNode(RunnerHooks, Node):
         self._cable_states = CableStatesReader(self.cable_names)
         self._lengths = np.empty(len(self.cable_names))
         self._tensions = np.empty(len(self.cable_names))
-        self._load = None  # the newest TipLoad
+        self._load = None  # the newest TipLoad, from _load_topic
+        self._load_topic = tip_wrench_topic(self._params, self.robot)
         self._wrench_expired = False
         self._stamp = None
         self._tip_position = None
@@ -148,7 +149,6 @@ class StaticsNode(RunnerHooks, Node):
                 measurement_queue_qos(self._params['input_queue_depth']), raw=True,
                 max_lag=self._params['max_input_lag'], fallback_qos=LATEST_SENSOR_QOS)
             self._intake.start()
-        self._load_topic = tip_wrench_topic(self._params, self.robot)
         self.create_subscription(WrenchStamped, self._load_topic, self._on_tip_wrench,
                                  LATEST_SENSOR_QOS)
         self._markers.set_rate(self._params['marker_rate'])
