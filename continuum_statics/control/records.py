@@ -4,6 +4,8 @@ Times are ``time.monotonic()`` seconds of *arrival* (a sender's stamp may be zer
 simulated clock; arrival times never do); stamps are kept only to pair messages with each other.
 """
 from dataclasses import dataclass
+import math
+import time
 
 import numpy as np
 
@@ -70,3 +72,49 @@ class TipLoad:
 def current_load(load, now, timeout, hold=False):
     """Wrench of a :class:`TipLoad` or zero when there is none or it expired (see ``hold``)."""
     return ZERO_LOAD if load is None else load.current(now, timeout, hold)
+
+
+class TipLoadInput:
+    """The tip load a node takes from ``topic``: the newest, whether it expired, what to say.
+
+    ``hold`` (``tip_wrench_source: estimate``): the load is kept past the timeout
+    (:meth:`TipLoad.current`), and :meth:`status` says so for a WARN on /diagnostics.
+    ``warn`` and ``info`` log once when the load expires and when it comes again.
+    """
+
+    def __init__(self, topic, hold, warn, info, clock=time.monotonic):
+        self.topic, self.hold = topic, hold
+        self.load = None  # the newest TipLoad
+        self.expired = False
+        self._warn, self._info, self._clock = warn, info, clock
+
+    def take(self, wrench):
+        """Use ``wrench`` (6,) N and N m (checked by the caller) from now on."""
+        self.load = TipLoad(wrench, self._clock())
+        if self.expired:
+            self.expired = False
+            self._info('%s received again' % self.topic)
+
+    def drop(self):
+        """Forget the load (the model cannot take it): zero until the next one."""
+        self.load = None
+
+    def current(self, timeout):
+        """Return the wrench (6,) to use now (zero without one); say once that it expired."""
+        now, load = self._clock(), self.load
+        if load is not None and load.expired(now, timeout) and not self.expired:
+            self.expired = True
+            self._warn('%s is older than %.3g s: %s' % (
+                self.topic, timeout, 'its last load kept (the estimator is late or stopped)'
+                if self.hold else 'using zero tip load'))
+        return current_load(load, now, timeout, self.hold)
+
+    def age(self):
+        """Seconds since the newest load arrived (inf without one)."""
+        return math.inf if self.load is None else self._clock() - self.load.received
+
+    def status(self):
+        """Return why a kept load is old ('' while fresh): for a WARN on /diagnostics."""
+        if not (self.expired and self.hold and self.load is not None):
+            return ''
+        return '%s %.3g s old: its last load kept' % (self.topic, self.age())

@@ -52,7 +52,7 @@ from sensor_msgs.msg import JointState
 from std_msgs.msg import Header
 
 from continuum_statics.control.health import StaticsHealth, load_values
-from continuum_statics.control.records import TipLoad, current_load
+from continuum_statics.control.records import TipLoadInput
 from continuum_statics.control.shape_tracking import ShapeTracker, Thresholds, passive_shape
 from continuum_statics.control.stamps import StampRule
 from continuum_statics.core.description.tendons import full_circle_tension
@@ -108,9 +108,9 @@ class StaticsNode(RunnerHooks, Node):
         self._cable_states = CableStatesReader(self.cable_names)
         self._lengths = np.empty(len(self.cable_names))
         self._tensions = np.empty(len(self.cable_names))
-        self._load = None  # the newest TipLoad, from _load_topic
-        self._load_topic = tip_wrench_topic(self._params, self.robot)
-        self._wrench_expired = False
+        topic = tip_wrench_topic(self._params, self.robot)
+        self._tip_load = TipLoadInput(topic, topic == 'tip_wrench_estimate',
+                                      self.get_logger().warning, self.get_logger().info)
         self._stamp = None
         self._tip_position = None
         self._tip_sigma = math.nan  # the fused tip's largest standard deviation, mm
@@ -149,7 +149,7 @@ class StaticsNode(RunnerHooks, Node):
                 measurement_queue_qos(self._params['input_queue_depth']), raw=True,
                 max_lag=self._params['max_input_lag'], fallback_qos=LATEST_SENSOR_QOS)
             self._intake.start()
-        self.create_subscription(WrenchStamped, self._load_topic, self._on_tip_wrench,
+        self.create_subscription(WrenchStamped, self._tip_load.topic, self._on_tip_wrench,
                                  LATEST_SENSOR_QOS)
         self._markers.set_rate(self._params['marker_rate'])
         self._passive_load = None
@@ -179,22 +179,12 @@ class StaticsNode(RunnerHooks, Node):
         except ValueError as error:
             self._problems.reject('tip_wrench', error)
             return
-        self._load = TipLoad(load, time.monotonic())
-        if self._wrench_expired:
-            self._wrench_expired = False
-            self.get_logger().info('%s received again' % self._load_topic)
+        self._tip_load.take(load)
         if self._passive:
             self._solve_passive(msg.header.stamp)
 
-    def _current_tip_load(self, now):
-        timeout, hold = self._params['tip_wrench_timeout'], self._load_topic != 'tip_wrench'
-        if self._load is not None and self._load.expired(now, timeout) and \
-                not self._wrench_expired:
-            self._wrench_expired = True
-            self.get_logger().warning('%s is older than %.3g s: %s' % (
-                self._load_topic, timeout, 'its last load kept (the estimator is late or '
-                'stopped)' if hold else 'using zero tip load'))
-        return current_load(self._load, now, timeout, hold)
+    def _current_tip_load(self):
+        return self._tip_load.current(self._params['tip_wrench_timeout'])
 
     def _thresholds(self):
         """Return the residual thresholds (m) with the encoders' noise floor."""
@@ -215,14 +205,14 @@ class StaticsNode(RunnerHooks, Node):
         if self._params['use_measured_tensions']:
             tensions, _ = self._cable_states.tensions(view, self._tensions)  # else unused
         result = self._tracker.update(lengths, tensions,
-                                      self._current_tip_load(time.monotonic()),
+                                      self._current_tip_load(),
                                       self._thresholds(), self._tension_limit(),
                                       stamp=view.sec + 1e-9 * view.nanosec)
         if self._sensors is not None:
             self._sensors.pass_on(result.estimate)
         if result.load_problem:
             self._problems.reject('tip_wrench', result.load_problem)
-            self._load = None
+            self._tip_load.drop()
         verdict = getattr(result.estimate, 'tensions_verdict', None)  # tension_noise in the file
         if verdict is not None and not verdict.used:
             self._problems.reject('tensions', 'set aside by the estimator: ' + verdict.reason)
@@ -242,7 +232,7 @@ class StaticsNode(RunnerHooks, Node):
 
     def _solve_passive(self, stamp):
         """Passive rod: solve and publish the shape under gravity and the current tip load."""
-        load = self._current_tip_load(time.monotonic()).copy()
+        load = self._current_tip_load().copy()
         key = (self._obstacles.version, load.tobytes())  # a new load or new obstacles
         if key == self._passive_load:
             return
@@ -308,7 +298,6 @@ class StaticsNode(RunnerHooks, Node):
                          self._problems.reject)
 
     def _publish_diagnostics(self):
-        now = time.monotonic()
         if self._passive:
             self._solve_passive(None)  # a tip load that expired: back to the unloaded shape
             self._republish_tf()
@@ -319,9 +308,11 @@ class StaticsNode(RunnerHooks, Node):
         values['max_tension_n'] = self._tension_limit()
         values.update(self._stamps.values())
         values.update(load_values(
-            self._current_tip_load(now),  # expires a stale tip load while no measurement comes
-            math.inf if self._load is None else now - self._load.received, self._wrench_expired,
+            self._current_tip_load(),  # expires a stale tip load while no measurement comes
+            self._tip_load.age(), self._tip_load.expired,
             *tip_wrench_limits(self.robot, self._params)))
+        if level == diag.OK and self._tip_load.status():
+            level, message = diag.WARN, self._tip_load.status()
         if self._tip_position is not None:
             values['tip_position_m'] = '%.5f %.5f %.5f' % tuple(self._tip_position)
         if self._sensors is not None:

@@ -183,6 +183,12 @@ def test_tip_wrench_bends_the_backbone_and_expires(harness, source):
                'the tip load estimate to expire')
     after = pose_xyz(rig.feed(straight).poses[-1].pose)
     np.testing.assert_allclose(after, unloaded if source == 'topic' else loaded, atol=1e-6)
+    if source == 'estimate':  # kept, and said so while the cables come (no other WARN)
+        def warned():
+            rig.feed(straight)
+            return 'its last load kept' in diagnostic_values(rig.diagnostics,
+                                                             '/statics')[1].message
+        wait_until(warned, 10.0, 'the WARN of a kept estimate')
 
 
 INVALID_PARAMETERS = [
