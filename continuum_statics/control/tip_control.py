@@ -40,9 +40,8 @@ from continuum_statics.control.handover import Handover
 from continuum_statics.control.health import Problems
 from continuum_statics.control.records import (
     Measurement,
-    TipLoad,
+    TipLoadInput,
     TipSample,
-    current_load,
     tracked_tip,
 )
 from continuum_statics.control.teleop import TeleopRun, TeleopSettings, Twist, twist_hold
@@ -112,7 +111,9 @@ class TipControl:
         self._measured_tips = deque(maxlen=4000)  # recent tracker TipSamples (tip, not marker)
         self.measured_tip = None
         self.backbone = None  # (stamp ns, serialized Path) of the newest backbone
-        self._load = None  # newest TipLoad
+        estimate = params['tip_wrench_source'] == 'estimate'  # kept past its timeout
+        self._load = TipLoadInput('tip_wrench_estimate' if estimate else 'tip_wrench', estimate,
+                                  log.warning, log.info, clock)
         self._driver_status = None  # (refusal or '', monotonic s) of cable_driver's status
         self._contact_since = None  # monotonic s tip_contact turned true, None without contact
 
@@ -191,7 +192,7 @@ class TipControl:
 
     def on_tip_wrench(self, wrench) -> None:
         """Take a checked tip wrench (6,): force N, moment N m, base frame."""
-        self._load = TipLoad(wrench, self.clock())
+        self._load.take(wrench)
 
     def on_driver_status(self, refusal) -> None:
         """cable_driver's status: why it refuses commands, or '' when it accepts them."""
@@ -216,8 +217,7 @@ class TipControl:
 
         An estimated load (``tip_wrench_source: estimate``) is kept after it, as statics does.
         """
-        return current_load(self._load, self.clock(), self.params['tip_wrench_timeout'],
-                            self.params['tip_wrench_source'] == 'estimate')
+        return self._load.current(self.params['tip_wrench_timeout'])
 
     def missing_state(self) -> str:
         """Return which state has never arrived, or '' when both have."""
