@@ -28,7 +28,7 @@ from continuum_statics.core.description.sensors import (
     SensorReading,
     default_model_uncertainty,
 )
-from continuum_statics.core.estimation.state_estimation import point_covariance
+from continuum_statics.core.estimation.state_estimation import _evolved, point_covariance
 from continuum_statics.core.robot import Robot
 from continuum_statics.tools.fusion import mismatched_truth, simulated_truth, smooth_path
 
@@ -260,6 +260,28 @@ def test_a_correction_fades_with_the_correlation_time():
     np.testing.assert_allclose(much_later.shape.positions, model.shape.positions, atol=1e-9)
     np.testing.assert_allclose(np.trace(much_later.tip_covariance[:3, :3]), variance[2],
                                rtol=1e-6)
+
+
+def test_a_copied_estimate_computes_its_covariances_again():
+    """``_evolved`` copies fields only: a covariance cached on the original is not carried."""
+    robot = load_robot(SENSOR_ROBOT)
+    lengths = _pulled(robot)
+    model = robot.estimate_shape(lengths, exact=True, stamp=0.0)
+    tip = model.shape.tip_position + model.shape.tip_rotation @ robot.sensors[0].offset
+    seen = robot.estimate_shape(lengths, exact=True, stamp=0.0, sensors={
+        'tip_tracker': SensorReading(tip + np.array([0.002, -0.001, 0.0]))})
+    for estimate in (seen, model):
+        assert estimate.tip_covariance is not None  # cached on both
+    for cached in (True, False):
+        original = seen if cached else dataclasses.replace(seen)  # the latter caches nothing
+        copy = _evolved(original, unmodelled=model.unmodelled)
+        expected = dataclasses.replace(seen, unmodelled=model.unmodelled)
+        np.testing.assert_allclose(copy.tip_covariance, expected.tip_covariance, rtol=1e-12)
+        np.testing.assert_allclose(copy.position_covariance, expected.position_covariance,
+                                   rtol=1e-12)
+        assert copy.unmodelled is model.unmodelled and copy.shape is seen.shape
+    with pytest.raises(TypeError, match='no field'):
+        _evolved(seen, unknown=1)
 
 
 def test_v6_held_out_rows_with_the_tracker_occluded():

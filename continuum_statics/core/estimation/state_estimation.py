@@ -440,8 +440,11 @@ def _evolved(record, **changes):
     if unknown:
         raise TypeError('%s has no field %s' % (type(record).__name__, ', '.join(unknown)))
     copy = object.__new__(type(record))
-    copy.__dict__.update((name, value) for name, value in record.__dict__.items()
-                         if name in fields)
+    if len(record.__dict__) == len(fields):  # nothing cached: one C-level dict copy
+        copy.__dict__.update(record.__dict__)
+    else:
+        copy.__dict__.update((name, value) for name, value in record.__dict__.items()
+                             if name in fields)
     copy.__dict__.update(changes)
     return copy
 
