@@ -71,6 +71,11 @@ class Harness:
         self.namespace = '/t' + uuid.uuid4().hex[:10]
         self.nodes = []
         self._spinning = []  # (executor, thread)
+        #: what raised in a node while the test ran (a callback, the intake thread): the test
+        #: fails at close with it (before, a raising callback ended its node's executor in
+        #: silence, and the test timed out or passed without that node)
+        self.failures = []
+        self._closing = False
 
     def _spin(self, node, kind):
         executor = make_executor(kind, self.context)
@@ -79,8 +84,9 @@ class Harness:
         def spin():
             try:
                 executor.spin()
-            except Exception:  # the context is shut down at the end of the test
-                pass
+            except Exception as error:  # the context is shut down at the end of the test
+                if not self._closing and self.context.ok():
+                    self.failures.append('%s: %r' % (node.get_name(), error))
 
         thread = threading.Thread(target=spin, daemon=True)
         thread.start()
@@ -98,6 +104,12 @@ class Harness:
         parameters = [Parameter(name, value=value) for name, value in overrides.items()]
         node = node_class(namespace=self.namespace, context=self.context,
                           parameter_overrides=parameters)
+        counted = getattr(node, 'on_node_failure', None)
+        if counted is not None:  # what a node counts itself (its intake thread's failures)
+            def on_node_failure(text, node=node, counted=counted):
+                self.failures.append('%s: %s' % (node.get_name(), text))
+                counted(text)
+            node.on_node_failure = on_node_failure
         self.nodes.append(node)
         self._spin(node, getattr(node, 'EXECUTOR', 'single'))
         return node
@@ -109,8 +121,12 @@ class Harness:
         self._spin(node, 'single')
         return node
 
-    def close(self):
-        """Stop spinning, destroy the nodes and shut the context down."""
+    def close(self, check=True):
+        """Stop spinning, destroy the nodes and shut the context down.
+
+        Then raise AssertionError naming what raised in a node during the test (``check``).
+        """
+        self._closing = True
         for node in self.nodes:
             release = getattr(node, 'release_waiters', None)
             if release is not None:
@@ -126,6 +142,9 @@ class Harness:
         for node in self.nodes:
             node.destroy_node()
         rclpy.try_shutdown(context=self.context)
+        if check and self.failures:
+            raise AssertionError('raised in a node during the test: %s' % '; '.join(
+                self.failures))
 
 
 class Collector:

@@ -23,6 +23,8 @@ import time
 
 from rclpy.callback_groups import CallbackGroup
 
+from continuum_statics.nodes.node_runner import hooks
+
 
 class NotExecutorServed(CallbackGroup):
     """A callback group whose entities no executor waits on or runs."""
@@ -154,6 +156,7 @@ class DedicatedIntake:
                     return
                 self._node.get_logger().error('intake failed: %r' % (error,),
                                               throttle_duration_sec=2.0)
+                hooks(self._node).on_node_failure('intake failed: %r' % (error,))
 
     @staticmethod
     def _take(entry, handle, msg_type, raw):

@@ -20,6 +20,7 @@ TOPIC_EXPRESSIONS = {
     'backend.command_topic': '<controller>/commands',  # drivers/ros2_control.py
     'tip_wrench_topic(self._params)': 'tip_wrench',      # or tip_wrench_estimate (published)
     'tip_wrench_topic(self._params, self.robot)': 'tip_wrench',
+    'self._tip_load.topic': 'tip_wrench',              # statics: tip_wrench_topic(...) above
     'tracker_topic(self.robot)': 'tip_pose_measured',    # or sensors/<name>/accepted (published)
 }
 #: Subscriptions whose topic is the user's (ros2_control's joint_states parameter) or internal.
