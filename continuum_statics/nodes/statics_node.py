@@ -2,8 +2,8 @@
 
 Subscribes ``cable_states`` (sensor_msgs/JointState: measured cable lengths in m by name; best
 effort) and ``tip_wrench`` (geometry_msgs/WrenchStamped in the base frame; zero until received
-and after it is older than ``tip_wrench_timeout``). Every measurement is solved with the numeric
-core, warm-started from the last estimate, and published as ``backbone`` (nav_msgs/Path,
+and after ``tip_wrench_timeout``; a ``tip_wrench_estimate`` is kept). Each measurement is
+solved, warm-started from the last estimate, and published as ``backbone`` (nav_msgs/Path,
 ``path_samples`` poses base -> tip) and ``tip_pose`` (geometry_msgs/PoseStamped), both latched,
 stamped with the measurement's stamp in the robot's base frame. ``backbone_markers``
 (visualization_msgs/MarkerArray) follows at ``marker_rate``, drawn by the thread that published
