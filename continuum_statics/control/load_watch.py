@@ -6,7 +6,8 @@ One entry point per timer tick, :meth:`LoadWatch.step`, given the newest inputs 
 2. gates before the solve: a tension above its cable's ``tension_limits`` (plus 3 sigma of
    noise) is not a reading of this robot (a bridge reporting mN, a faulty load cell): set aside;
    while the cables move (and ``contact_min_time`` after), the last estimate at rest is held
-   (still solved: the warm start follows each cable's friction direction): the model is a
+   (still solved, every ``HELD_SOLVE_PERIOD``: the warm start follows each cable's friction
+   direction): the model is a
    statics model, and friction turning in a reversed cable is no load;
 3. an input within ``UNCHANGED_SIGMAS`` of the one last solved, once a re-solve no longer moves
    the estimate -> the last estimate unchanged (an unchanged measurement gives an unchanged
@@ -51,6 +52,11 @@ MOVING_SIGMAS = 5.0
 #: Tension readings above their cable's upper limit by more than this many noise standard
 #: deviations are not readings of this robot.
 LIMIT_SIGMAS = 3.0
+#: While the cables move, the held estimate's warm start is solved at most once in this many
+#: seconds (it only follows each cable's friction direction; the estimate is not published).
+#: Solved at every tick (up to 100 Hz) it took 4.1-4.5 s of a core over the README set-up's
+#: ten goals, 245-416 solves; at this period 2.1-2.8 s, 121-138 (statics shares the 2 cores).
+HELD_SOLVE_PERIOD = 0.05
 
 
 class Verdict(enum.Enum):
@@ -104,6 +110,7 @@ class LoadWatch:
         self._settled = False  # re-solving that measurement no longer moves the estimate
         self._rejected = None  # (measurement vector, reason) of the last one set aside
         self._still = None  # (lengths, monotonic s): where the cables last stopped moving
+        self._held_solved = None  # monotonic s of the last solve while the cables moved
 
     def measurements(self, inputs, now, timeout, use_tip_pose):
         """Return (keyword arguments of estimate_tip_wrench, '') or (None, reason)."""
@@ -137,6 +144,7 @@ class LoadWatch:
         moving = self._moving(kwargs.get('lengths'), noise, now) and self.published is not None
         if moving:
             return self._held(kwargs, now, solve)
+        self._held_solved = None
         vector, sigma = _measurement_vector(kwargs, noise)
         unchanged = _within(vector, self._solved, UNCHANGED_SIGMAS * sigma)
         if self._rejected is not None and _within(vector, self._rejected[0],
@@ -168,14 +176,17 @@ class LoadWatch:
     def _held(self, kwargs, now, solve):
         """Hold the last estimate at rest while the cables move (a moving rod is no statics).
 
-        Still solved: the warm start follows each cable's friction direction.
+        Still solved, at most every :data:`HELD_SOLVE_PERIOD`: the warm start follows each
+        cable's friction direction.
         """
-        try:
-            estimate = solve(self.estimate, **kwargs)
-        except ValueError:
-            estimate = None
-        if estimate is not None and not _flagged(estimate):
-            self.estimate = estimate
+        if self._held_solved is None or now - self._held_solved >= HELD_SOLVE_PERIOD:
+            self._held_solved = now
+            try:
+                estimate = solve(self.estimate, **kwargs)
+            except ValueError:
+                estimate = None
+            if estimate is not None and not _flagged(estimate):
+                self.estimate = estimate
         self._solved, self._settled, self._rejected = None, False, None
         return Outcome(Verdict.HELD, self.published,
                        contact_changed=self._contact(self.published, now, True))

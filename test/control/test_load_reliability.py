@@ -227,12 +227,27 @@ def test_while_the_cables_move_the_last_estimate_at_rest_holds():
     solver = Solver(rest, *[moving] * 4, fake([0.2, 0.0, 0.0]))
     loads = watch(min_time=0.2)
     assert loads.step(kwargs(0.3), NOISE, 0.0, solver).estimate is rest
-    for k, now in enumerate((0.05, 0.1, 0.2, 0.25)):  # moving, then still for < 0.2 s
+    for k, now in enumerate((0.05, 0.1, 0.2, 0.26)):  # moving, then still for < 0.2 s
         outcome = loads.step(kwargs(0.3 + 1e-3 * min(k + 1, 2)), NOISE, now, solver)
         assert outcome.verdict is Verdict.HELD and outcome.estimate is rest
     # solved meanwhile (friction directions follow), each from the last: the warm starts
     assert solver.warm[1:] == [rest, moving, moving, moving]
     assert loads.step(kwargs(0.302), NOISE, 0.45, solver).verdict is Verdict.PUBLISH
+
+
+def test_while_the_cables_move_the_warm_start_is_solved_every_fifty_milliseconds():
+    """At 100 Hz ticks in motion: a solve every HELD_SOLVE_PERIOD, not every tick (a core)."""
+    rest = fake([0.1, 0.0, 0.0])
+    solver = Solver(rest, *[fake([3.0, 0.0, 0.0])] * 40)
+    loads = watch()
+    loads.step(kwargs(0.3), NOISE, 0.0, solver)
+    ticks = 0.01 * np.arange(1, 101)  # one second of motion
+    for k, now in enumerate(ticks):
+        outcome = loads.step(kwargs(0.3 + 5e-4 * (k + 1)), NOISE, now, solver)  # 50 mm/s
+        assert outcome.verdict is Verdict.HELD and outcome.estimate is rest
+    # 1 s at HELD_SOLVE_PERIOD = 0.05 s: 20, or every sixth tick where 5 ticks add up to a
+    # hair under it (before: all 100)
+    assert 16 <= len(solver.warm) - 1 <= 20
 
 
 def test_a_measurement_set_aside_is_not_solved_again_while_it_stays():
