@@ -59,26 +59,14 @@ class TipLoad:
         """Return True when older than ``timeout`` s (0: never expires)."""
         return timeout > 0.0 and now - self.received > timeout
 
-    def current(self, now, timeout, hold=False):
-        """Return the wrench, or zero once :meth:`expired` unless ``hold``.
-
-        ``hold``: an estimated load (``tip_wrench_source: estimate``) is kept when its estimator
-        is late, since a payload does not vanish with its estimate; zero moved the model tip
-        10 mm under a 0.14 N load while one estimate took 3-4 s and goals were judged there.
-        """
-        return ZERO_LOAD if self.expired(now, timeout) and not hold else self.wrench
-
-
-def current_load(load, now, timeout, hold=False):
-    """Wrench of a :class:`TipLoad` or zero when there is none or it expired (see ``hold``)."""
-    return ZERO_LOAD if load is None else load.current(now, timeout, hold)
-
 
 class TipLoadInput:
     """The tip load a node takes from ``topic``: the newest, whether it expired, what to say.
 
-    ``hold`` (``tip_wrench_source: estimate``): the load is kept past the timeout
-    (:meth:`TipLoad.current`), and :meth:`status` says so for a WARN on /diagnostics.
+    ``hold`` (``tip_wrench_source: estimate``): the load is kept past the timeout, since a
+    payload does not vanish with its estimate (zero load moved the model tip 10 mm under a
+    0.14 N load while one estimate took 3-4 s, and goals were judged there); :meth:`status`
+    says so for a WARN on /diagnostics.
     ``warn`` and ``info`` log once when the load expires and when it comes again.
     """
 
@@ -101,13 +89,14 @@ class TipLoadInput:
 
     def current(self, timeout):
         """Return the wrench (6,) to use now (zero without one); say once that it expired."""
-        now, load = self._clock(), self.load
-        if load is not None and load.expired(now, timeout) and not self.expired:
+        load = self.load
+        expired = load is not None and load.expired(self._clock(), timeout)
+        if expired and not self.expired:
             self.expired = True
             self._warn('%s is older than %.3g s: %s' % (
                 self.topic, timeout, 'its last load kept (the estimator is late or stopped)'
                 if self.hold else 'using zero tip load'))
-        return current_load(load, now, timeout, self.hold)
+        return ZERO_LOAD if load is None or (expired and not self.hold) else load.wrench
 
     def age(self):
         """Seconds since the newest load arrived (inf without one)."""
