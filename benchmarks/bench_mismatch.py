@@ -60,16 +60,21 @@ def main(argv=None):
     parser = argparse.ArgumentParser(prog='python -m benchmarks.bench_mismatch')
     parser.add_argument('--train', type=int, default=400, help='training rows')
     parser.add_argument('--rows', type=int, default=600, help='held-out rows')
+    parser.add_argument('--tracker-only', action='store_true',
+                        help='calibrate on the training run without the coil (as before)')
     args = parser.parse_args(argv)
     nominal, truth = robots()
     tracker, coil = nominal.sensors
     rng = np.random.default_rng(3)
     began = time.monotonic()
     lengths = path(nominal, args.train, seed=1)
-    tips = np.array([_point(shape, tracker)[0] for shape in truth_run(truth, lengths)])
-    tips += rng.normal(0.0, tracker.position_sigma, tips.shape)
+    shapes = truth_run(truth, lengths)
+    seen = [np.array([_point(shape, sensor)[0] for shape in shapes])
+            + rng.normal(0.0, sensor.position_sigma, (args.train, 3))
+            for sensor in (tracker, coil)]
     run = RecordedRun(times=PERIOD * np.arange(args.train), labels=('',) * args.train,
-                      lengths=lengths, tips=tips, source='simulated truth')
+                      lengths=lengths, tips=seen[0], source='simulated truth',
+                      points={} if args.tracker_only else {coil.name: seen[1]})
     bare = nominal.with_model_uncertainty(ModelUncertainty())
     measured, report = model_uncertainty.measure(bare, run)
     print('model_uncertainty from %d training rows (%.0f s): %s' % (

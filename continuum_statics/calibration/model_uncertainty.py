@@ -37,12 +37,15 @@ from continuum_statics.calibration.run_model import RunModel
 from continuum_statics.core.description.sensors import (
     DEFAULT_SENSOR_NOISE,
     ModelUncertainty,
+    Sensor,
     default_model_uncertainty,
 )
 from continuum_statics.core.estimation.gates import chi2_quantile
 from continuum_statics.core.estimation.state_estimation import (
     GROUPS,
     group_sigma,
+    sensor_rows,
+    white_sigma,
 )
 
 #: Occlusion patterns of the fit: (rows seen, rows occluded), repeated over the run.
@@ -90,44 +93,61 @@ def fold_robots(robot, run, fit_names, model, x, workers=None, shear_fixed=False
     return pairs
 
 
-def residual_rows(robot, run):
-    """Replay a run through the estimator; return (residuals (n, 3) m, marker columns (n, 3, k)).
+def run_sensors(robot, run, tracker_noise=None):
+    """Return the [Sensor] a run measures: the tip tracker, then each other sensor it holds.
 
-    Each row is estimated to the end, warm-started from the previous (friction follows each
-    cable's motion); its load columns are the estimator's (refreshed as the tip moves).
+    The tip tracker (``run.tips``, at the robot's ``tip_marker``) has ``tracker_noise`` (None:
+    the robot file's tip sensor's, else :data:`TRACKER_NOISE`); a sensor of the robot file whose
+    points the run holds (``run.points``, the same frame as the tips) has its own noise. A
+    pose sensor's orientation is not used here.
+    """
+    tips = [sensor for sensor in robot.sensors if sensor.at_tip]
+    if tracker_noise is None:
+        tracker_noise = tips[0].position_sigma if tips else TRACKER_NOISE
+    tip = Sensor('tip', robot.length, robot.tip_marker, position_sigma=float(tracker_noise),
+                 at_tip=True)
+    return [tip] + [sensor for sensor in robot.sensors
+                    if not sensor.at_tip and sensor.name in run.points]
+
+
+def residual_rows(robot, run, sensors):
+    """Replay a run through the estimator; return (residuals (n, m) m, point columns (n, m, k)).
+
+    ``sensors``: the [Sensor] of :func:`run_sensors`, m = 3 per sensor, in that order (a row a
+    sensor lacks: NaN; the first is the tip tracker, ``run.tips``). Each row is estimated to
+    the end, warm-started from the previous (friction follows each cable's motion); its load
+    columns are the estimator's (refreshed as the tip moves), at each sensor's point
+    (:func:`sensor_rows`).
     """
     robot = robot.without_load_model()  # the model's own error: a load held is not one
-    residuals = np.full((len(run), 3), np.nan)
+    residuals = np.hstack([run.tips] + [run.points[sensor.name] for sensor in sensors[1:]])
     columns = None
     previous = None
     for i, lengths in enumerate(run.lengths):
         estimate = robot.estimate_shape(lengths, warm_start=previous, exact=True,
                                         stamp=float(run.times[i]))
         previous = estimate
-        shape = estimate.shape
-        arm = shape.tip_rotation @ robot.tip_marker
-        residuals[i] = run.tips[i] - (shape.tip_position + arm)
-        sens = estimate.sensitivity
         if columns is None:
-            columns = np.zeros((len(run), 3, sens.positions.shape[2]))
-        columns[i] = sens.positions[-1] - _skew(arm) @ sens.angles[-1]
+            columns = np.zeros(residuals.shape + (estimate.sensitivity.positions.shape[2],))
+        for j, sensor in enumerate(sensors):
+            point, jac, _ = sensor_rows(estimate.shape, estimate.sensitivity, sensor)
+            residuals[i, 3 * j:3 * j + 3] -= point
+            columns[i, 3 * j:3 * j + 3] = jac[:3]
     return residuals, columns
 
 
-def _skew(v):
-    return np.array([[0.0, -v[2], v[1]], [v[2], 0.0, -v[0]], [-v[1], v[0], 0.0]])
-
-
-def fit(robot, sequences, tracker_noise, patterns=None):
+def fit(robot, sequences, sensors, patterns=None):
     """Return ({group: sigma}, tau) maximising the predictive likelihood of occluded rows.
 
-    ``sequences``: [(times (n,) s, residuals (n, 3) m, marker columns (n, 3, k))], each replayed
-    on its own. The replay of :func:`replay_filter` under each occlusion pattern of ``patterns``
-    (default :data:`OCCLUSION_PATTERNS`): the sum over the rows the tracker does not see of
-    log N(e_i; H_i mean_i, H_i P_i H_i^T + sigma_y^2 I), maximised (Nelder-Mead) over log sigma
-    per group and log tau, and over the offset's sigma and tau alone (the other groups at
-    :data:`SWITCHED_OFF` of their prior: the last-residual baseline's model); the likelier is
-    kept. The rows it sees update the unmodelled loads, as on the robot.
+    ``sequences``: [(times (n,) s, residuals (n, m) m, point columns (n, m, k))] of
+    :func:`residual_rows`, each replayed on its own; ``sensors``: the [Sensor] of their entries,
+    three each (the tip tracker first). The replay of :func:`replay_filter` under each
+    occlusion pattern of ``patterns`` (default :data:`OCCLUSION_PATTERNS`; every sensor seen or
+    occluded together): the sum over the rows the sensors do not see of
+    log N(e_i; H_i mean_i, H_i P_i H_i^T + R), R the sensors' noise, maximised (Nelder-Mead)
+    over log sigma per group and log tau, and over the offset's sigma and tau alone (the other
+    groups at :data:`SWITCHED_OFF` of their prior: the last-residual baseline's model); the
+    likelier is kept. The rows it sees update the unmodelled loads, as on the robot.
     """
     groups = _group_index(robot)
     if robot.model_uncertainty.drift > 0.0:
@@ -145,16 +165,19 @@ def fit(robot, sequences, tracker_noise, patterns=None):
                                              for seen, hidden in patterns or OCCLUSION_PATTERNS])
                 for times, residuals, columns in sequences]
 
+    spread = np.repeat([sensor.position_sigma for sensor in sensors], 3)
+    reach = np.repeat([white_sigma(1.0, sensor.s, robot.length) for sensor in sensors], 3)
+
     def negative_log_likelihood(x, drift=None, replays=occluded, point_noise=0.0):
         sigma = _sigma_vector(groups, np.exp(x[:-1]))
-        noise = math.hypot(tracker_noise, point_noise)  # the tracker sits at the tip
+        noise = np.hypot(spread, point_noise * reach)  # the white error grows as s / L
         total = 0.0
         for times, residuals, columns, masks in replays:
             for seen in masks:
                 innovations, spreads = replay_filter(times, residuals, columns, sigma,
                                                      math.exp(x[-1]), noise, seen, drift)
                 # the rows scored: the occluded ones (all of them when every row is seen)
-                scored = (~seen if not np.all(seen) else seen) & np.all(np.isfinite(residuals),
+                scored = (~seen if not np.all(seen) else seen) & np.any(np.isfinite(residuals),
                                                                         axis=1)
                 solved = np.linalg.solve(spreads[scored], innovations[scored][:, :, None])
                 total += 0.5 * float(np.sum(np.linalg.slogdet(spreads[scored])[1])
@@ -187,7 +210,7 @@ def fit(robot, sequences, tracker_noise, patterns=None):
         sigmas.update(drift=float(sigma), drift_time=float(time))
     sigmas['point_noise'] = _point_noise(
         negative_log_likelihood, best, (sigma, time) if kept else None,
-        [(t, r, c, [np.ones(len(t), bool)]) for t, r, c in sequences], tracker_noise)
+        [(t, r, c, [np.ones(len(t), bool)]) for t, r, c in sequences], sensors[0].position_sigma)
     return sigmas, math.exp(best[-1])
 
 
@@ -217,21 +240,23 @@ def seen_mask(rows, seen, hidden):
     return (np.arange(rows) % (seen + hidden)) < seen
 
 
-def replay_filter(times, residuals, columns, sigma, tau, tracker_noise, seen, drift=None):
-    """Replay the unmodelled loads' filter in the tracker's coordinates (no solves).
+def replay_filter(times, residuals, columns, sigma, tau, noise, seen, drift=None):
+    """Replay the unmodelled loads' filter in the sensors' coordinates (no solves).
 
-    ``residuals`` (n, 3): measured minus the model's marker point; ``columns`` (n, 3, k): the
-    marker rows of the load columns; ``sigma`` (k,) the prior; ``seen`` (n,) rows the tracker
-    is used on; ``drift``: (sigma m, time s) of the drift, or None. Returns each row's
-    innovation (n, 3) before its update and its covariance (n, 3, 3) (the prediction error of
-    an occluded row and what the estimate says of it). The arithmetic of
+    ``residuals`` (n, m): measured minus the model's points (NaN: not measured); ``columns``
+    (n, m, k): the points' rows of the load columns; ``sigma`` (k,) the prior; ``noise`` (m,)
+    or one value, m; ``seen`` (n,) rows the sensors are used on; ``drift``: (sigma m, time s)
+    of the drift, or None. Returns each row's innovation (n, m) before its update and its
+    covariance (n, m, m) (the prediction error of an occluded row and what the estimate says
+    of it). The arithmetic of
     :func:`state_estimation.decayed` / :func:`state_estimation.fused`, the estimator's, compiled
     (:mod:`.filter_replay`).
     """
     sigma, columns, drift_time = with_drift(sigma, columns, drift)
     return replay_rows(np.asarray(times, dtype=float), np.ascontiguousarray(residuals, float),
                        np.ascontiguousarray(columns, float), np.ascontiguousarray(sigma, float),
-                       float(tau), float(drift_time or 0.0), float(tracker_noise),
+                       float(tau), float(drift_time or 0.0),
+                       np.broadcast_to(np.asarray(noise, dtype=float), residuals.shape[1:]).copy(),
                        np.asarray(seen, dtype=bool))
 
 
@@ -244,9 +269,11 @@ def with_drift(sigma, columns, drift):
         return sigma, columns, None
     rate = group_sigma(ModelUncertainty(drift=drift[0], drift_time=drift[1]), 'drift_rate')
     sigma = np.concatenate([sigma, [drift[0]] * 3, [rate] * 3])
-    # the drift moves the marker as an offset; its rate moves nothing now
-    columns = np.concatenate([columns, np.broadcast_to(np.eye(3), (len(columns), 3, 3)),
-                              np.zeros((len(columns), 3, 3))], axis=2)
+    # the drift moves every point as an offset; its rate moves nothing now
+    rows = columns.shape[1]
+    columns = np.concatenate([columns, np.broadcast_to(np.tile(np.eye(3), (rows // 3, 1)),
+                                                       (len(columns), rows, 3)),
+                              np.zeros((len(columns), rows, 3))], axis=2)
     return sigma, columns, drift[1]
 
 
@@ -273,18 +300,19 @@ def measure(robot, run, tracker_noise=None, folds=None):
     was not fitted to; without them the residuals are ``robot``'s on the whole ``run`` (rows
     it may have been fitted to: a smaller scale than a held-out run's).
     """
-    if tracker_noise is None:
-        tips = [sensor for sensor in robot.sensors if sensor.at_tip]
-        tracker_noise = tips[0].position_sigma if tips else TRACKER_NOISE
+    sensors = run_sensors(robot, run, tracker_noise)
     prior = default_model_uncertainty(robot.c[0], robot.length)
     sequences = []
     for fold_robot, rows in folds or [(robot, run)]:
-        residuals, columns = residual_rows(fold_robot.with_model_uncertainty(prior), rows)
+        residuals, columns = residual_rows(fold_robot.with_model_uncertainty(prior), rows,
+                                           sensors)
         sequences.append((rows.times, residuals, columns))
     robot = robot.with_model_uncertainty(prior)
-    sigmas, tau = fit(robot, sequences, tracker_noise)
+    sigmas, tau = fit(robot, sequences, sensors)
     uncertainty = ModelUncertainty(correlation_time=tau, **sigmas)
-    rms = math.sqrt(np.nanmean(np.concatenate([np.sum(r ** 2, axis=1)
+    rms = math.sqrt(np.nanmean(np.concatenate([np.sum(r[:, :3] ** 2, axis=1)
                                                for _, r, _ in sequences])))
-    return uncertainty, {'tracker_noise': tracker_noise, 'correlation_time': tau,
-                         'residual_rms': rms, 'cross_validated': folds is not None, **sigmas}
+    return uncertainty, {'tracker_noise': sensors[0].position_sigma,
+                         'sensors': [sensor.name for sensor in sensors[1:]],
+                         'correlation_time': tau, 'residual_rms': rms,
+                         'cross_validated': folds is not None, **sigmas}

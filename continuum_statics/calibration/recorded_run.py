@@ -6,7 +6,9 @@ A recorded run is what ``calibrate`` fits a robot model to. Two sources are read
   column per cable name with its length as ``cable_states`` reports it (m) and ``tip_x, tip_y,
   tip_z`` (m). Other labs' files are read through a :class:`ColumnMap`: which column is which
   cable, whether it holds a length or a motor-side displacement, and the units. Lines starting
-  with ``#`` are comments.
+  with ``#`` are comments. Other sensors of the robot file (an EM coil on the body) may have
+  columns ``<name>_x, <name>_y, <name>_z`` in the tips' units and frame, empty where they gave
+  nothing: ``calibrate --model-uncertainty`` measures the model's error at their points too.
 - a rosbag2 recording (directory or ``.mcap`` file): ``.../cable_states`` (JointState, lengths
   in m) and a measured tip topic (PoseStamped, m). Each tip message is one sample, paired with
   the latest cable_states at or before it.
@@ -14,7 +16,7 @@ A recorded run is what ``calibrate`` fits a robot model to. Two sources are read
 Lengths come out in the robot's cable order, in m; tips in m, in the tracker's frame.
 """
 import csv
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 import math
 from pathlib import Path
 
@@ -110,6 +112,8 @@ class RecordedRun:
     lengths: np.ndarray  # (n, n_cables) m, robot cable order, motor-side as cable_states has them
     tips: np.ndarray     # (n, 3) m, tracker frame
     source: str          # file path
+    #: {sensor name: (n, 3) m} other sensors' points, tracker frame (NaN: none on that row)
+    points: dict = field(default_factory=dict)
 
     def __len__(self):
         return len(self.times)
@@ -123,11 +127,12 @@ class RecordedRun:
         return RecordedRun(times=self.times[index],
                            labels=tuple(np.array(self.labels, dtype=object)[index]),
                            lengths=self.lengths[index], tips=self.tips[index],
-                           source=self.source)
+                           source=self.source,
+                           points={name: p[index] for name, p in self.points.items()})
 
 
 def read_recorded_run(path, cable_names, straight_lengths, column_map=ColumnMap(),
-                      tip_topic='tip_pose_measured'):
+                      tip_topic='tip_pose_measured', sensor_names=()):
     """Read a recorded run from a CSV file or a rosbag2 recording (directory or ``.mcap``).
 
     :param cable_names: the robot's cable names (the order of ``lengths`` columns)
@@ -135,13 +140,16 @@ def read_recorded_run(path, cable_names, straight_lengths, column_map=ColumnMap(
         (``robot.straight_cable_lengths``); used by displacement columns
     :param column_map: CSV columns (ignored for a bag)
     :param tip_topic: bag topic (or its last name parts) of the measured tip PoseStamped
+    :param sensor_names: other sensors whose points a CSV file may hold, as columns
+        ``<name>_x, <name>_y, <name>_z`` (the tips' scale and frame; an empty or ``nan`` cell:
+        none on that row), read into ``points``
     :raises ValueError: naming the file, and the row and column, of what cannot be read
     """
     path = Path(path)
     cable_names = list(cable_names)
     if path.is_dir() or path.suffix == '.mcap':
         return _read_bag(path, cable_names, tip_topic)
-    return _read_csv(path, cable_names, straight_lengths, column_map)
+    return _read_csv(path, cable_names, straight_lengths, column_map, sensor_names)
 
 
 def check_tip_units(tips, rod_length, source, option='--tip-scale 0.001'):
@@ -158,7 +166,7 @@ def check_tip_units(tips, rod_length, source, option='--tip-scale 0.001'):
                          % (source, spread, rod_length, rod_length, option))
 
 
-def _read_csv(path, cable_names, straight_lengths, columns):
+def _read_csv(path, cable_names, straight_lengths, columns, sensor_names=()):
     cable_columns = list(columns.cables or cable_names)
     if len(cable_columns) != len(cable_names):
         raise ValueError('%d cable columns (%s) for a robot of %d cables (%s)' % (
@@ -192,7 +200,10 @@ def _read_csv(path, cable_names, straight_lengths, columns):
         numeric.append(columns.time)
     at = [header.index(c) for c in numeric]
     label_at = header.index(columns.label) if columns.label in header else None
-    values, labels = [], []
+    sensor_at = {name: [header.index('%s_%s' % (name, axis)) for axis in 'xyz']
+                 for name in sensor_names
+                 if all('%s_%s' % (name, axis) in header for axis in 'xyz')}
+    values, labels, points = [], [], []
     for row_number, (line_number, line) in enumerate(lines[1:], start=1):
         where = '%s, row %d (line %d)' % (path, row_number, line_number)
         cells = next(csv.reader([line]))
@@ -210,6 +221,8 @@ def _read_csv(path, cable_names, straight_lengths, columns):
                 raise ValueError('%s, column %s: %r is not finite' % (where, name, cells[i]))
             row.append(value)
         values.append(row)
+        points.append([_optional(cells[i], where, header[i]) for at in sensor_at.values()
+                       for i in at])
         labels.append(cells[label_at].strip() if label_at is not None else '')
         if has_time and len(values) > 1 and row[-1] < values[-2][-1]:
             raise ValueError("%s, column %s: time %r is before the previous row's %r "
@@ -225,7 +238,20 @@ def _read_csv(path, cable_names, straight_lengths, columns):
     return RecordedRun(
         times=table[:, -1] if has_time else np.arange(len(table), dtype=float),
         labels=tuple(labels), lengths=cables, tips=table[:, n:n + 3] * columns.tip_scale,
-        source=str(path))
+        source=str(path), points={name: np.array(points, dtype=float).reshape(len(table), -1)
+                                  [:, 3 * j:3 * j + 3] * columns.tip_scale
+                                  for j, name in enumerate(sensor_at)})
+
+
+def _optional(cell, where, name):
+    """Return a sensor cell's value: NaN when empty or ``nan`` (no reading on that row)."""
+    try:
+        value = float(cell) if cell.strip() else math.nan
+    except ValueError:
+        raise ValueError('%s, column %s: %r is not a number' % (where, name, cell)) from None
+    if math.isinf(value):
+        raise ValueError('%s, column %s: %r is not finite' % (where, name, cell))
+    return value
 
 
 def _stamp(msg, received):

@@ -27,7 +27,8 @@ from continuum_statics.calibration.selection import select
 def read_run(path, robot, column_map, tip_topic='tip_pose_measured'):
     """Read a recorded run (CSV or bag) in the robot's cable order, SI units, tips checked."""
     run = read_recorded_run(path, robot.cable_names, robot.straight_cable_lengths, column_map,
-                            tip_topic)
+                            tip_topic, [sensor.name for sensor in robot.sensors
+                                        if not sensor.at_tip])
     check_tip_units(run.tips, robot.length, path)
     return run
 

@@ -88,6 +88,27 @@ def test_length_columns_named_as_cables(tmp_path):
     assert run.labels == ('', '')
 
 
+def test_other_sensors_columns_are_read_with_the_tips_scale_and_gaps(tmp_path):
+    data = tmp_path / 'run.csv'
+    data.write_text('timestamp,c0,c1,tip_x,tip_y,tip_z,em_coil_x,em_coil_y,em_coil_z,other_x\n'
+                    '0.0,0.1,0.1,1,2,300,4,5,150,9\n'
+                    '0.1,0.1,0.1,1,2,300,,,,9\n'      # the coil gave nothing on this row
+                    '0.2,0.1,0.1,1,2,300,nan,nan,nan,9\n'
+                    '0.3,0.1,0.1,1,2,300,6,7,151,9\n')
+    run = read_recorded_run(data, ['c0', 'c1'], None, ColumnMap(tip_scale=0.001),
+                            sensor_names=['em_coil', 'other', 'absent'])
+    assert list(run.points) == ['em_coil']  # 'other' lacks two of its columns: not a point
+    np.testing.assert_array_equal(run.points['em_coil'][[0, 3]],
+                                  [[0.004, 0.005, 0.150], [0.006, 0.007, 0.151]])
+    assert np.all(np.isnan(run.points['em_coil'][1:3]))
+    np.testing.assert_array_equal(run.subset([3, 0]).points['em_coil'],
+                                  run.points['em_coil'][[3, 0]])
+    assert read_recorded_run(data, ['c0', 'c1'], None).points == {}  # not asked: not read
+    data.write_text(data.read_text().replace(',6,7,', ',6,x7,'))
+    with pytest.raises(ValueError, match=r'row 4 \(line 5\), column em_coil_y: .x7. is not a'):
+        read_recorded_run(data, ['c0', 'c1'], None, sensor_names=['em_coil'])
+
+
 GOOD = 'timestamp,c0,c1,tip_x,tip_y,tip_z\n0.0,0.1,0.1,0,0,0.3\n0.5,0.1,0.1,0,0,0.3\n'
 
 

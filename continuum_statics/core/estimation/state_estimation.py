@@ -636,7 +636,7 @@ def _rows_at(history, stamp, sensor, shape, sensitivity, origin=None):
     None when the rows are the current estimate's.
     """
     if stamp is None or not history or stamp >= history[-1][0]:
-        return (*_sensor_rows(shape, sensitivity, sensor), None)
+        return (*sensor_rows(shape, sensitivity, sensor), None)
     if stamp < history[0][0]:
         return None
     after = max(bisect.bisect_left(history, stamp, key=lambda moment: moment[0]), 1)
@@ -644,10 +644,10 @@ def _rows_at(history, stamp, sensor, shape, sensitivity, origin=None):
                                                                   history[after])
     k = sensitivity.positions.shape[2]
     if sens0.positions.shape[2] != k or sens1.positions.shape[2] != k:
-        return (*_sensor_rows(shape, sensitivity, sensor), None)  # other unmodelled loads then
+        return (*sensor_rows(shape, sensitivity, sensor), None)  # other unmodelled loads then
     w = min(max((stamp - t0) / (t1 - t0), 0.0), 1.0) if t1 > t0 else 1.0
-    point0, jac0, rotation0 = _sensor_rows(shape0, sens0, sensor)
-    point1, jac1, rotation1 = _sensor_rows(shape1, sens1, sensor)
+    point0, jac0, rotation0 = sensor_rows(shape0, sens0, sensor)
+    point1, jac1, rotation1 = sensor_rows(shape1, sens1, sensor)
     shift = np.zeros(len(jac0))
     if origin is not None:
         shift = ((1.0 - w) * jac0 @ (origin - origin0) + w * jac1 @ (origin - origin1))
@@ -810,7 +810,7 @@ def _small_rotations(rotations, reference):
                            delta[:, 1, 0] - delta[:, 0, 1]], axis=1)
 
 
-def _sensor_rows(shape, sensitivity, sensor):
+def sensor_rows(shape, sensitivity, sensor):
     """Return (prediction (3,), H (3 or 6, k), rotation) of ``sensor`` at ``shape`` (d = 0)."""
     lower, upper, w, near = _placement(shape.s, sensor)
     rotation = shape.rotations[near]
@@ -861,7 +861,7 @@ def _sensor_measurement(robot, shape, sensitivity, prior, sensor, reading, stamp
     if rows is None:
         return None
     predicted, jac, rotation, shift = rows
-    judged = jac[:3] if shift is None else _sensor_rows(shape, sensitivity, sensor)[1][:3]
+    judged = jac[:3] if shift is None else sensor_rows(shape, sensitivity, sensor)[1][:3]
     shift = np.zeros(len(jac)) if shift is None else shift
     moved = prior.correction  # what the model's shape does not have yet
     innovation = reading.position - predicted - shift[:3] - jac[:3] @ moved
@@ -1146,7 +1146,7 @@ def point_covariance(estimate, sensor):
 
     The model's part only: add ``sensor.position_sigma ** 2`` to compare with a reading.
     """
-    _, jac, rotation = _sensor_rows(estimate.shape, estimate.sensitivity, sensor)
+    _, jac, rotation = sensor_rows(estimate.shape, estimate.sensitivity, sensor)
     jac = jac[:3]
     unmodelled = estimate.unmodelled
     if sensor.at_tip and unmodelled.tip_white is not None:
