@@ -223,6 +223,8 @@ def _run_report(summary):
             lines[-1] += ', drift %.3g mm over %.3g s' % (1e3 * u['drift'], u['drift_time'])
         if u.get('point_noise'):
             lines[-1] += ', point noise %.3g mm at the tip' % (1e3 * u['point_noise'])
+        if u.get('sensors'):
+            lines[-1] += '; measured at the tip and at %s' % ', '.join(u['sensors'])
     if summary['output']:
         lines.append('wrote %s' % summary['output'])
     return '\n'.join(lines)

@@ -7,12 +7,14 @@ import pytest
 from rosbags.rosbag2 import StoragePlugin, Writer
 from rosbags.typesys import Stores, get_typestore
 
+from continuum_statics import load_robot
 from continuum_statics.calibration.recorded_run import (
     ColumnMap,
     add_column_arguments,
     column_map_from_args,
     read_recorded_run,
 )
+from continuum_statics.calibration.runs import read_run
 
 V6 = REPO / 'test' / 'data' / 'ftdcr_v6' / 'tendon_pull_subset.csv'
 V6_OPTIONS = ['--cable-columns', 'servo_3_mm,servo_1_mm,servo_20_mm,servo_23_mm,servo_9_mm,'
@@ -107,6 +109,19 @@ def test_other_sensors_columns_are_read_with_the_tips_scale_and_gaps(tmp_path):
     data.write_text(data.read_text().replace(',6,7,', ',6,x7,'))
     with pytest.raises(ValueError, match=r'row 4 \(line 5\), column em_coil_y: .x7. is not a'):
         read_recorded_run(data, ['c0', 'c1'], None, sensor_names=['em_coil'])
+
+
+def test_calibrate_reads_the_robot_files_other_sensors_and_not_its_tip_tracker(tmp_path):
+    robot = load_robot(REPO / 'config' / 'tendon_robot_sensors.yaml')  # tip_tracker, em_coil
+    names = ['%s_%s' % (sensor, axis) for sensor in ('tip_tracker', 'em_coil') for axis in 'xyz']
+    data = tmp_path / 'run.csv'
+    data.write_text(','.join(list(robot.cable_names) + ['tip_x', 'tip_y', 'tip_z'] + names)
+                    + '\n' + ','.join(['%.6f' % x for x in robot.straight_cable_lengths]
+                                      + ['0', '0', '0.3', '0', '0', '0.3', '0', '0', '0.15'])
+                    + '\n')
+    run = read_run(data, robot, ColumnMap())
+    assert list(run.points) == ['em_coil']  # the tip tracker's points are the run's tips
+    np.testing.assert_array_equal(run.points['em_coil'], [[0.0, 0.0, 0.15]])
 
 
 GOOD = 'timestamp,c0,c1,tip_x,tip_y,tip_z\n0.0,0.1,0.1,0,0,0.3\n0.5,0.1,0.1,0,0,0.3\n'
