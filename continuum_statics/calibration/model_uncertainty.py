@@ -304,8 +304,9 @@ def measure(robot, run, tracker_noise=None, folds=None):
     prior = default_model_uncertainty(robot.c[0], robot.length)
     sequences = []
     for fold_robot, rows in folds or [(robot, run)]:
+        # each fold's own tip marker and length (fit names): its residuals are its robot's
         residuals, columns = residual_rows(fold_robot.with_model_uncertainty(prior), rows,
-                                           sensors)
+                                           run_sensors(fold_robot, rows, tracker_noise))
         sequences.append((rows.times, residuals, columns))
     robot = robot.with_model_uncertainty(prior)
     sigmas, tau = fit(robot, sequences, sensors)
