@@ -11,7 +11,9 @@ A recorded run is what ``calibrate`` fits a robot model to. Two sources are read
   nothing: ``calibrate --model-uncertainty`` measures the model's error at their points too.
 - a rosbag2 recording (directory or ``.mcap`` file): ``.../cable_states`` (JointState, lengths
   in m) and a measured tip topic (PoseStamped, m). Each tip message is one sample, paired with
-  the latest cable_states at or before it.
+  the latest cable_states at or before it. Another sensor's ``.../sensors/<name>``
+  (PoseStamped or PoseWithCovarianceStamped, the tips' frame) gives a sample its point when one
+  of its messages is stamped within :data:`PAIRING_WINDOW` of the tip's.
 
 Lengths come out in the robot's cable order, in m; tips in m, in the tracker's frame.
 """
@@ -25,6 +27,10 @@ import numpy as np
 from continuum_statics.calibration.bag_reading import open_bag, pick_connections
 
 KINDS = ('length', 'displacement')
+#: s: a bag's sensor message pairs with the tip sample stamped nearest to it, this close (a
+#: 40 Hz EM coil beside a 120 Hz tracker: within 12.5 ms)
+PAIRING_WINDOW = 0.02
+_SENSOR_TYPES = ('geometry_msgs/msg/PoseStamped', 'geometry_msgs/msg/PoseWithCovarianceStamped')
 
 
 @dataclass(frozen=True)
@@ -140,15 +146,15 @@ def read_recorded_run(path, cable_names, straight_lengths, column_map=ColumnMap(
         (``robot.straight_cable_lengths``); used by displacement columns
     :param column_map: CSV columns (ignored for a bag)
     :param tip_topic: bag topic (or its last name parts) of the measured tip PoseStamped
-    :param sensor_names: other sensors whose points a CSV file may hold, as columns
-        ``<name>_x, <name>_y, <name>_z`` (the tips' scale and frame; an empty or ``nan`` cell:
-        none on that row), read into ``points``
+    :param sensor_names: other sensors whose points the run may hold, read into ``points``: a
+        CSV's columns ``<name>_x, <name>_y, <name>_z`` (the tips' scale and frame; an empty or
+        ``nan`` cell: none on that row), a bag's ``.../sensors/<name>`` topic
     :raises ValueError: naming the file, and the row and column, of what cannot be read
     """
     path = Path(path)
     cable_names = list(cable_names)
     if path.is_dir() or path.suffix == '.mcap':
-        return _read_bag(path, cable_names, tip_topic)
+        return _read_bag(path, cable_names, tip_topic, sensor_names)
     return _read_csv(path, cable_names, straight_lengths, column_map, sensor_names)
 
 
@@ -260,7 +266,7 @@ def _stamp(msg, received):
     return stamp if stamp != 0 else received
 
 
-def _read_bag(path, cable_names, tip_topic):
+def _read_bag(path, cable_names, tip_topic, sensor_names=()):
     reader = open_bag(path)
     try:
         connections = list(reader.connections)
@@ -275,16 +281,27 @@ def _read_bag(path, cable_names, tip_topic):
             raise ValueError('bag %s has no .../%s PoseStamped topic (topics: %s)'
                              % (path, tip_topic, topics))
         tip_ids = {c.id for c in tip}
+        sensors = {}  # connection id -> sensor name
+        for name in sensor_names:
+            for msgtype in _SENSOR_TYPES:
+                sensors.update((c.id, name) for c in pick_connections(
+                    connections, 'sensors/' + name, msgtype))
+        seen = {name: ([], []) for name in set(sensors.values())}
+        frames = {}  # topic kind ('tip' or a sensor name) -> the frame ids of its messages
         column = {name: j for j, name in enumerate(cable_names)}
         orders = {}  # JointState name tuple -> robot cable index of each entry
         state_times, state_lengths, tip_times, tip_points = [], [], [], []
-        for connection, received, raw in reader.messages(connections=states + tip):
+        chosen = [c for c in connections if c.id in sensors]
+        for connection, received, raw in reader.messages(connections=states + tip + chosen):
             msg = reader.deserialize(raw, connection.msgtype)
             t = _stamp(msg, received)
-            if connection.id in tip_ids:
-                p = msg.pose.position
-                tip_times.append(t)
-                tip_points.append((p.x, p.y, p.z))
+            if connection.id in tip_ids or connection.id in sensors:
+                pose = msg.pose.pose if hasattr(msg.pose, 'pose') else msg.pose
+                kind = sensors.get(connection.id, 'tip')
+                frames.setdefault(kind, set()).add(msg.header.frame_id)
+                times, points = (tip_times, tip_points) if kind == 'tip' else seen[kind]
+                times.append(t)
+                points.append((pose.position.x, pose.position.y, pose.position.z))
                 continue
             names = tuple(msg.name)
             if names not in orders:
@@ -312,9 +329,38 @@ def _read_bag(path, cable_names, tip_topic):
     latest = np.searchsorted(state_times, tip_times, side='right') - 1
     # a tracker that loses the marker publishes NaN: such a sample carries no measurement
     keep = (latest >= 0) & np.all(np.isfinite(tip_points), axis=1)
+    tip_frames = frames.get('tip', set()) - {''}
+    for name in seen:
+        # an empty frame id: the sender's default, taken as the tips'
+        named = frames.get(name, set()) - {''}
+        if named and named != tip_frames:
+            raise ValueError('bag %s: sensors/%s is in frame %s, the tips in %s: calibrate reads '
+                             'them in one frame' % (path, name, ', '.join(sorted(named)),
+                                                    ', '.join(sorted(tip_frames)) or '""'))
     return RecordedRun(times=tip_times[keep] * 1e-9, labels=('',) * int(keep.sum()),
                        lengths=state_lengths[latest[keep]], tips=tip_points[keep],
-                       source=str(path))
+                       source=str(path), points={name: _paired(tip_times[keep], *seen[name])
+                                                 for name in sorted(seen)})
+
+
+def _paired(sample_times, times, points):
+    """Return (n, 3) m: each sample's nearest sensor point stamped within the window, else NaN.
+
+    ``sample_times`` sorted (ns); ``times`` (ns) and ``points`` a sensor's messages, any order.
+    """
+    order = np.argsort(times, kind='stable')
+    times = np.asarray(times, dtype=np.int64)[order]
+    points = np.asarray(points, dtype=float).reshape(-1, 3)[order]
+    out = np.full((len(sample_times), 3), np.nan)
+    if not len(times):
+        return out
+    at = np.searchsorted(times, sample_times)
+    before, after = np.maximum(at - 1, 0), np.minimum(at, len(times) - 1)
+    nearest = np.where(np.abs(times[before] - sample_times)
+                       <= np.abs(times[after] - sample_times), before, after)
+    close = np.abs(times[nearest] - sample_times) <= PAIRING_WINDOW * 1e9
+    out[close] = points[nearest[close]]
+    return out
 
 
 def _order(names, column, path, topic):

@@ -1,5 +1,6 @@
 """Recorded runs from CSV (the real FTDCR v6 subset, the project's own layout) and rosbag2."""
 import argparse
+import dataclasses
 
 from conftest import REPO
 import numpy as np
@@ -172,10 +173,12 @@ def bag_lengths(k):
     return [0.1 + 0.01 * ROBOT_CABLES.index(name) + 0.001 * k for name in BAG_NAMES]
 
 
-def write_bag(directory, tip_times, stamped=True, names=BAG_NAMES, delays=None):
+def write_bag(directory, tip_times, stamped=True, names=BAG_NAMES, delays=None, coil=()):
     """cable_states at 10 Hz from 1000 s (stamp 1000 + k/10), a tip at each of ``tip_times``.
 
-    ``delays`` {('states' or 'tip', index): s} adds to a message's receive time.
+    ``delays`` {('states' or 'tip', index): s} adds to a message's receive time; ``coil``
+    [(stamp s, (x, y, z) m, frame id)] on ``/em/sensors/em_coil``
+    (PoseWithCovarianceStamped).
     """
     delays = delays or {}
     JointState = STORE.types['sensor_msgs/msg/JointState']
@@ -196,12 +199,23 @@ def write_bag(directory, tip_times, stamped=True, names=BAG_NAMES, delays=None):
             orientation=Quaternion(x=0.0, y=0.0, z=0.0, w=1.0)))
         latency = (TIP_LATENCY if stamped else 0.0) + delays.get(('tip', i), 0.0)
         messages.append((t + latency, 'tip', msg))
+    Covariant = STORE.types['geometry_msgs/msg/PoseWithCovariance']
+    for t, (x, y, z), frame in coil:
+        msg = STORE.types['geometry_msgs/msg/PoseWithCovarianceStamped'](
+            header=dataclasses.replace(header(t), frame_id=frame), pose=Covariant(
+                pose=Pose(position=Point(x=x, y=y, z=z),
+                          orientation=Quaternion(x=0.0, y=0.0, z=0.0, w=1.0)),
+                covariance=np.zeros(36)))
+        messages.append((t + 0.03, 'coil', msg))
     with Writer(directory, version=9, storage_plugin=StoragePlugin.MCAP) as writer:
         connections = {
             'states': writer.add_connection('/continuum/cable_states',
                                             'sensor_msgs/msg/JointState', typestore=STORE),
             'tip': writer.add_connection('/mocap/tip_pose_measured',
-                                         'geometry_msgs/msg/PoseStamped', typestore=STORE)}
+                                         'geometry_msgs/msg/PoseStamped', typestore=STORE),
+            'coil': writer.add_connection('/em/sensors/em_coil',
+                                          'geometry_msgs/msg/PoseWithCovarianceStamped',
+                                          typestore=STORE)}
         for received, role, msg in sorted(messages, key=lambda m: m[0]):
             writer.write(connections[role], round(received * 1e9),
                          STORE.serialize_cdr(msg, connections[role].msgtype))
@@ -267,3 +281,20 @@ def test_bag_cable_names_must_be_the_robots(tmp_path, names, expected):
     with pytest.raises(ValueError, match=expected) as error:
         read_recorded_run(bag, ROBOT_CABLES, None)
     assert str(bag) in str(error.value)
+
+
+def test_bag_sensor_points_pair_with_the_nearest_tip_sample_or_none(tmp_path):
+    # tips at 1000.25 / 1000.5 / 1000.75; the coil 5 ms after the first, 15 ms before the
+    # third (the nearer of two), none within 20 ms of the second
+    coil = [(1000.255, (0.0, 0.0, 0.15), 'world'), (1000.45, (9.0, 9.0, 9.0), 'world'),
+            (1000.735, (0.01, 0.0, 0.15), 'world'), (1000.72, (8.0, 8.0, 8.0), 'world')]
+    bag = write_bag(tmp_path / 'run', [1000.25, 1000.5, 1000.75], coil=coil)
+    run = read_recorded_run(bag, ROBOT_CABLES, None, sensor_names=['em_coil', 'absent'])
+    assert list(run.points) == ['em_coil']
+    np.testing.assert_allclose(run.points['em_coil'][[0, 2]], [[0.0, 0.0, 0.15],
+                                                               [0.01, 0.0, 0.15]])
+    assert np.all(np.isnan(run.points['em_coil'][1]))
+    assert read_recorded_run(bag, ROBOT_CABLES, None).points == {}  # not asked: not read
+    other = write_bag(tmp_path / 'other', [1000.25], coil=[(1000.25, (0, 0, 0.15), 'em')])
+    with pytest.raises(ValueError, match='sensors/em_coil is in frame em, the tips in world'):
+        read_recorded_run(other, ROBOT_CABLES, None, sensor_names=['em_coil'])
