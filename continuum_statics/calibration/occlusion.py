@@ -7,7 +7,9 @@ sensor that is seen on blocks of rows and occluded on the blocks between. On the
 it reports the error of the fused estimate, of the model alone (the same replay without the
 tracker: ``solve_lengths`` row by row) and of the simple baseline (the model plus the last seen
 residual, decayed with a 10 s time constant), and how many occluded rows the estimate's 95 %
-ellipsoid holds (the marker point's covariance plus the tracker's noise).
+ellipsoid holds (the marker point's covariance plus the tracker's noise). The run's other
+sensors (``run.points``: a coil on the body) are read with the tracker on the rows it sees and
+occluded with it, as ``calibrate`` measured the model's error.
 """
 from dataclasses import dataclass
 import math
@@ -54,6 +56,7 @@ def tip_sensor(robot):
 def occlusion_replay(robot, run, seen, hidden, model_points=None):
     """Replay ``run`` with the tip tracker seen ``seen`` rows, then occluded ``hidden``."""
     sensor = tip_sensor(robot)
+    others = [other for other in robot.sensors if other.name in run.points and other is not sensor]
     if model_points is None:
         model_points = replay(robot, run)[0]
     mask = seen_mask(len(run), seen, hidden)
@@ -62,7 +65,11 @@ def occlusion_replay(robot, run, seen, hidden, model_points=None):
     previous, last = None, None
     for i, lengths in enumerate(run.lengths):
         stamp = float(run.times[i])
-        readings = {sensor.name: SensorReading(run.tips[i], stamp=stamp)} if mask[i] else None
+        readings = None
+        if mask[i]:
+            readings = {sensor.name: SensorReading(run.tips[i], stamp=stamp)}
+            readings.update((other.name, SensorReading(run.points[other.name][i], stamp=stamp))
+                            for other in others if np.all(np.isfinite(run.points[other.name][i])))
         began = time.perf_counter()
         estimate = robot.estimate_shape(lengths, warm_start=previous, exact=True,
                                         sensors=readings, stamp=stamp)

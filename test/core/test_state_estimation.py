@@ -574,6 +574,44 @@ def test_calibrate_from_two_sensors_recovers_a_known_hidden_offset_seen_by_both(
     assert measured.point_noise < tracker.position_sigma, report
 
 
+def test_the_occlusion_replay_reads_the_runs_other_sensors_with_the_tracker():
+    """A run whose tracker and EM coil both see the model plus one offset (2 mm, 8 s).
+
+    The coil is read on the rows the tracker sees and occluded with it. Its benefit hides in
+    the protocol's yardstick here (the occluded rows' error is against the tracker's noisy
+    readings, and the offset moves more in an occluded block than one reading's noise): seen,
+    2.52 mm against 2.39 without it, coverage 88 and 92 %.
+    """
+    robot = load_robot(SENSOR_ROBOT)
+    tracker, coil = robot.sensors
+    rng = np.random.default_rng(4)
+    rows, sigma, tau = 120, 2e-3, 8.0
+    times = np.cumsum(rng.uniform(0.3, 0.7, rows))
+    offset = np.empty((rows, 3))
+    offset[0] = rng.normal(0.0, sigma, 3)
+    for i in range(1, rows):
+        a = math.exp(-(times[i] - times[i - 1]) / tau)
+        offset[i] = a * offset[i - 1] + math.sqrt(1 - a * a) * rng.normal(0.0, sigma, 3)
+    lengths = robot.straight_cable_lengths - rng.uniform(0.0, 0.006, (rows, 4))
+    tips, coils, previous = np.empty((rows, 3)), np.empty((rows, 3)), None
+    for i in range(rows):
+        previous = robot.solve_lengths(lengths[i], warm_start=previous)
+        shape = previous.shape
+        tips[i] = (shape.tip_position + shape.tip_rotation @ tracker.offset + offset[i]
+                   + rng.normal(0.0, tracker.position_sigma, 3))
+        coils[i] = ([np.interp(coil.s, shape.s, shape.positions[:, k]) for k in range(3)]
+                    + offset[i] + rng.normal(0.0, coil.position_sigma, 3))
+    robot = robot.with_model_uncertainty(ModelUncertainty(base_position=sigma,
+                                                          correlation_time=tau))
+    run = RecordedRun(times=times, labels=('',) * rows, lengths=lengths, tips=tips,
+                      source='synthetic', points={coil.name: coils})
+    alone = occlusion_replay(robot, dataclasses.replace(run, points={}), 5, 5)
+    both = occlusion_replay(robot, run, 5, 5)
+    assert both.fused != alone.fused  # the coil's readings moved the estimate
+    assert abs(both.fused - alone.fused) < 0.1 * alone.fused and both.coverage > 0.85
+    assert both.model == alone.model and both.rows == alone.rows == 60
+
+
 def _truth_points(truth, lengths, sensor):
     points, previous = [], None
     for row in lengths:
