@@ -206,9 +206,15 @@ def _read_csv(path, cable_names, straight_lengths, columns, sensor_names=()):
         numeric.append(columns.time)
     at = [header.index(c) for c in numeric]
     label_at = header.index(columns.label) if columns.label in header else None
-    sensor_at = {name: [header.index('%s_%s' % (name, axis)) for axis in 'xyz']
-                 for name in sensor_names
-                 if all('%s_%s' % (name, axis) in header for axis in 'xyz')}
+    sensor_at = {}
+    for name in sensor_names:
+        present = ['%s_%s' % (name, axis) in header for axis in 'xyz']
+        if any(present) and not all(present):
+            raise ValueError('%s has %s but not %s: a sensor point needs all three' % (
+                path, ', '.join(name + '_' + a for a, p in zip('xyz', present) if p),
+                ', '.join(name + '_' + a for a, p in zip('xyz', present) if not p)))
+        if all(present):
+            sensor_at[name] = [header.index('%s_%s' % (name, axis)) for axis in 'xyz']
     values, labels, points = [], [], []
     for row_number, (line_number, line) in enumerate(lines[1:], start=1):
         where = '%s, row %d (line %d)' % (path, row_number, line_number)

@@ -98,9 +98,11 @@ def test_other_sensors_columns_are_read_with_the_tips_scale_and_gaps(tmp_path):
                     '0.1,0.1,0.1,1,2,300,,,,9\n'      # the coil gave nothing on this row
                     '0.2,0.1,0.1,1,2,300,nan,nan,nan,9\n'
                     '0.3,0.1,0.1,1,2,300,6,7,151,9\n')
+    with pytest.raises(ValueError, match='has other_x but not other_y, other_z'):
+        read_recorded_run(data, ['c0', 'c1'], None, sensor_names=['em_coil', 'other'])
     run = read_recorded_run(data, ['c0', 'c1'], None, ColumnMap(tip_scale=0.001),
-                            sensor_names=['em_coil', 'other', 'absent'])
-    assert list(run.points) == ['em_coil']  # 'other' lacks two of its columns: not a point
+                            sensor_names=['em_coil', 'absent'])
+    assert list(run.points) == ['em_coil']
     np.testing.assert_array_equal(run.points['em_coil'][[0, 3]],
                                   [[0.004, 0.005, 0.150], [0.006, 0.007, 0.151]])
     assert np.all(np.isnan(run.points['em_coil'][1:3]))
