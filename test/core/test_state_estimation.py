@@ -514,18 +514,46 @@ def _synthetic_run(robot, rng, times, hidden, noise):
                        source='synthetic')
 
 
+def _ou_offset(rng, times, sigma, tau):
+    """Return (n, 3) m: an Ornstein-Uhlenbeck offset (sigma m, tau s) drawn at ``times``."""
+    offset = np.empty((len(times), 3))
+    offset[0] = rng.normal(0.0, sigma, 3)
+    for i in range(1, len(times)):
+        a = math.exp(-(times[i] - times[i - 1]) / tau)
+        offset[i] = a * offset[i - 1] + math.sqrt(1 - a * a) * rng.normal(0.0, sigma, 3)
+    return offset
+
+
+def _two_sensor_run(robot, rng, rows, sigma, tau, coil_every):
+    """Return a run of random pulls seen by the tip tracker and the EM coil.
+
+    Both at the model's points plus one offset (:func:`_ou_offset`) and their files' noise,
+    the coil every ``coil_every`` rows.
+    """
+    tracker, coil = robot.sensors
+    times = np.cumsum(rng.uniform(0.3, 0.7, rows))
+    offset = _ou_offset(rng, times, sigma, tau)
+    lengths = robot.straight_cable_lengths - rng.uniform(0.0, 0.006, (rows, 4))
+    tips, coils, previous = np.empty((rows, 3)), np.full((rows, 3), np.nan), None
+    for i in range(rows):
+        previous = robot.solve_lengths(lengths[i], warm_start=previous)
+        shape = previous.shape
+        tips[i] = (shape.tip_position + shape.tip_rotation @ tracker.offset + offset[i]
+                   + rng.normal(0.0, tracker.position_sigma, 3))
+        if i % coil_every == 0:  # the coil's point by interpolation along the rod (offset 0)
+            coils[i] = ([np.interp(coil.s, shape.s, shape.positions[:, k]) for k in range(3)]
+                        + offset[i] + rng.normal(0.0, coil.position_sigma, 3))
+    return RecordedRun(times=times, labels=('',) * rows, lengths=lengths, tips=tips,
+                       source='synthetic', points={coil.name: coils})
+
+
 def test_calibrate_recovers_a_known_hidden_offset():
     """A synthetic run: the tracker sees the model plus an offset process of known sigma, tau."""
     robot = load_robot(REPO / 'config' / 'tendon_robot_real_tendons.yaml')
     rng = np.random.default_rng(7)
     sigma, tau, noise, rows = 2e-3, 8.0, 3e-4, 400
     times = np.cumsum(rng.uniform(0.3, 0.7, rows))
-    offset = np.empty((rows, 3))
-    offset[0] = rng.normal(0.0, sigma, 3)
-    for i in range(1, rows):
-        a = math.exp(-(times[i] - times[i - 1]) / tau)
-        offset[i] = a * offset[i - 1] + math.sqrt(1 - a * a) * rng.normal(0.0, sigma, 3)
-    run = _synthetic_run(robot, rng, times, offset, noise)
+    run = _synthetic_run(robot, rng, times, _ou_offset(rng, times, sigma, tau), noise)
     measured, report = model_uncertainty.measure(robot, run, tracker_noise=noise)
     assert 0.7 * sigma < measured.base_position < 1.4 * sigma, report
     assert 0.5 * tau < measured.correlation_time < 2.0 * tau, report
@@ -549,24 +577,7 @@ def test_calibrate_from_two_sensors_recovers_a_known_hidden_offset_seen_by_both(
     tracker, coil = robot.sensors
     rng = np.random.default_rng(11)
     sigma, tau, rows = 2e-3, 8.0, 300
-    times = np.cumsum(rng.uniform(0.3, 0.7, rows))
-    offset = np.empty((rows, 3))
-    offset[0] = rng.normal(0.0, sigma, 3)
-    for i in range(1, rows):
-        a = math.exp(-(times[i] - times[i - 1]) / tau)
-        offset[i] = a * offset[i - 1] + math.sqrt(1 - a * a) * rng.normal(0.0, sigma, 3)
-    lengths = robot.straight_cable_lengths - rng.uniform(0.0, 0.006, (rows, 4))
-    tips, coils, previous = np.empty((rows, 3)), np.full((rows, 3), np.nan), None
-    for i in range(rows):
-        previous = robot.solve_lengths(lengths[i], warm_start=previous)
-        shape = previous.shape
-        tips[i] = (shape.tip_position + shape.tip_rotation @ tracker.offset + offset[i]
-                   + rng.normal(0.0, tracker.position_sigma, 3))
-        if i % 3 == 0:  # the coil's point by interpolation along the rod (offset zero)
-            coils[i] = ([np.interp(coil.s, shape.s, shape.positions[:, k]) for k in range(3)]
-                        + offset[i] + rng.normal(0.0, coil.position_sigma, 3))
-    run = RecordedRun(times=times, labels=('',) * rows, lengths=lengths, tips=tips,
-                      source='synthetic', points={coil.name: coils})
+    run = _two_sensor_run(robot, rng, rows, sigma, tau, coil_every=3)
     measured, report = model_uncertainty.measure(robot, run)
     assert report['sensors'] == [coil.name] and report['tracker_noise'] == 5e-4
     assert 0.7 * sigma < measured.base_position < 1.4 * sigma, report
@@ -583,28 +594,11 @@ def test_the_occlusion_replay_reads_the_runs_other_sensors_with_the_tracker():
     2.52 mm against 2.39 without it, coverage 88 and 92 %.
     """
     robot = load_robot(SENSOR_ROBOT)
-    tracker, coil = robot.sensors
     rng = np.random.default_rng(4)
     rows, sigma, tau = 120, 2e-3, 8.0
-    times = np.cumsum(rng.uniform(0.3, 0.7, rows))
-    offset = np.empty((rows, 3))
-    offset[0] = rng.normal(0.0, sigma, 3)
-    for i in range(1, rows):
-        a = math.exp(-(times[i] - times[i - 1]) / tau)
-        offset[i] = a * offset[i - 1] + math.sqrt(1 - a * a) * rng.normal(0.0, sigma, 3)
-    lengths = robot.straight_cable_lengths - rng.uniform(0.0, 0.006, (rows, 4))
-    tips, coils, previous = np.empty((rows, 3)), np.empty((rows, 3)), None
-    for i in range(rows):
-        previous = robot.solve_lengths(lengths[i], warm_start=previous)
-        shape = previous.shape
-        tips[i] = (shape.tip_position + shape.tip_rotation @ tracker.offset + offset[i]
-                   + rng.normal(0.0, tracker.position_sigma, 3))
-        coils[i] = ([np.interp(coil.s, shape.s, shape.positions[:, k]) for k in range(3)]
-                    + offset[i] + rng.normal(0.0, coil.position_sigma, 3))
+    run = _two_sensor_run(robot, rng, rows, sigma, tau, coil_every=1)
     robot = robot.with_model_uncertainty(ModelUncertainty(base_position=sigma,
                                                           correlation_time=tau))
-    run = RecordedRun(times=times, labels=('',) * rows, lengths=lengths, tips=tips,
-                      source='synthetic', points={coil.name: coils})
     alone = occlusion_replay(robot, dataclasses.replace(run, points={}), 5, 5)
     both = occlusion_replay(robot, run, 5, 5)
     assert both.fused != alone.fused  # the coil's readings moved the estimate
