@@ -12,8 +12,9 @@ A recorded run is what ``calibrate`` fits a robot model to. Two sources are read
 - a rosbag2 recording (directory or ``.mcap`` file): ``.../cable_states`` (JointState, lengths
   in m) and a measured tip topic (PoseStamped, m). Each tip message is one sample, paired with
   the latest cable_states at or before it. Another sensor's ``.../sensors/<name>``
-  (PoseStamped or PoseWithCovarianceStamped, the tips' frame) gives a sample its point when one
-  of its messages is stamped within :data:`PAIRING_WINDOW` of the tip's.
+  (PoseStamped or PoseWithCovarianceStamped) gives a sample its point when one of its messages
+  is stamped within :data:`PAIRING_WINDOW` of the tip's; a sensor in another frame than the
+  tips is left out (``notes`` says so).
 
 Lengths come out in the robot's cable order, in m; tips in m, in the tracker's frame.
 """
@@ -120,6 +121,7 @@ class RecordedRun:
     source: str          # file path
     #: {sensor name: (n, 3) m} other sensors' points, tracker frame (NaN: none on that row)
     points: dict = field(default_factory=dict)
+    notes: tuple = ()    # what the reader left out, and why
 
     def __len__(self):
         return len(self.times)
@@ -134,7 +136,8 @@ class RecordedRun:
                            labels=tuple(np.array(self.labels, dtype=object)[index]),
                            lengths=self.lengths[index], tips=self.tips[index],
                            source=self.source,
-                           points={name: p[index] for name, p in self.points.items()})
+                           points={name: p[index] for name, p in self.points.items()},
+                           notes=self.notes)
 
 
 def read_recorded_run(path, cable_names, straight_lengths, column_map=ColumnMap(),
@@ -336,17 +339,19 @@ def _read_bag(path, cable_names, tip_topic, sensor_names=()):
     # a tracker that loses the marker publishes NaN: such a sample carries no measurement
     keep = (latest >= 0) & np.all(np.isfinite(tip_points), axis=1)
     tip_frames = frames.get('tip', set()) - {''}
-    for name in seen:
+    notes = []
+    for name in sorted(seen):
         # an empty frame id: the sender's default, taken as the tips'
         named = frames.get(name, set()) - {''}
         if named and named != tip_frames:
-            raise ValueError('bag %s: sensors/%s is in frame %s, the tips in %s: calibrate reads '
-                             'them in one frame' % (path, name, ', '.join(sorted(named)),
-                                                    ', '.join(sorted(tip_frames)) or '""'))
+            notes.append('sensors/%s is in frame %s, the tips in %s: left out (its points are '
+                         "read in the tips' frame)" % (name, ', '.join(sorted(named)),
+                                                       ', '.join(sorted(tip_frames)) or '""'))
+            del seen[name]
     return RecordedRun(times=tip_times[keep] * 1e-9, labels=('',) * int(keep.sum()),
                        lengths=state_lengths[latest[keep]], tips=tip_points[keep],
                        source=str(path), points={name: _paired(tip_times[keep], *seen[name])
-                                                 for name in sorted(seen)})
+                                                 for name in sorted(seen)}, notes=tuple(notes))
 
 
 def _paired(sample_times, times, points):

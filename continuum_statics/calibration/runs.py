@@ -72,6 +72,8 @@ def _calibrate_run(robot_file, data_file, fit_names, column_map, output, validat
         run = read_run(data_file, robot, column_map, tip_topic)
         held_out = read_run(validate, robot, column_map, tip_topic) if validate else None
         shear_fixed = summaries.shear_fixed(robot_file)
+    for note in run.notes:
+        log('calibrate: %s: %s' % (data_file, note))
     began = time.monotonic()
     # the file as given replayed (a serial replay, far from the fit: the slowest rows) in a
     # process of its own while the scans and the fit's serial steps leave a core free

@@ -297,6 +297,9 @@ def test_bag_sensor_points_pair_with_the_nearest_tip_sample_or_none(tmp_path):
                                                                [0.01, 0.0, 0.15]])
     assert np.all(np.isnan(run.points['em_coil'][1]))
     assert read_recorded_run(bag, ROBOT_CABLES, None).points == {}  # not asked: not read
+    assert run.notes == ()
     other = write_bag(tmp_path / 'other', [1000.25], coil=[(1000.25, (0, 0, 0.15), 'em')])
-    with pytest.raises(ValueError, match='sensors/em_coil is in frame em, the tips in world'):
-        read_recorded_run(other, ROBOT_CABLES, None, sensor_names=['em_coil'])
+    run = read_recorded_run(other, ROBOT_CABLES, None, sensor_names=['em_coil'])
+    assert run.points == {} and len(run.tips) == 1  # the tips are read as before
+    assert run.notes == ("sensors/em_coil is in frame em, the tips in world: left out (its "
+                         "points are read in the tips' frame)",)
